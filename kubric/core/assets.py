@@ -1,0 +1,193 @@
+"""The base of everything that can be placed in a scene: :class:`Asset`.
+
+An asset has a unique ``uid`` (``name``, ``name.001``, ``name.002``, ... per process, like Blender),
+validated properties (see :mod:`kubric.core.traits`), keyframes, and a link to the views (simulator,
+renderer) of every scene it belongs to. Assigning a property notifies each of those views once via
+``view.on_change(asset, name, value)``; ``keyframe_insert`` notifies via
+``view.on_keyframe(asset, name, frame)``.
+
+Keyframe interpolation (``get_value_at``, ``at_frame``, ``get_values_over_time``): vectors and
+scalars interpolate **linearly**, quaternions by **slerp** (shorter arc), anything else holds the
+previous keyframe. Before the first / after the last keyframe the first / last value is held.
+Renderer views must key Blender with linear interpolation so Blender's motion matches this.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import threading
+from collections import defaultdict
+from collections.abc import Iterator, Sequence
+from typing import Any
+
+import numpy as np
+
+from kubric.core import traits as kt
+from kubric.core.quaternion import Quaternion
+
+_uid_lock = threading.Lock()
+_uid_counts: dict[str, int] = defaultdict(int)
+
+
+def next_uid(name: str) -> str:
+    """The next unique id for ``name``: ``name``, then ``name.001``, ``name.002``, ..."""
+    with _uid_lock:
+        count = _uid_counts[name]
+        _uid_counts[name] += 1
+    return name if count == 0 else f"{name}.{count:03d}"
+
+
+def reset_uid_counters() -> None:
+    """Forget all issued uids (for tests and for building several scenes in one process)."""
+    with _uid_lock:
+        _uid_counts.clear()
+
+
+class Asset(kt.HasProperties):
+    """Base class of objects, lights, cameras and materials.
+
+    Keyword-only construction: every keyword must be a property name (or ``name``), else
+    ``TypeError`` naming it. ``name`` (default: the class name) is the basis of ``uid``.
+
+    Attributes:
+      uid: unique id, read-only.
+      keyframes: ``{property: {frame: value}}``.
+      linked_objects: ``{view: backend object}``, filled by views.
+      scenes: the scenes this asset was added to.
+    """
+
+    background = kt.Property(False, kt.as_bool(), "part of the background (floor, dome, camera)")
+    metadata = kt.Property(dict, kt.as_dict(), "free-form metadata carried to the output")
+
+    def __init__(self, *, name: str | None = None, **kwargs):
+        if name is not None and (not isinstance(name, str) or not name):
+            raise TypeError(f"{type(self).__name__}.name must be a non-empty string, got {name!r}")
+        self._name = name or type(self).__name__
+        self._uid = self._make_uid()
+        self.linked_objects: dict[Any, Any] = {}
+        self.scenes: list = []
+        self.keyframes: dict[str, dict[int, Any]] = defaultdict(dict)
+        self._init_properties(kwargs)
+
+    def _make_uid(self) -> str:
+        return next_uid(self._name)
+
+    @property
+    def name(self) -> str:
+        return self._name
+
+    @property
+    def uid(self) -> str:
+        return self._uid
+
+    @property
+    def active_scene(self):
+        """The first scene this asset was added to (or None)."""
+        return self.scenes[0] if self.scenes else None
+
+    # ------------------------------------------------------------------ views
+    @property
+    def views(self) -> tuple:
+        """Every view of every scene this asset belongs to, each once."""
+        seen: dict[int, Any] = {}
+        for scene in self.scenes:
+            for view in scene.views:
+                seen.setdefault(id(view), view)
+        return tuple(seen.values())
+
+    def _on_property_set(self, name: str, value: Any) -> None:
+        for view in self.views:
+            view.on_change(self, name, value)
+
+    # ------------------------------------------------------------------ keyframes
+    def keyframe_insert(self, name: str, frame: int) -> None:
+        """Store the current value of property ``name`` at ``frame`` and notify every view."""
+        self.get_property(name)  # raises KeyError naming the allowed properties
+        if isinstance(frame, bool) or not isinstance(frame, (int, np.integer)):
+            raise TypeError(f"{self.uid}: keyframe frame must be an integer, got {frame!r}")
+        frame = int(frame)
+        self.keyframes[name][frame] = self._values[name]
+        for view in self.views:
+            view.on_keyframe(self, name, frame)
+
+    def get_value_at(self, name: str, frame: float, interpolation: str | None = None):
+        """Value of ``name`` at a (possibly fractional) frame, interpolated between keyframes.
+
+        ``interpolation`` defaults to the property's own (linear / slerp / constant); pass
+        ``"constant"`` or ``"nearest"`` to override.
+        """
+        prop = self.get_property(name)
+        keys = self.keyframes.get(name)
+        if not keys:
+            return self._values[name]
+        if frame in keys:
+            return keys[frame]
+        frames = sorted(keys)
+        if frame <= frames[0]:
+            return keys[frames[0]]
+        if frame >= frames[-1]:
+            return keys[frames[-1]]
+        right = int(np.searchsorted(frames, frame))
+        f0, f1 = frames[right - 1], frames[right]
+        v0, v1 = keys[f0], keys[f1]
+        mode = interpolation or prop.interpolation
+        t = (frame - f0) / (f1 - f0)
+        if mode == "constant":
+            return v0
+        if mode == "nearest":
+            return v0 if t <= 0.5 else v1
+        if mode == "slerp":
+            q = Quaternion.slerp(Quaternion(v0), Quaternion(v1), t)
+            return prop.convert(np.asarray(q), self, name)
+        if mode == "linear":
+            mixed = (1.0 - t) * np.asarray(v0, dtype=np.float64) + t * np.asarray(v1, np.float64)
+            return prop.convert(mixed if np.ndim(mixed) else float(mixed), self, name)
+        raise ValueError(f"unknown interpolation {mode!r}; allowed: linear, slerp, constant, "
+                         "nearest")
+
+    def get_values_over_time(self, name: str, frames: Sequence[float] | None = None,
+                             interpolation: str | None = None) -> np.ndarray:
+        """Array of the values at ``frames`` (default: the scene's frame_start..frame_end)."""
+        if frames is None:
+            scene = self.active_scene
+            if scene is None:
+                raise ValueError(f"{self.uid} is in no scene: pass frames explicitly")
+            frames = range(scene.frame_start, scene.frame_end + 1)
+        return np.array([self.get_value_at(name, f, interpolation) for f in frames],
+                        dtype=np.float32)
+
+    @contextlib.contextmanager
+    def at_frame(self, frame: float | None, interpolation: str | None = None) -> Iterator[Asset]:
+        """Temporarily set every keyframed property to its value at ``frame``.
+
+        Views are *not* notified (this is a read-only look at the animation). ``None`` is a no-op.
+        """
+        if frame is None:
+            yield self
+            return
+        saved = {name: self._values[name] for name in self.keyframes}
+        try:
+            for name in saved:
+                self._values[name] = self.get_value_at(name, frame, interpolation)
+            yield self
+        finally:
+            self._values.update(saved)
+
+    # ------------------------------------------------------------------ identity
+    def __hash__(self) -> int:
+        return hash(self._uid)
+
+    def __eq__(self, other) -> bool:
+        if not isinstance(other, Asset):
+            return NotImplemented
+        return self._uid == other._uid
+
+    def __repr__(self) -> str:
+        return f"<{type(self).__name__} {self._uid}>"
+
+
+class UndefinedAsset(Asset):
+    """Marker for "not set" (e.g. :class:`UndefinedMaterial`); its uid is always its name."""
+
+    def _make_uid(self) -> str:
+        return self._name

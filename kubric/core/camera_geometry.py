@@ -1,0 +1,204 @@
+"""The one place that defines Kubric's camera conventions. Pure numpy.
+
+Frames
+  * **Camera frame** (Blender's): x right, y up, the camera looks down **−z**. ``matrix_world``
+    (4×4) maps camera → world.
+  * **OpenCV frame**: x right, y down, looking down **+z** = camera frame with y and z negated.
+
+Image coordinates
+  * **Normalised** (upstream Kubric): ``(u, v)`` in [0, 1]², origin at the *top-left corner* of
+    the image, u to the right, v **down**.
+  * **Pixels**: ``(x, y) = (u·W, v·H)``: origin at the top-left corner, the centre of pixel
+    (row r, column c) is at ``(c + 0.5, r + 0.5)``.
+
+Perspective camera (focal length f and sensor width sw in mm, resolution W×H, square pixels, so the
+sensor height is sh = sw·H/W; ``shift_x``, ``shift_y`` in units of the sensor width, as Blender with
+horizontal sensor fit):
+  * normalised intrinsics (upstream's form, for a point in the camera frame):
+    ``K = [[f/sw, 0, -cx], [0, -f/sh, -cy], [0, 0, -1]]`` with ``cx = 0.5 - shift_x`` and
+    ``cy = 0.5 + shift_y·W/H``; ``(u, v, 1) ∝ K @ p_cam``.
+  * pixel intrinsics (OpenCV): ``[[fx, 0, cx·W], [0, fy, cy·H], [0, 0, 1]]``, ``fx = fy = f/sw·W``.
+  * **depth** = Euclidean distance from the camera centre; **z** = distance along the view axis.
+Orthographic camera (``orthographic_scale`` = visible width in metres): ``u = x_cam / scale + cx``,
+``v = -y_cam / (scale·H/W) + cy``; depth and z are both the distance from the image plane.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+# Blender camera frame → OpenCV camera frame.
+CAMERA_TO_OPENCV = np.diag([1.0, -1.0, -1.0])
+
+
+def _resolution(camera, resolution=None) -> tuple[int, int]:
+    if resolution is not None:
+        w, h = (int(v) for v in resolution)
+    else:
+        scene = camera.active_scene
+        if scene is None:
+            raise ValueError(f"{camera.uid} is in no scene: pass resolution=(width, height)")
+        w, h = scene.resolution
+    return w, h
+
+
+def principal_point(camera, resolution=None) -> tuple[float, float]:
+    """Normalised principal point (cx, cy) in [0, 1] image coordinates (y down)."""
+    w, h = _resolution(camera, resolution)
+    return 0.5 - float(camera.shift_x), 0.5 + float(camera.shift_y) * w / h
+
+
+def normalised_intrinsics(camera, resolution=None) -> np.ndarray:
+    """Upstream Kubric's 3×3 ``K`` (see module doc); for orthographic cameras the affine map
+    ``(u, v, 1) = K @ (x_cam, y_cam, 1)``."""
+    w, h = _resolution(camera, resolution)
+    cx, cy = principal_point(camera, (w, h))
+    if is_orthographic(camera):
+        s = float(camera.orthographic_scale)
+        return np.array([[1.0 / s, 0.0, cx], [0.0, -w / (s * h), cy], [0.0, 0.0, 1.0]])
+    fx = camera.focal_length / camera.sensor_width
+    fy = fx * w / h
+    return np.array([[fx, 0.0, -cx], [0.0, -fy, -cy], [0.0, 0.0, -1.0]])
+
+
+def pixel_intrinsics(camera, resolution=None) -> np.ndarray:
+    """OpenCV 3×3 pixel intrinsics (perspective cameras only)."""
+    if is_orthographic(camera):
+        raise ValueError(f"{camera.uid} is orthographic: it has no pinhole pixel intrinsics")
+    w, h = _resolution(camera, resolution)
+    cx, cy = principal_point(camera, (w, h))
+    f = camera.focal_length / camera.sensor_width * w
+    return np.array([[f, 0.0, cx * w], [0.0, f, cy * h], [0.0, 0.0, 1.0]])
+
+
+def is_orthographic(camera) -> bool:
+    return hasattr(camera, "orthographic_scale")
+
+
+def camera_to_world(camera, frame: float | None = None) -> np.ndarray:
+    """(4, 4) camera → world matrix at ``frame`` (interpolated from keyframes; None = now)."""
+    with camera.at_frame(frame):
+        return camera.matrix_world
+
+
+def camera_to_world_matrices(camera, frames: Sequence[float]) -> np.ndarray:
+    """(T, 4, 4) camera → world matrices for each frame."""
+    return np.stack([camera_to_world(camera, f) for f in frames])
+
+
+def world_to_camera(camera, frame: float | None = None) -> np.ndarray:
+    """(4, 4) world → camera (Blender camera frame) matrix at ``frame``."""
+    m = camera_to_world(camera, frame)
+    inv = np.eye(4)
+    inv[:3, :3] = m[:3, :3].T
+    inv[:3, 3] = -m[:3, :3].T @ m[:3, 3]
+    return inv
+
+
+def project_points(camera, points, frame: float | None = None, resolution=None) -> np.ndarray:
+    """Project world points (..., 3) to normalised image coordinates.
+
+    Returns (..., 3): ``u``, ``v`` (origin top-left, v down) and ``+1`` for points in front of the
+    camera, ``-1`` behind it (upstream's ``project_point`` format).
+    """
+    pts = np.asarray(points, dtype=np.float64)
+    cam = pts @ world_to_camera(camera, frame)[:3, :3].T + world_to_camera(camera, frame)[:3, 3]
+    w, h = _resolution(camera, resolution)
+    cx, cy = principal_point(camera, (w, h))
+    if is_orthographic(camera):
+        s = float(camera.orthographic_scale)
+        u = cam[..., 0] / s + cx
+        v = -cam[..., 1] / (s * h / w) + cy
+        sign = np.where(cam[..., 2] < 0, 1.0, -1.0)
+    else:
+        fx = camera.focal_length / camera.sensor_width
+        fy = fx * w / h
+        d = -cam[..., 2]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            u = fx * cam[..., 0] / d + cx
+            v = -fy * cam[..., 1] / d + cy
+        sign = np.sign(d)
+    return np.stack([u, v, sign], axis=-1)
+
+
+def project_to_pixels(camera, points, frame: float | None = None, resolution=None):
+    """World points (..., 3) → (pixel xy (..., 2), depth (...)): depth is the distance to the camera
+    centre (perspective) or to the image plane (orthographic)."""
+    w, h = _resolution(camera, resolution)
+    uvs = project_points(camera, points, frame, (w, h))
+    xy = uvs[..., :2] * np.array([w, h], dtype=np.float64)
+    pts = np.asarray(points, dtype=np.float64)
+    m = world_to_camera(camera, frame)
+    cam = pts @ m[:3, :3].T + m[:3, 3]
+    depth = -cam[..., 2] if is_orthographic(camera) else np.linalg.norm(cam, axis=-1)
+    return xy, depth
+
+
+def pixel_rays(camera, pixels_xy, frame: float | None = None, resolution=None):
+    """Rays through pixel positions (..., 2): returns (origins (..., 3), unit directions (..., 3))
+    in world coordinates."""
+    w, h = _resolution(camera, resolution)
+    xy = np.asarray(pixels_xy, dtype=np.float64)
+    u, v = xy[..., 0] / w, xy[..., 1] / h
+    cx, cy = principal_point(camera, (w, h))
+    m = camera_to_world(camera, frame)
+    rot, centre = m[:3, :3], m[:3, 3]
+    if is_orthographic(camera):
+        s = float(camera.orthographic_scale)
+        local = np.stack([(u - cx) * s, -(v - cy) * s * h / w, np.zeros_like(u)], axis=-1)
+        origins = local @ rot.T + centre
+        dirs = np.broadcast_to(-rot[:, 2], origins.shape).copy()
+        return origins, dirs
+    fx = camera.focal_length / camera.sensor_width
+    fy = fx * w / h
+    local = np.stack([(u - cx) / fx, -(v - cy) / fy, -np.ones_like(u)], axis=-1)
+    local /= np.linalg.norm(local, axis=-1, keepdims=True)
+    dirs = local @ rot.T
+    return np.broadcast_to(centre, dirs.shape).copy(), dirs
+
+
+def unproject_pixels(camera, pixels_xy, depth, frame: float | None = None, resolution=None):
+    """Inverse of :func:`project_to_pixels`: pixel positions (..., 2) and depth (...) → world
+    points (..., 3)."""
+    origins, dirs = pixel_rays(camera, pixels_xy, frame, resolution)
+    return origins + dirs * np.asarray(depth, dtype=np.float64)[..., None]
+
+
+def _depth_per_z(camera, w: int, h: int) -> np.ndarray:
+    """(H, W) factor depth / z at every pixel centre."""
+    if is_orthographic(camera):
+        return np.ones((h, w))
+    cx, cy = principal_point(camera, (w, h))
+    fx = camera.focal_length / camera.sensor_width
+    fy = fx * w / h
+    u = (np.arange(w) + 0.5) / w
+    v = (np.arange(h) + 0.5) / h
+    dx = (u[None, :] - cx) / fx
+    dy = (v[:, None] - cy) / fy
+    return np.sqrt(1.0 + dx**2 + dy**2)
+
+
+def _per_pixel(camera, image, factor_fn):
+    arr = np.asarray(image)
+    squeeze = arr.ndim >= 3 and arr.shape[-1] == 1
+    hw = arr.shape[-3:-1] if squeeze else arr.shape[-2:]
+    if len(hw) != 2:
+        raise ValueError(f"expected an image (..., H, W) or (..., H, W, 1), got shape {arr.shape}")
+    h, w = hw
+    factor = factor_fn(_depth_per_z(camera, w, h))
+    if squeeze:
+        factor = factor[..., None]
+    return (arr * factor).astype(np.result_type(arr.dtype, np.float32))
+
+
+def z_to_depth(camera, z) -> np.ndarray:
+    """z (distance along the view axis) → depth (distance to the camera centre), per pixel.
+    ``z`` has shape (..., H, W) or (..., H, W, 1)."""
+    return _per_pixel(camera, z, lambda f: f)
+
+
+def depth_to_z(camera, depth) -> np.ndarray:
+    """Inverse of :func:`z_to_depth`."""
+    return _per_pixel(camera, depth, lambda f: 1.0 / f)

@@ -1,0 +1,159 @@
+"""Random scene sampling. Every function takes an explicit ``rng`` (``numpy.random.RandomState`` or
+``numpy.random.Generator``); nothing here creates a random generator, so one seed fixes a scene.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import numpy as np
+
+from kubric.core.color import Color
+from kubric.core.objects import PhysicalObject
+from kubric.core.quaternion import Quaternion
+
+#: CLEVR colours (sRGB 0–255), from the CLEVR dataset / MOVi-A.
+CLEVR_COLORS_RGB255 = {
+    "blue": (42, 75, 215), "brown": (129, 74, 25), "cyan": (41, 208, 208),
+    "gray": (87, 87, 87), "green": (29, 105, 20), "purple": (129, 38, 192),
+    "red": (173, 35, 35), "yellow": (255, 238, 5),
+}
+CLEVR_COLORS = {name: Color(*(c / 255.0 for c in rgb)) for name, rgb in CLEVR_COLORS_RGB255.items()}
+#: CLEVR object sizes (scale factor): MOVi-A uses small 0.7 and large 1.4.
+CLEVR_SIZES = {"small": 0.7, "large": 1.4}
+#: MOVi-A shapes (KuBasic asset ids).
+CLEVR_SHAPES = ("cube", "cylinder", "sphere")
+
+
+def _require_rng(rng, where: str):
+    if not isinstance(rng, (np.random.RandomState, np.random.Generator)):
+        raise TypeError(f"{where} needs rng=numpy.random.RandomState(...) or "
+                        f"numpy.random.default_rng(...), got {rng!r}")
+    return rng
+
+
+def _uniform(rng, low=0.0, high=1.0, size=None):
+    return rng.uniform(low, high, size)
+
+
+def _choice_index(rng, n: int) -> int:
+    if isinstance(rng, np.random.Generator):
+        return int(rng.integers(n))
+    return int(rng.randint(n))
+
+
+def random_hue_color(saturation: float = 1.0, value: float = 1.0, *, rng) -> Color:
+    """A colour of uniformly random hue with the given HSV saturation and value."""
+    _require_rng(rng, "random_hue_color")
+    return Color.from_hsv(float(_uniform(rng)), saturation, value)
+
+
+def random_clevr_color(*, rng) -> tuple[str, Color]:
+    """(name, Color) of a uniformly chosen CLEVR colour."""
+    _require_rng(rng, "random_clevr_color")
+    names = sorted(CLEVR_COLORS)
+    name = names[_choice_index(rng, len(names))]
+    return name, CLEVR_COLORS[name]
+
+
+def random_rotation(axis: str | Sequence[float] | None = None, *, rng) -> tuple[float, ...]:
+    """A uniformly random rotation (WXYZ tuple): about ``axis`` ("X", "Y", "Z" or a vector) by a
+    uniform angle, or uniform over SO(3) when ``axis`` is None."""
+    _require_rng(rng, "random_rotation")
+    if axis is None:
+        # Shoemake's method: uniform over SO(3).
+        u1, u2, u3 = (float(v) for v in _uniform(rng, size=3))
+        q = (np.sqrt(u1) * np.cos(2 * np.pi * u3), np.sqrt(1 - u1) * np.sin(2 * np.pi * u2),
+             np.sqrt(1 - u1) * np.cos(2 * np.pi * u2), np.sqrt(u1) * np.sin(2 * np.pi * u3))
+        return tuple(float(v) for v in q)
+    angle = float(_uniform(rng, 0.0, 2 * np.pi))
+    return tuple(Quaternion(axis=axis, angle=angle))
+
+
+def rotation_sampler(axis=None) -> Callable[[PhysicalObject, Any], None]:
+    """A sampler ``(obj, rng) → None`` that sets a random rotation (see :func:`random_rotation`)."""
+    def sample(obj, rng):
+        obj.quaternion = random_rotation(axis=axis, rng=rng)
+    return sample
+
+
+def _region(region) -> np.ndarray:
+    arr = np.asarray(region, dtype=np.float64)
+    if arr.shape != (2, 3) or np.any(arr[0] > arr[1]):
+        raise ValueError(f"a region must be [[x0, y0, z0], [x1, y1, z1]] with lower ≤ upper, "
+                         f"got {region!r}")
+    return arr
+
+
+def position_sampler(region) -> Callable[[PhysicalObject, Any], None]:
+    """A sampler that moves the object so that its (rotated, scaled) axis-aligned bounding box lies
+    inside ``region`` = [[x0, y0, z0], [x1, y1, z1]] (uniformly among such positions)."""
+    region = _region(region)
+
+    def sample(obj, rng):
+        box = obj.aabbox - np.asarray(obj.position, dtype=np.float64)
+        low, high = region[0] - box[0], region[1] - box[1]
+        if np.any(low > high):
+            raise ValueError(f"{obj.uid} (extent {(box[1] - box[0]).round(3).tolist()}) does not "
+                             f"fit in region {region.tolist()}")
+        obj.position = _uniform(rng, low, high)
+    return sample
+
+
+def bottom_sampler(region) -> Callable[[PhysicalObject, Any], None]:
+    """Like :func:`position_sampler` but the object's lowest point rests on the region's floor."""
+    region = _region(region)
+
+    def sample(obj, rng):
+        box = obj.aabbox - np.asarray(obj.position, dtype=np.float64)
+        low, high = region[0] - box[0], region[1] - box[1]
+        if np.any(low[:2] > high[:2]):
+            raise ValueError(f"{obj.uid} does not fit in region {region.tolist()}")
+        xy = _uniform(rng, low[:2], high[:2])
+        obj.position = (xy[0], xy[1], region[0, 2] - box[0, 2])
+    return sample
+
+
+def resample_while(asset, samplers: Sequence[Callable], condition: Callable[[Any], bool],
+                   max_trials: int, *, rng) -> int:
+    """Apply ``samplers`` (each ``(asset, rng)``) until ``condition(asset)`` is False.
+
+    Returns the number of trials used; raises ``RuntimeError`` naming the asset after
+    ``max_trials``.
+    """
+    _require_rng(rng, "resample_while")
+    if max_trials < 1:
+        raise ValueError(f"max_trials must be ≥ 1, got {max_trials}")
+    for trial in range(1, max_trials + 1):
+        for sampler in samplers:
+            sampler(asset, rng)
+        if not condition(asset):
+            return trial
+    raise RuntimeError(f"{asset.uid}: no valid sample after {max_trials} trials "
+                       f"(enlarge the region or allow more trials)")
+
+
+def move_until_no_overlap(asset, simulator, spawn_region=((-1, -1, -1), (1, 1, 1)),
+                          max_trials: int = 100, *, rng) -> int:
+    """Give ``asset`` a random rotation and a position inside ``spawn_region`` until it overlaps
+    nothing in ``simulator`` (which must offer ``check_overlap(asset)``). Returns the trials used."""
+    return resample_while(asset, samplers=[rotation_sampler(), position_sampler(spawn_region)],
+                          condition=simulator.check_overlap, max_trials=max_trials, rng=rng)
+
+
+def sample_point_in_half_sphere_shell(inner_radius: float, outer_radius: float,
+                                      offset: float = 0.0, *, rng) -> np.ndarray:
+    """A point (3,) uniformly distributed in the upper half of a spherical shell
+    (inner_radius ≤ |p| ≤ outer_radius, z ≥ offset)."""
+    _require_rng(rng, "sample_point_in_half_sphere_shell")
+    if not 0 <= inner_radius <= outer_radius:
+        raise ValueError(f"need 0 ≤ inner_radius ≤ outer_radius, got {inner_radius}, "
+                         f"{outer_radius}")
+    if offset >= outer_radius:
+        raise ValueError(f"offset {offset} leaves no room below outer_radius {outer_radius}")
+    while True:
+        v = np.asarray(_uniform(rng, (-outer_radius, -outer_radius, offset),
+                                (outer_radius, outer_radius, outer_radius)), dtype=np.float64)
+        if inner_radius <= np.linalg.norm(v) <= outer_radius:
+            return v
