@@ -29,6 +29,9 @@ from collections.abc import Sequence
 
 import numpy as np
 
+#: Depth / z written where a pixel-centre ray hits nothing (metres).
+BACKGROUND_DEPTH = 10000.0
+
 # Blender camera frame → OpenCV camera frame.
 CAMERA_TO_OPENCV = np.diag([1.0, -1.0, -1.0])
 

@@ -54,7 +54,7 @@ class Color(tuple):
 
     def __new__(cls, r: float = 0.0, g: float = 0.0, b: float = 0.0, a: float = 1.0):
         values = []
-        for label, v in zip("rgba", (r, g, b, a)):
+        for label, v in zip("rgba", (r, g, b, a), strict=True):
             if isinstance(v, bool) or np.ndim(v) != 0:
                 raise TypeError(f"Color.{label} must be a number in [0, 1], got {v!r}")
             f = float(v)
@@ -100,7 +100,7 @@ class Color(tuple):
 
     @classmethod
     def from_hsv(cls, h: float, s: float, v: float, a: float = 1.0) -> Color:
-        for label, x in zip("hsv", (h, s, v)):
+        for label, x in zip("hsv", (h, s, v), strict=True):
             if not 0.0 <= float(x) <= 1.0:
                 raise ValueError(f"HSV component {label} must be in [0, 1], got {x!r}")
         return cls(*colorsys.hsv_to_rgb(h, s, v), a)

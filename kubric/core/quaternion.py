@@ -210,7 +210,8 @@ def look_at_quaternion(position, target, up="Y", front="-Z") -> Quaternion:
 
     The local ``up`` axis is turned as close to world +Z as possible. With the defaults (cameras and
     lights: front = −Z, up = +Y), looking from the origin at (0, 0, 1) gives (0, 0, 1, 0). When the view
-    direction is parallel to world Z, world +X is used as the "right" direction.
+    direction is parallel to world Z, the frame falls back as upstream Kubric does: looking straight
+    down, the camera's x axis is world −X and its y axis world −Y.
     """
     position = np.asarray(position, dtype=np.float64)
     target = np.asarray(target, dtype=np.float64)

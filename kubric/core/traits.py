@@ -18,7 +18,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from kubric.core.color import Color, get_color
+from kubric.core.color import get_color
 from kubric.core.quaternion import Quaternion
 
 #: A converter takes (value, owner, property name) and returns the canonical value or raises.

@@ -1,0 +1,80 @@
+"""Seeded sampling helpers."""
+
+import inspect
+
+import numpy as np
+import pytest
+
+import kubric as kb
+from kubric import randomness
+
+
+def test_no_function_has_a_default_rng():
+    for name, fn in inspect.getmembers(randomness, inspect.isfunction):
+        params = inspect.signature(fn).parameters
+        if "rng" in params:
+            assert params["rng"].default is inspect.Parameter.empty, name
+
+
+def test_same_seed_same_samples_and_rng_required():
+    a = [kb.random_hue_color(rng=np.random.RandomState(3)) for _ in range(2)]
+    assert a[0] == a[1]
+    assert kb.random_rotation(rng=np.random.default_rng(1)) == kb.random_rotation(
+        rng=np.random.default_rng(1))
+    with pytest.raises(TypeError, match="needs rng="):
+        kb.random_hue_color(rng=42)
+
+
+def test_random_rotation_is_unit_and_about_axis():
+    rng = np.random.RandomState(0)
+    q = np.array([kb.random_rotation(rng=rng) for _ in range(2000)])
+    np.testing.assert_allclose(np.linalg.norm(q, axis=1), 1, atol=1e-9)
+    # uniform over SO(3): the rotated x axis is uniform on the sphere, mean ≈ 0
+    xs = np.array([kb.Quaternion(v).rotate([1, 0, 0]) for v in q])
+    assert np.all(np.abs(xs.mean(axis=0)) < 0.05)
+    qz = kb.random_rotation(axis="Z", rng=rng)
+    assert qz[1] == pytest.approx(0) and qz[2] == pytest.approx(0)
+
+
+def test_position_sampler_keeps_bounding_box_in_region():
+    rng = np.random.RandomState(5)
+    region = [[-1, -2, 0], [3, 2, 4]]
+    cube = kb.Cube(scale=0.5)
+    for _ in range(200):
+        kb.rotation_sampler()(cube, rng)
+        kb.position_sampler(region)(cube, rng)
+        box = cube.aabbox
+        assert np.all(box[0] >= np.array(region[0]) - 1e-5)
+        assert np.all(box[1] <= np.array(region[1]) + 1e-5)
+    with pytest.raises(ValueError, match="does not fit in region"):
+        kb.position_sampler([[0, 0, 0], [0.1, 0.1, 0.1]])(cube, rng)
+
+
+def test_bottom_sampler_rests_on_floor():
+    cube = kb.Cube(scale=(1, 1, 0.3))
+    kb.bottom_sampler([[-5, -5, 2], [5, 5, 9]])(cube, np.random.RandomState(0))
+    assert cube.aabbox[0, 2] == pytest.approx(2.0, abs=1e-5)
+
+
+def test_resample_while_counts_trials_and_gives_up_clearly():
+    rng = np.random.RandomState(0)
+    cube = kb.Cube()
+    n = kb.resample_while(cube, [kb.position_sampler([[-10] * 3, [10] * 3])],
+                          condition=lambda obj: obj.position[0] < 5, max_trials=1000, rng=rng)
+    assert n >= 1 and cube.position[0] >= 5
+    with pytest.raises(RuntimeError, match="Cube: no valid sample after 3 trials"):
+        kb.resample_while(cube, [], condition=lambda obj: True, max_trials=3, rng=rng)
+
+
+def test_half_sphere_shell():
+    rng = np.random.RandomState(1)
+    pts = np.array([kb.sample_point_in_half_sphere_shell(7, 9, rng=rng) for _ in range(500)])
+    r = np.linalg.norm(pts, axis=1)
+    assert np.all((r >= 7) & (r <= 9)) and np.all(pts[:, 2] >= 0)
+
+
+def test_clevr_palette_values():
+    assert randomness.CLEVR_COLORS_RGB255["yellow"] == (255, 238, 5)
+    assert randomness.CLEVR_SIZES == {"small": 0.7, "large": 1.4}
+    name, color = randomness.random_clevr_color(rng=np.random.RandomState(0))
+    assert color == randomness.CLEVR_COLORS[name]
