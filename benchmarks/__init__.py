@@ -1,0 +1,1 @@
+"""Benchmarks (`make bench`): long measurements that never run in the test suite."""
