@@ -26,6 +26,9 @@ class RecordingView(View):
     def on_keyframe(self, asset, name, frame):
         self.calls.append(("keyframe", asset, name, frame))
 
+    def on_keyframe_delete(self, asset, name, frame):
+        self.calls.append(("keyframe_delete", asset, name, frame))
+
 
 def test_uids_follow_blender_naming_and_can_be_reset():
     a, b, c = kb.Cube(), kb.Cube(), kb.Cube(name="floor")
@@ -270,3 +273,17 @@ def test_lights_and_materials_validate():
     tex = kb.Texture(filename="sky.exr", mapping="environment")
     assert kb.FlatMaterial(color=tex).color is tex
     assert kb.Scene(background=tex).background is tex
+
+
+def test_keyframe_delete_notifies_and_names_missing_frames():
+    scene = kb.Scene()
+    view = RecordingView(scene)
+    cube = kb.Cube()
+    scene += cube
+    cube.keyframe_insert("position", 3)
+    view.calls.clear()
+    cube.keyframe_delete("position", 3)
+    assert view.calls == [("keyframe_delete", cube, "position", 3)]
+    assert cube.keyframes["position"] == {}
+    with pytest.raises(KeyError, match=r"no keyframe of 'position' at frame 3; keyed frames: \[\]"):
+        cube.keyframe_delete("position", 3)

@@ -200,10 +200,14 @@ def test_contacts_are_merged_per_frame_and_raw_contacts_are_available():
 class _Recorder(View):
     def __init__(self, scene):
         self.keys = []
+        self.deleted = []
         super().__init__(scene)
 
     def on_keyframe(self, asset, name, frame):
         self.keys.append((asset.uid, name, frame))
+
+    def on_keyframe_delete(self, asset, name, frame):
+        self.deleted.append((asset.uid, name, frame))
 
 
 def test_repeated_runs_replace_the_animation_and_notify_other_views():
@@ -223,6 +227,9 @@ def test_repeated_runs_replace_the_animation_and_notify_other_views():
     np.testing.assert_allclose(ball.keyframes["velocity"][0], (1.0, 0.0, 0.0), atol=1e-6)
     assert ball.position[0] > 0.2  # slid along x during the second run
     assert recorder.keys.count(("Sphere", "position", 10)) == 2
+    # other views are told to drop the stale keys, once per property and frame
+    stale = [d for d in recorder.deleted if d[:2] == ("Sphere", "position")]
+    assert sorted(d[2] for d in stale) == list(range(11, 31))
 
 
 def test_run_rejects_bad_frame_range():

@@ -4,7 +4,8 @@ An asset has a unique ``uid`` (``name``, ``name.001``, ``name.002``, ... per pro
 validated properties (see :mod:`kubric.core.traits`), keyframes, and a link to the views (simulator,
 renderer) of every scene it belongs to. Assigning a property notifies each of those views once via
 ``view.on_change(asset, name, value)``; ``keyframe_insert`` notifies via
-``view.on_keyframe(asset, name, frame)``.
+``view.on_keyframe(asset, name, frame)`` and ``keyframe_delete`` via
+``view.on_keyframe_delete(asset, name, frame)``.
 
 Keyframe interpolation (``get_value_at``, ``at_frame``, ``get_values_over_time``): vectors and
 scalars interpolate **linearly**, quaternions by **slerp** (shorter arc), anything else holds the
@@ -109,6 +110,18 @@ class Asset(kt.HasProperties):
         self.keyframes[name][frame] = self._values[name]
         for view in self.views:
             view.on_keyframe(self, name, frame)
+
+    def keyframe_delete(self, name: str, frame: int) -> None:
+        """Remove the keyframe of ``name`` at ``frame`` and notify every view; a missing one is a
+        ``KeyError`` naming the frames that exist."""
+        self.get_property(name)
+        frames = self.keyframes.get(name, {})
+        if frame not in frames:
+            raise KeyError(f"{self.uid} has no keyframe of {name!r} at frame {frame}; "
+                           f"keyed frames: {sorted(frames)}")
+        del frames[frame]
+        for view in self.views:
+            view.on_keyframe_delete(self, name, frame)
 
     def get_value_at(self, name: str, frame: float, interpolation: str | None = None):
         """Value of ``name`` at a (possibly fractional) frame, interpolated between keyframes.

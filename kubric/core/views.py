@@ -8,7 +8,8 @@ and its assets call, on every linked view:
   it) and whenever an asset is added to the scene;
 * ``remove(asset)``  — when an asset leaves the scene or the view is unlinked;
 * ``on_change(item, name, value)`` — after a property of the scene or of an asset changed;
-* ``on_keyframe(asset, name, frame)`` — after ``asset.keyframe_insert(name, frame)``.
+* ``on_keyframe(asset, name, frame)`` — after ``asset.keyframe_insert(name, frame)``;
+* ``on_keyframe_delete(asset, name, frame)`` — after ``asset.keyframe_delete(name, frame)``.
 
 :class:`TableView` turns these calls into look-ups in three tables keyed by model class (resolved
 along the class's MRO, so a subclass inherits its parents' rows):
@@ -19,6 +20,7 @@ along the class's MRO, so a subclass inherits its parents' rows):
 * ``setters``: ``{ModelClass: {property: fn(view, item, backend_obj, value)}}``. Properties without
   a row are ignored by that backend (e.g. colour in a physics engine).
 * ``keyframers``: ``{ModelClass: {property: fn(view, item, backend_obj, frame)}}``.
+* ``keyframe_deleters``: the same shape, called when a keyframe is deleted.
 
 Adding a property or a backend therefore touches one table, not every asset class.
 """
@@ -52,6 +54,9 @@ class View:
     def on_keyframe(self, asset, name: str, frame: int) -> None:
         """``asset`` stored a keyframe of ``name`` at ``frame`` (value in ``asset.keyframes``)."""
 
+    def on_keyframe_delete(self, asset, name: str, frame: int) -> None:
+        """``asset`` deleted its keyframe of ``name`` at ``frame``."""
+
 
 def _resolve(table: Mapping[type, Any], cls: type) -> tuple[bool, Any]:
     for klass in cls.__mro__:
@@ -73,11 +78,13 @@ class TableView(View):
     builders: ClassVar[Mapping[type, Builder | None]] = {}
     setters: ClassVar[Mapping[type, Mapping[str, Setter]]] = {}
     keyframers: ClassVar[Mapping[type, Mapping[str, Keyframer]]] = {}
+    keyframe_deleters: ClassVar[Mapping[type, Mapping[str, Keyframer]]] = {}
 
     def __init_subclass__(cls, **kwargs):
         super().__init_subclass__(**kwargs)
         cls._setter_cache = {}
         cls._keyframer_cache = {}
+        cls._deleter_cache = {}
 
     def _setters_for(self, cls: type) -> dict[str, Setter]:
         if cls not in self._setter_cache:
@@ -88,6 +95,11 @@ class TableView(View):
         if cls not in self._keyframer_cache:
             self._keyframer_cache[cls] = _merged(self.keyframers, cls)
         return self._keyframer_cache[cls]
+
+    def _deleters_for(self, cls: type) -> dict[str, Keyframer]:
+        if cls not in self._deleter_cache:
+            self._deleter_cache[cls] = _merged(self.keyframe_deleters, cls)
+        return self._deleter_cache[cls]
 
     def backend_object(self, item):
         """The backend counterpart of ``item`` in this view, or None if it has none."""
@@ -132,3 +144,11 @@ class TableView(View):
         keyframer = self._keyframers_for(type(asset)).get(name)
         if keyframer is not None:
             keyframer(self, asset, obj, frame)
+
+    def on_keyframe_delete(self, asset, name: str, frame: int) -> None:
+        obj = asset.linked_objects.get(self)
+        if obj is None:
+            return
+        deleter = self._deleters_for(type(asset)).get(name)
+        if deleter is not None:
+            deleter(self, asset, obj, frame)

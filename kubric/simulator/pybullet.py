@@ -267,8 +267,8 @@ class PyBullet(TableView):
         velocities, then the real run). Each run replaces the animation of the previous ones:
         keyframes of the four properties that an earlier ``run`` of this simulator wrote at
         frames outside the new range are deleted from the model, so the model holds exactly the
-        latest run's trajectory. (The view contract has no keyframe deletion, so other views,
-        e.g. a renderer, keep such out-of-range keys; frames inside the range are re-keyed.)
+        latest run's trajectory (``asset.keyframe_delete`` tells the other views, e.g. the
+        renderer, to drop those keys too).
 
         Args:
           frame_start, frame_end: inclusive frame range (``frame_end ≥ frame_start``).
@@ -323,7 +323,8 @@ class PyBullet(TableView):
         for obj, old_frames in self._keyed_frames.items():
             for frame in old_frames.difference(frames):
                 for name in SIMULATED_PROPERTIES:
-                    obj.keyframes.get(name, {}).pop(frame, None)
+                    if frame in obj.keyframes.get(name, {}):
+                        obj.keyframe_delete(name, frame)
         self._keyed_frames = {}
         for obj, track in animation.items():
             for i, frame in enumerate(frames):
