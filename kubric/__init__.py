@@ -33,7 +33,8 @@ _LAZY_NAMES = {
     "kubric.file_io": [
         "as_path", "write_pkl", "write_json", "write_png", "write_palette_png",
         "write_scaled_png", "write_tiff", "write_image_dict", "read_png", "read_tiff",
-        "read_json", "read_pkl", "read_palette_png", "read_scaled_png",
+        "read_json", "read_pkl", "read_palette_png", "read_scaled_png", "read_image_dict",
+        "read_layer", "read_segmentation",
     ],
     "kubric.utils": [
         "ArgumentParser", "done", "get_camera_info", "get_instance_info", "get_scene_metadata",

@@ -1,0 +1,285 @@
+"""The renderer's layer dict ↔ a scene directory (docs: ``shared/spec/output-format.md``).
+
+Input to :func:`write_image_dict`: ``{layer name: (T, H, W, C) array}`` as returned by
+``Blender.render()``; every layer must share T, H and W. Frame ``i`` (0-based) of a layer goes to
+``<directory>/<template>.format(i)`` with these default templates and encodings:
+
+=====================  ============================  ===  ======================================
+layer                  file                          C    encoding
+=====================  ============================  ===  ======================================
+rgba                   ``rgba_{:05d}.png``           4    uint8 → 8-bit RGBA PNG
+rgb                    ``rgb_{:05d}.png``            3    uint8 → 8-bit RGB PNG
+depth, z               ``depth_{:05d}.tiff``         1    float → float32 TIFF (metres)
+segmentation           ``segmentation_{:05d}.png``   1    integer labels → 8-bit palette PNG if
+                                                          the scene's largest label ≤ 255, else
+                                                          16-bit grey (> 65535 raises)
+forward_flow,          ``forward_flow_{:05d}.png``   2    float → 16-bit RGB, channel 2 = 0,
+backward_flow, flow                                       ``round((v - min) / (max - min) *
+                                                          65535)`` with ONE min/max per layer per
+                                                          scene, stored in ``data_ranges.json``
+normal                 ``normal_{:05d}.png``         3    float in [-1, 1] → ``round((n + 1) / 2
+                                                          * 65535)`` 16-bit RGB
+object_coordinates,    ``uv_{:05d}.png`` ...         3    float in [0, 1] → ``round(x * 65535)``
+uv                                                        16-bit RGB
+=====================  ============================  ===  ======================================
+
+Floats for normal / object_coordinates / uv may exceed their interval by float noise up to
+:data:`RANGE_TOLERANCE` (clipped); larger excursions, NaN and inf raise. ``data_ranges.json``
+gets ``{"min", "max"}`` for every scaled layer and also for ``depth`` and ``z`` (an addition for
+readers that quantise depth); an existing ``data_ranges.json`` is updated, not replaced.
+
+:func:`read_image_dict` is the inverse: it finds the frames of every layer present, checks they
+are numbered 0..T-1 and returns the same dict (flows float32 C = 2, normal / object_coordinates /
+uv float32, depth / z float32, segmentation uint32, rgba uint8), exact up to the quantisation step
+of each encoding (1/65535 of the range; normals 2/65535).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import re
+import string
+from collections.abc import Callable, Iterable, Mapping
+from concurrent.futures import ThreadPoolExecutor
+
+import numpy as np
+
+from kubric.io import png_io, tiff_io
+from kubric.io.json_io import read_json, write_json
+from kubric.io.paths import PathLike, as_path, atomic_write_bytes, read_bytes
+
+DATA_RANGES_FILE = "data_ranges.json"
+RANGE_TOLERANCE = 1e-4
+
+
+@dataclasses.dataclass(frozen=True)
+class LayerFormat:
+    """How one layer is stored: default file template, channel count, encoding kind."""
+
+    template: str
+    channels: int
+    kind: str  # "image8" | "tiff" | "labels" | "scaled" | "signed_unit" | "unit"
+
+
+LAYERS: dict[str, LayerFormat] = {
+    "rgba": LayerFormat("rgba_{:05d}.png", 4, "image8"),
+    "rgb": LayerFormat("rgb_{:05d}.png", 3, "image8"),
+    "depth": LayerFormat("depth_{:05d}.tiff", 1, "tiff"),
+    "z": LayerFormat("z_{:05d}.tiff", 1, "tiff"),
+    "segmentation": LayerFormat("segmentation_{:05d}.png", 1, "labels"),
+    "forward_flow": LayerFormat("forward_flow_{:05d}.png", 2, "scaled"),
+    "backward_flow": LayerFormat("backward_flow_{:05d}.png", 2, "scaled"),
+    "flow": LayerFormat("flow_{:05d}.png", 2, "scaled"),
+    "normal": LayerFormat("normal_{:05d}.png", 3, "signed_unit"),
+    "object_coordinates": LayerFormat("object_coordinates_{:05d}.png", 3, "unit"),
+    "uv": LayerFormat("uv_{:05d}.png", 3, "unit"),
+}
+#: layers whose {"min", "max"} goes to data_ranges.json
+RANGE_KINDS = ("scaled", "tiff")
+
+
+def frame_filename(template: str, index: int) -> str:
+    """``template`` formatted with frame ``index``; accepts ``{:05d}`` and ``{i:05d}`` fields."""
+    try:
+        return template.format(index, i=index)
+    except (IndexError, KeyError, ValueError) as err:
+        raise ValueError(f"file template {template!r} must have one field such as '{{:05d}}' or "
+                         f"'{{i:05d}}' for the frame index: {err}") from None
+
+
+def _template_regex(template: str) -> re.Pattern:
+    parts = []
+    for literal, field, _, _ in string.Formatter().parse(template):
+        parts.append(re.escape(literal))
+        if field is not None:
+            parts.append(r"(\d+)")
+    return re.compile("".join(parts) + r"\Z")
+
+
+def _templates(file_templates: Mapping[str, str] | None) -> dict[str, str]:
+    templates = {name: fmt.template for name, fmt in LAYERS.items()}
+    for name, template in dict(file_templates or {}).items():
+        if name not in LAYERS:
+            raise ValueError(f"file_templates: unknown layer {name!r}; known: {sorted(LAYERS)}")
+        frame_filename(template, 0)
+        templates[name] = template
+    return templates
+
+
+# -------------------------------------------------------------------------------- encoding
+def _unit_interval_to_uint16(arr: np.ndarray, lo: float, hi: float, what: str) -> np.ndarray:
+    if arr.dtype.kind != "f":
+        raise TypeError(f"{what}: expected float values in [{lo}, {hi}], got dtype {arr.dtype}")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{what}: values must be finite, found NaN or inf")
+    vmin, vmax = float(arr.min()), float(arr.max())
+    if vmin < lo - RANGE_TOLERANCE or vmax > hi + RANGE_TOLERANCE:
+        raise ValueError(f"{what}: values must lie in [{lo}, {hi}], got range [{vmin}, {vmax}]")
+    scaled = (np.clip(arr.astype(np.float64), lo, hi) - lo) * (png_io.UINT16_MAX / (hi - lo))
+    return np.rint(scaled).astype(np.uint16)
+
+
+def _prepare_layer(name: str, data, ranges: dict) -> tuple[np.ndarray, Callable]:
+    """Validate one (T, H, W, C) layer; return its per-frame samples and the frame encoder."""
+    fmt = LAYERS[name]
+    what = f"write_image_dict: layer {name!r}"
+    arr = np.asarray(data)
+    if arr.ndim != 4 or arr.shape[-1] != fmt.channels or 0 in arr.shape:
+        raise ValueError(f"{what}: expected shape (T, H, W, {fmt.channels}), got {arr.shape}")
+    if fmt.kind == "image8":
+        if arr.dtype != np.uint8:
+            raise TypeError(f"{what}: expected dtype uint8 (8-bit PNG), got {arr.dtype}")
+        return arr, png_io.encode_png
+    if fmt.kind == "tiff":
+        if arr.dtype.kind != "f":
+            raise TypeError(f"{what}: expected float depth values, got dtype {arr.dtype}")
+        finite = arr[np.isfinite(arr)]
+        if finite.size:  # NaN / inf pixels are stored as they are but left out of the range
+            ranges[name] = {"min": float(finite.min()), "max": float(finite.max())}
+        return arr, tiff_io.encode_tiff
+    if fmt.kind == "labels":
+        labels, max_label = png_io.check_labels(arr.reshape(-1, arr.shape[2], 1), what)
+        bitdepth = 8 if max_label <= 255 else 16
+        encode = lambda frame: png_io.encode_labels(frame, max_label, None, bitdepth, what)
+        return arr, encode
+    if fmt.kind == "scaled":
+        value_range = png_io.float_range(arr, what)
+        ranges[name] = value_range
+        q = png_io.scale_to_uint16(arr, value_range["min"], value_range["max"])
+    elif fmt.kind == "signed_unit":
+        q = _unit_interval_to_uint16(arr, -1.0, 1.0, what)
+    else:
+        q = _unit_interval_to_uint16(arr, 0.0, 1.0, what)
+    if q.shape[-1] == 2:
+        q = np.concatenate([q, np.zeros_like(q[..., :1])], axis=-1)
+    return q, png_io.encode_png
+
+
+def write_image_dict(data_dict: Mapping[str, np.ndarray], directory: PathLike,
+                     file_templates: Mapping[str, str] | None = None,
+                     max_write_threads: int = 16) -> dict[str, dict[str, float]]:
+    """Write every layer of ``data_dict`` into ``directory`` (see module docstring).
+
+    All layers are validated before any file is written; each file is written atomically by up to
+    ``max_write_threads`` threads (zlib releases the GIL). Returns the ranges written to
+    ``data_ranges.json``.
+    """
+    directory = as_path(directory)
+    if max_write_threads < 1:
+        raise ValueError(f"max_write_threads must be ≥ 1, got {max_write_threads}")
+    unknown = sorted(set(data_dict) - set(LAYERS))
+    if unknown:
+        raise ValueError(f"write_image_dict: unknown layer(s) {unknown}; known: {sorted(LAYERS)}")
+    templates = _templates(file_templates)
+    ranges: dict[str, dict[str, float]] = {}
+    prepared = {name: _prepare_layer(name, data, ranges) for name, data in data_dict.items()}
+    shapes = {name: samples.shape[:3] for name, (samples, _) in prepared.items()}
+    if len(set(shapes.values())) > 1:
+        raise ValueError(f"write_image_dict: layers disagree on (T, H, W): {shapes}")
+    jobs = [(samples[i], encode, directory / frame_filename(templates[name], i))
+            for name, (samples, encode) in prepared.items() for i in range(samples.shape[0])]
+    directory.mkdir(parents=True, exist_ok=True)
+
+    def run(job):
+        frame, encode, path = job
+        atomic_write_bytes(encode(frame), path)
+
+    if jobs:
+        with ThreadPoolExecutor(max_workers=min(max_write_threads, len(jobs))) as pool:
+            for _ in pool.map(run, jobs):  # re-raises the first exception
+                pass
+    if ranges:
+        range_path = directory / DATA_RANGES_FILE
+        merged = read_json(range_path) if range_path.exists() else {}
+        merged.update(ranges)
+        write_json(merged, range_path)
+    return ranges
+
+
+# -------------------------------------------------------------------------------- decoding
+def _frame_paths(directory, template: str) -> list:
+    """The frame files of ``template`` (which may start with sub-directories) in index order."""
+    subdir, _, basename = template.rpartition("/")
+    if "{" in subdir:
+        raise ValueError(f"file template {template!r}: the frame index must be in the file name, "
+                         "not in a directory name")
+    folder = directory / subdir if subdir else directory
+    pattern = _template_regex(basename)
+    found = {}
+    for path in (folder.iterdir() if folder.is_dir() else ()):
+        match = pattern.match(path.name)
+        if match and frame_filename(basename, int(match.group(1))) == path.name:
+            found[int(match.group(1))] = path
+    missing = sorted(set(range(len(found))) - set(found))
+    if missing:
+        raise ValueError(f"{str(directory)!r}: frames of {template!r} must be numbered "
+                         f"0..{len(found) - 1}; missing indices {missing[:10]}")
+    return [found[i] for i in range(len(found))]
+
+
+def _decode_frame(name: str, path, value_range) -> np.ndarray:
+    fmt = LAYERS[name]
+    data = read_bytes(path)
+    if fmt.kind == "tiff":
+        arr = tiff_io.decode_tiff(data, repr(str(path))).astype(np.float32, copy=False)
+    else:
+        arr, _ = png_io.decode_png(data, repr(str(path)))
+        if fmt.kind == "labels":
+            arr = arr.astype(np.uint32)
+        elif fmt.kind != "image8":
+            if arr.dtype != np.uint16:
+                raise ValueError(f"{str(path)!r}: layer {name!r} must be a 16-bit PNG")
+            lo, hi = {"scaled": value_range, "signed_unit": (-1.0, 1.0)}.get(fmt.kind, (0, 1))
+            arr = png_io.unscale_from_uint16(arr, lo, hi)
+    if arr.shape[-1] < fmt.channels:
+        raise ValueError(f"{str(path)!r}: layer {name!r} needs {fmt.channels} channels, the "
+                         f"file has {arr.shape[-1]}")
+    return arr[..., :fmt.channels]
+
+
+def read_layer(directory: PathLike, name: str, file_templates: Mapping[str, str] | None = None,
+               value_range=None) -> np.ndarray:
+    """Read all frames of one layer from a scene directory as a (T, H, W, C) array.
+
+    Scaled layers (flows) use ``value_range`` or else the entry in ``data_ranges.json``.
+    """
+    directory = as_path(directory)
+    if name not in LAYERS:
+        raise ValueError(f"read_layer: unknown layer {name!r}; known: {sorted(LAYERS)}")
+    paths = _frame_paths(directory, _templates(file_templates)[name])
+    if not paths:
+        raise FileNotFoundError(f"{str(directory)!r} has no frames of layer {name!r}")
+    if LAYERS[name].kind == "scaled":
+        if value_range is None:
+            range_path = directory / DATA_RANGES_FILE
+            ranges = read_json(range_path) if range_path.exists() else {}
+            if name not in ranges:
+                raise ValueError(f"{str(range_path)!r} has no range for layer {name!r}")
+            value_range = ranges[name]
+        value_range = png_io._range_pair(value_range, f"read_layer({name!r})")
+    frames = [_decode_frame(name, p, value_range) for p in paths]
+    if len({f.shape for f in frames}) > 1:
+        raise ValueError(f"{str(directory)!r}: frames of layer {name!r} differ in shape")
+    return np.stack(frames)
+
+
+def read_image_dict(directory: PathLike, layers: Iterable[str] | None = None,
+                    file_templates: Mapping[str, str] | None = None) -> dict[str, np.ndarray]:
+    """Decode a scene directory's layers back into the renderer's (T, H, W, C) layer dict.
+
+    ``layers``: names to read (each must be present); None reads every known layer that has at
+    least one frame file.
+    """
+    directory = as_path(directory)
+    if not directory.is_dir():
+        raise NotADirectoryError(f"read_image_dict: {str(directory)!r} is not a directory")
+    templates = _templates(file_templates)
+    if layers is None:
+        layers = [n for n in LAYERS if _frame_paths(directory, templates[n])]
+    return {name: read_layer(directory, name, file_templates) for name in layers}
+
+
+def read_segmentation(directory: PathLike, file_template: str | None = None) -> np.ndarray:
+    """All segmentation frames of a scene directory, (T, H, W, 1) uint32 labels."""
+    templates = None if file_template is None else {"segmentation": file_template}
+    return read_layer(directory, "segmentation", templates)
