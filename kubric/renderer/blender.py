@@ -1,0 +1,448 @@
+"""The Blender Cycles renderer: a view of the scene model on ``bpy==5.0.1``.
+
+``Blender(scene, ...)`` resets Blender to factory settings, sets every render option explicitly
+(Cycles, **Standard** view transform, samples, denoising, light tree, bounces, device) and then
+links itself to the scene, which replays the scene and its assets through the mapping tables
+``builders`` / ``setters`` / ``keyframers`` below (one row per model class / property).
+
+Rendering: :meth:`Blender.render` renders every requested frame in two Blender calls (contiguous
+frame runs are one ``render(animation=True)`` each): the RGB render at ``samples_per_pixel`` and
+the exact annotation render described in :mod:`kubric.renderer.blender_passes`. Blender's state is
+kept between frames (``render.use_persistent_data``). The result is a dict of (T, H, W, C) numpy
+arrays (see blender_passes and the output contract): rgba uint8, depth/z float32 (metres),
+segmentation uint32, forward/backward_flow float32 (Δrow, Δcol in pixels), normal, uv,
+object_coordinates float32.
+
+Options:
+  samples_per_pixel (int ≥ 1), adaptive_sampling (bool), use_denoising (bool, OIDN),
+  background_transparency (bool: transparent film, alpha 0 where the background shows),
+  motion_blur (False / 0 = off, True = shutter 0.5 frames, or a shutter length in frames > 0;
+  RGB only — annotations are always sharp), device ("CPU" or "GPU"; default "GPU" when the
+  environment variable KUBRIC_USE_GPU is 1/true, else "CPU"), max_bounces (None = Blender's
+  defaults, or an int ≥ 0 limiting every bounce kind), light_tree (bool, default False: faster on
+  small lamp-lit scenes), verbose (bool: show Blender's console output), scratch_dir (where frames
+  are written; default a new temporary directory).
+Depth of field comes from the perspective camera's ``use_dof`` / ``focus_distance`` /
+``aperture_fstop`` (RGB only).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import sys
+import tempfile
+from pathlib import Path
+
+import bpy
+import numpy as np
+
+from kubric.core import cameras, lights, materials, objects
+from kubric.core.scene import Scene
+from kubric.core.views import TableView
+from kubric.renderer import blender_materials as bm
+from kubric.renderer import blender_objects as bo
+from kubric.renderer import blender_passes as bp
+from kubric.renderer import blender_world as bw
+
+
+@contextlib.contextmanager
+def _silenced(active: bool):
+    """Redirect the process's stdout/stderr file descriptors to /dev/null while active."""
+    if not active:
+        yield
+        return
+    sys.stdout.flush()
+    sys.stderr.flush()
+    saved = os.dup(1), os.dup(2)
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    try:
+        os.dup2(devnull, 1)
+        os.dup2(devnull, 2)
+        yield
+    finally:
+        os.dup2(saved[0], 1)
+        os.dup2(saved[1], 2)
+        for fd in (*saved, devnull):
+            os.close(fd)
+
+
+def _as_bool(name, value):
+    if not isinstance(value, (bool, np.bool_)):
+        raise TypeError(f"Blender option {name} must be True or False, got {value!r}")
+    return bool(value)
+
+
+def _as_int(name, value, low):
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < low:
+        raise ValueError(f"Blender option {name} must be an integer ≥ {low}, got {value!r}")
+    return int(value)
+
+
+def _motion_blur(value):
+    if isinstance(value, (bool, np.bool_)):
+        return 0.5 if value else 0.0
+    if isinstance(value, (int, float, np.number)) and 0 <= float(value) <= 10:
+        return float(value)
+    raise ValueError(f"Blender option motion_blur must be a bool or a shutter length in frames in "
+                     f"[0, 10], got {value!r}")
+
+
+def _device(value):
+    if value is None:
+        value = "GPU" if os.environ.get("KUBRIC_USE_GPU", "").lower() in ("1", "true", "yes") \
+            else "CPU"
+    if value not in ("CPU", "GPU"):
+        raise ValueError(f"Blender option device must be 'CPU' or 'GPU', got {value!r}")
+    return value
+
+
+class Blender(TableView):
+    """Cycles renderer view (see module doc for options and output)."""
+
+    builders = {
+        Scene: bw.build_scene,
+        objects.Cube: bo.build_cube,
+        objects.Sphere: bo.build_sphere,
+        objects.FileBasedObject: bo.build_file_object,
+        cameras.PerspectiveCamera: bo.build_perspective_camera,
+        cameras.OrthographicCamera: bo.build_orthographic_camera,
+        lights.DirectionalLight: bo.build_sun,
+        lights.PointLight: bo.build_point,
+        lights.SpotLight: bo.build_spot,
+        lights.RectAreaLight: bo.build_area,
+        materials.PrincipledBSDFMaterial: bm.build_principled,
+        materials.FlatMaterial: bm.build_flat,
+        materials.Texture: None,  # read by the materials / world that use it
+    }
+    setters = {
+        Scene: bw.SCENE_SETTERS,
+        objects.Object3D: {"position": bo.set_location, "quaternion": bo.set_rotation},
+        objects.PhysicalObject: {"scale": bo.set_scale, "material": bo.set_object_material},
+        cameras.Camera: {"shift_x": bo._data_setter("shift_x"),
+                         "shift_y": bo._data_setter("shift_y")},
+        cameras.PerspectiveCamera: {"focal_length": bo._data_setter("lens"),
+                                    "sensor_width": bo._data_setter("sensor_width"),
+                                    "use_dof": bo._set_dof,
+                                    "focus_distance": bo._set_focus_distance,
+                                    "aperture_fstop": bo._set_fstop},
+        cameras.OrthographicCamera: {"orthographic_scale": bo._data_setter("ortho_scale")},
+        lights.Light: {"color": bo.set_light_color, "intensity": bo._data_setter("energy")},
+        lights.DirectionalLight: {"shadow_softness": bo._data_setter("angle")},
+        lights.SpotLight: {"spot_size": bo._data_setter("spot_size"),
+                           "spot_blend": bo._data_setter("spot_blend")},
+        lights.RectAreaLight: {"width": bo._data_setter("size"),
+                               "height": bo._data_setter("size_y")},
+        materials.PrincipledBSDFMaterial: bm.PRINCIPLED_SETTERS,
+        materials.FlatMaterial: bm.FLAT_SETTERS,
+    }
+    keyframers = {
+        objects.Object3D: bo.object_keyframers(),
+        objects.PhysicalObject: bo.physical_keyframers(),
+        cameras.PerspectiveCamera: bo.camera_keyframers(),
+        lights.Light: bo.light_keyframers(),
+        materials.PrincipledBSDFMaterial: bm.PRINCIPLED_KEYFRAMERS,
+        materials.FlatMaterial: bm.FLAT_KEYFRAMERS,
+    }
+
+    def __init__(self, scene, scratch_dir=None, adaptive_sampling=False, use_denoising=True,
+                 samples_per_pixel=128, background_transparency=False, *, motion_blur=False,
+                 device=None, max_bounces=None, light_tree=False, verbose=False):
+        self.samples_per_pixel = _as_int("samples_per_pixel", samples_per_pixel, 1)
+        self.adaptive_sampling = _as_bool("adaptive_sampling", adaptive_sampling)
+        self.use_denoising = _as_bool("use_denoising", use_denoising)
+        self.background_transparency = _as_bool("background_transparency",
+                                                background_transparency)
+        self.motion_blur = _motion_blur(motion_blur)
+        self.device = _device(device)
+        self.max_bounces = None if max_bounces is None else _as_int("max_bounces",
+                                                                     max_bounces, 0)
+        self.light_tree = _as_bool("light_tree", light_tree)
+        self.verbose = _as_bool("verbose", verbose)
+        if scratch_dir is None:
+            scratch_dir = tempfile.mkdtemp(prefix="kubric_blender_")
+        self.scratch_dir = Path(scratch_dir)
+        self.scratch_dir.mkdir(parents=True, exist_ok=True)
+        self.imported_materials: dict[str, list] = {}
+        with self.quiet():
+            bpy.ops.wm.read_factory_settings(use_empty=True)
+            bpy.context.preferences.edit.keyframe_new_interpolation_type = "LINEAR"
+            self.bpy_scene = bpy.context.scene
+            self._setup_render_engine()
+        super().__init__(scene)
+
+    # ------------------------------------------------------------------ setup
+    def quiet(self):
+        """Context manager silencing Blender's console output unless ``verbose``."""
+        return _silenced(not self.verbose)
+
+    def _setup_render_engine(self):
+        s = self.bpy_scene
+        s.render.engine = "CYCLES"
+        s.view_settings.view_transform = "Standard"
+        s.view_settings.look = "None"
+        s.view_settings.exposure = 0.0
+        s.view_settings.gamma = 1.0
+        s.display_settings.display_device = "sRGB"
+        s.render.use_persistent_data = True
+        s.render.use_compositing = False
+        s.render.use_sequencer = False
+        s.cycles.use_light_tree = self.light_tree
+        s.cycles.denoiser = "OPENIMAGEDENOISE"
+        self._setup_device()
+        layer = s.view_layers[0]
+        aov = layer.aovs.add()
+        aov.name, aov.type = bp.AOV_NAME, "COLOR"
+
+    def _setup_device(self):
+        s = self.bpy_scene
+        if self.device == "CPU":
+            s.cycles.device = "CPU"
+            return
+        prefs = bpy.context.preferences.addons["cycles"].preferences
+        for kind in ("OPTIX", "CUDA", "HIP", "ONEAPI", "METAL"):
+            try:
+                prefs.compute_device_type = kind
+            except TypeError:
+                continue
+            prefs.get_devices()
+            gpus = [d for d in prefs.devices if d.type == kind]
+            if gpus:
+                for d in prefs.devices:
+                    d.use = d.type == kind
+                s.cycles.device = "GPU"
+                return
+        raise RuntimeError("Blender option device='GPU' (or KUBRIC_USE_GPU) was requested but "
+                           "Cycles finds no OPTIX/CUDA/HIP/oneAPI/Metal device; use device='CPU'")
+
+    # ------------------------------------------------------------------ table helpers
+    def destroy(self, asset, obj) -> None:
+        if isinstance(obj, bpy.types.Object):
+            bpy.data.objects.remove(obj, do_unlink=True)
+        elif isinstance(obj, bpy.types.Material):
+            bpy.data.materials.remove(obj, do_unlink=True)
+
+    def assign_material(self, asset, obj, material) -> None:
+        """Give ``obj`` the Blender counterpart of ``material`` (in every slot)."""
+        if isinstance(material, materials.UndefinedMaterial):
+            imported = self.imported_materials.get(asset.uid)
+            mats = imported if imported else [bm.default_material()]
+        else:
+            if self not in material.linked_objects:
+                self.add(material)
+            mats = [material.linked_objects[self]]
+        mesh = obj.data
+        if len(mats) == 1 and len(mesh.materials) > 1:
+            for i in range(len(mesh.materials)):
+                mesh.materials[i] = mats[0]
+        else:
+            mesh.materials.clear()
+            for m in mats:
+                mesh.materials.append(m)
+
+    # ------------------------------------------------------------------ per-render state
+    def _object_tables(self):
+        """Give every rendered object a unique pass_index; return (label lut, bounds lut)."""
+        assets = self.scene.assets
+        labels = np.zeros(len(assets) + 1, np.uint32)
+        bounds = np.zeros((len(assets) + 1, 2, 3), np.float64)
+        for i, asset in enumerate(assets, start=1):
+            obj = asset.linked_objects.get(self)
+            if not isinstance(obj, bpy.types.Object) or obj.type != "MESH":
+                continue
+            obj.pass_index = i
+            seg = getattr(asset, "segmentation_id", None)
+            labels[i] = i if seg is None else seg
+            bounds[i] = np.asarray(asset.bounds, np.float64)
+        return labels, bounds
+
+    def _sync(self):
+        s = self.bpy_scene
+        cam = self.scene.camera
+        obj = cam.linked_objects.get(self)
+        if obj is None:
+            raise ValueError("the scene has no camera: add a PerspectiveCamera or "
+                             "OrthographicCamera before rendering")
+        s.camera = obj
+        linear_interpolation()
+
+    def _configure_rgb(self, path_prefix):
+        s = self.bpy_scene
+        c = s.cycles
+        c.samples = self.samples_per_pixel
+        c.use_adaptive_sampling = self.adaptive_sampling
+        c.use_denoising = self.use_denoising
+        c.filter_width = 1.5
+        s.render.film_transparent = self.background_transparency
+        s.render.use_motion_blur = self.motion_blur > 0
+        if self.motion_blur > 0:
+            s.render.motion_blur_shutter = self.motion_blur
+        self._camera_dof(restore=True)
+        layer = s.view_layers[0]
+        layer.material_override = None
+        self._passes(layer, False)
+        if self.max_bounces is None:
+            c.max_bounces, c.diffuse_bounces, c.glossy_bounces = 12, 4, 4
+            c.transmission_bounces, c.volume_bounces, c.transparent_max_bounces = 12, 0, 8
+        else:
+            c.max_bounces = c.diffuse_bounces = c.glossy_bounces = self.max_bounces
+            c.transmission_bounces = c.volume_bounces = c.transparent_max_bounces = \
+                self.max_bounces
+        img = s.render.image_settings
+        img.media_type = "IMAGE"
+        img.file_format = "PNG"
+        img.color_mode = "RGBA"
+        img.color_depth = "8"
+        img.compression = 15
+        s.render.filepath = str(path_prefix)
+
+    def _configure_annotations(self, path_prefix):
+        s = self.bpy_scene
+        c = s.cycles
+        c.samples = 1
+        c.use_adaptive_sampling = False
+        c.use_denoising = False
+        c.filter_width = 0.01
+        c.max_bounces = c.diffuse_bounces = c.glossy_bounces = 0
+        c.transmission_bounces = c.volume_bounces = c.transparent_max_bounces = 0
+        s.render.film_transparent = True
+        s.render.use_motion_blur = False
+        self._camera_dof(restore=False)
+        layer = s.view_layers[0]
+        layer.material_override = bp.override_material()
+        self._passes(layer, True)
+        img = s.render.image_settings
+        img.media_type = "MULTI_LAYER_IMAGE"
+        img.file_format = "OPEN_EXR_MULTILAYER"
+        img.color_depth = "32"
+        img.exr_codec = "ZIP"
+        s.render.filepath = str(path_prefix)
+
+    def _passes(self, layer, on):
+        layer.use_pass_z = layer.use_pass_object_index = layer.use_pass_normal = on
+        layer.use_pass_vector = layer.use_pass_uv = on
+
+    def _camera_dof(self, restore):
+        cam = self.scene.camera
+        obj = cam.linked_objects.get(self)
+        if obj is not None and isinstance(cam, cameras.PerspectiveCamera):
+            obj.data.dof.use_dof = bool(cam.use_dof) if restore else False
+
+    def _render_runs(self, frames, prefix, suffix):
+        """Render ``frames`` in as few animation calls as possible; return the file per frame."""
+        s = self.bpy_scene
+        start, end = s.frame_start, s.frame_end
+        runs, files = [], {}
+        for f in frames:
+            _frame_file(prefix, f, suffix).unlink(missing_ok=True)  # never read a stale frame
+        for f in frames:
+            if runs and f == runs[-1][1] + 1:
+                runs[-1][1] = f
+            else:
+                runs.append([f, f])
+        try:
+            with self.quiet():
+                for a, b in runs:
+                    s.frame_end = 1048574
+                    s.frame_start, s.frame_end = a, b
+                    bpy.ops.render.render(animation=True)
+        finally:
+            s.frame_end = 1048574
+            s.frame_start, s.frame_end = start, end
+        for f in frames:
+            path = _frame_file(prefix, f, suffix)
+            if not path.is_file():
+                raise RuntimeError(f"Blender did not write frame {f} to {path}")
+            files[f] = path
+        return files
+
+    # ------------------------------------------------------------------ public API
+    def render(self, frames=None, return_layers=bp.ALL_LAYERS, ignore_missing=False):
+        """Render ``frames`` (default: the scene's frame range) → {layer: (T, H, W, C) array}.
+
+        ``return_layers`` is any subset of ``("rgba",) + ANNOTATION_LAYERS`` (see module doc).
+        """
+        frames = list(self.scene.frames if frames is None else frames)
+        if not frames:
+            raise ValueError("Blender.render: frames is empty")
+        for f in frames:
+            if isinstance(f, bool) or not isinstance(f, (int, np.integer)):
+                raise TypeError(f"Blender.render: frames must be integers, got {f!r}")
+        frames = [int(f) for f in frames]
+        if min(frames) < 0:
+            raise ValueError(f"Blender.render: Blender renders frames ≥ 0 only, got {min(frames)}")
+        wanted = tuple(return_layers)
+        unknown = sorted(set(wanted) - set(bp.ALL_LAYERS))
+        if unknown:
+            raise ValueError(f"Blender.render: unknown layers {unknown}; allowed: "
+                             f"{list(bp.ALL_LAYERS)}")
+        self._sync()
+        out: dict[str, list] = {k: [] for k in wanted}
+        if "rgba" in wanted:
+            prefix = self.scratch_dir / "rgba_"
+            self._configure_rgb(prefix)
+            files = self._render_runs(sorted(set(frames)), str(prefix), ".png")
+            for f in frames:
+                out["rgba"].append(_read_png_rgba(files[f]))
+        ann = [k for k in wanted if k != "rgba"]
+        if ann:
+            labels, bounds = self._object_tables()
+            prefix = self.scratch_dir / "annotations_"
+            self._configure_annotations(prefix)
+            try:
+                files = self._render_runs(sorted(set(frames)), str(prefix), ".exr")
+            finally:
+                self._configure_rgb(self.scratch_dir / "rgba_")
+            for f in frames:
+                passes = bp.read_multilayer_exr(files[f])
+                layers = bp.decode(passes, self.scene.camera, f, labels, bounds, ann)
+                for k in ann:
+                    out[k].append(layers[k])
+        return {k: np.stack(v) for k, v in out.items()}
+
+    def render_still(self, frame=None, return_layers=bp.ALL_LAYERS):
+        """Render one frame (default: Blender's current frame) → {layer: (H, W, C) array}."""
+        frame = self.bpy_scene.frame_current if frame is None else frame
+        return {k: v[0] for k, v in self.render([frame], return_layers).items()}
+
+    def save_state(self, path):
+        """Write the scene as a .blend file (RGB settings, animation included) for the UI."""
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        self._sync()
+        self._object_tables()
+        self._configure_rgb(self.scratch_dir / "rgba_")
+        with self.quiet():
+            bpy.ops.wm.save_as_mainfile(filepath=str(path.resolve()), copy=True)
+        return path
+
+
+def linear_interpolation():
+    """Set every keyframe of every action to LINEAR interpolation (bpy 5 layered actions)."""
+    for action in bpy.data.actions:
+        for fcurve in _action_fcurves(action):
+            for kp in fcurve.keyframe_points:
+                if kp.interpolation != "LINEAR":
+                    kp.interpolation = "LINEAR"
+
+
+def _action_fcurves(action):
+    curves = []
+    for layer in getattr(action, "layers", []):
+        for strip in layer.strips:
+            for bag in getattr(strip, "channelbags", []):
+                curves.extend(bag.fcurves)
+    if not curves and hasattr(action, "fcurves"):
+        curves = list(action.fcurves)
+    return curves
+
+
+def _frame_file(prefix, frame, suffix) -> Path:
+    """The file Blender writes for ``frame`` when render.filepath is ``prefix`` (#### padding)."""
+    return Path(f"{prefix}{frame:04d}{suffix}")
+
+
+def _read_png_rgba(path) -> np.ndarray:
+    from PIL import Image
+    with Image.open(path) as im:
+        return np.asarray(im.convert("RGBA"), dtype=np.uint8)

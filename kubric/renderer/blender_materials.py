@@ -1,0 +1,226 @@
+"""Blender counterparts of the model's materials and textures (node trees for Cycles).
+
+* :class:`~kubric.core.materials.PrincipledBSDFMaterial` → a Principled BSDF with bpy 5.0's input
+  names: ``Base Color``, ``Metallic``, ``Specular IOR Level`` (← ``specular``), ``Specular Tint``
+  (a colour in 5.0: the model's scalar tint t gives ``(1−t)·white + t·base colour``),
+  ``Roughness``, ``IOR``, ``Transmission Weight``, ``Emission Color`` with ``Emission Strength`` 1.
+  bpy 5.0 has no ``Transmission Roughness`` input: the model property is kept but has no effect.
+* :class:`~kubric.core.materials.FlatMaterial` → Emission (strength 1) seen by camera rays; other
+  rays see a Transparent BSDF when ``indirect_visibility`` is False (no reflections, no shadows);
+  ``holdout`` replaces the camera-ray shader by a Holdout (alpha 0 in RGBA; annotation layers still
+  show the object because they are rendered with an override material).
+* A colour that is a :class:`~kubric.core.materials.Texture`: ``"uv"`` mapping → Image Texture on
+  the mesh UVs; ``"environment"`` mapping → equirectangular lookup by the direction from the
+  object's origin to the shaded point (world axes, rotated by ``texture.rotation``), which lets a
+  dome show an HDRI as floor + backdrop. ``texture.strength`` multiplies the colour.
+"""
+
+from __future__ import annotations
+
+import bpy
+
+from kubric.core.materials import Texture
+
+
+def load_image(texture: Texture):
+    if not texture.filename:
+        raise ValueError(f"{texture.uid}: Texture.filename is empty")
+    try:
+        return bpy.data.images.load(texture.filename, check_existing=True)
+    except RuntimeError as err:
+        raise ValueError(f"{texture.uid}: cannot load Texture.filename "
+                         f"{texture.filename!r}: {err}") from None
+
+
+def _new_material(asset):
+    mat = bpy.data.materials.new(asset.uid)
+    nodes = mat.node_tree.nodes
+    nodes.clear()
+    out = nodes.new("ShaderNodeOutputMaterial")
+    out.name = "output"
+    return mat, out
+
+
+def _color_node(mat, name):
+    """The node feeding colour ``name``: an RGB node replaced by texture nodes when needed."""
+    nodes = mat.node_tree.nodes
+    node = nodes.get(name)
+    if node is None:
+        node = nodes.new("ShaderNodeRGB")
+        node.name = name
+    return node
+
+
+def texture_color_output(node_tree, texture: Texture, prefix: str):
+    """Build (or reuse) the nodes that turn ``texture`` into a colour; return the colour socket."""
+    nodes, links = node_tree.nodes, node_tree.links
+    for n in [n for n in nodes if n.name.startswith(prefix + ":")]:
+        nodes.remove(n)
+    image = load_image(texture)
+    if texture.mapping == "uv":
+        tex = nodes.new("ShaderNodeTexImage")
+        coords = nodes.new("ShaderNodeTexCoord")
+        links.new(coords.outputs["UV"], tex.inputs["Vector"])
+    else:
+        tex = nodes.new("ShaderNodeTexEnvironment")
+        geom = nodes.new("ShaderNodeNewGeometry")
+        info = nodes.new("ShaderNodeObjectInfo")
+        sub = nodes.new("ShaderNodeVectorMath")
+        sub.operation = "SUBTRACT"
+        mapping = nodes.new("ShaderNodeMapping")
+        mapping.vector_type = "VECTOR"
+        mapping.inputs["Rotation"].default_value = tuple(float(v) for v in texture.rotation)
+        links.new(geom.outputs["Position"], sub.inputs[0])
+        links.new(info.outputs["Location"], sub.inputs[1])
+        links.new(sub.outputs["Vector"], mapping.inputs["Vector"])
+        links.new(mapping.outputs["Vector"], tex.inputs["Vector"])
+        for n in (geom, info, sub, mapping):
+            n.name = f"{prefix}:{n.name}"
+    tex.image = image
+    tex.name = f"{prefix}:{tex.name}"
+    scale = nodes.new("ShaderNodeMix")
+    scale.data_type = "RGBA"
+    scale.blend_type = "MULTIPLY"
+    scale.name = f"{prefix}:strength"
+    scale.inputs["Factor"].default_value = 1.0
+    s = float(texture.strength)
+    scale.inputs[7].default_value = (s, s, s, 1.0)
+    links.new(tex.outputs["Color"], scale.inputs[6])
+    return scale.outputs[2]
+
+
+def _connect_color(mat, socket, value, prefix):
+    """Drive ``socket`` by a constant colour or a texture."""
+    links = mat.node_tree.links
+    for link in list(socket.links):
+        links.remove(link)
+    if isinstance(value, Texture):
+        links.new(texture_color_output(mat.node_tree, value, prefix), socket)
+    else:
+        for n in [n for n in mat.node_tree.nodes if n.name.startswith(prefix + ":")]:
+            mat.node_tree.nodes.remove(n)
+        socket.default_value = tuple(value)
+
+
+# ---------------------------------------------------------------------------------- principled
+def build_principled(view, asset):
+    mat, out = _new_material(asset)
+    bsdf = mat.node_tree.nodes.new("ShaderNodeBsdfPrincipled")
+    bsdf.name = "bsdf"
+    mat.node_tree.links.new(bsdf.outputs["BSDF"], out.inputs["Surface"])
+    bsdf.inputs["Emission Strength"].default_value = 1.0
+    return mat
+
+
+def _bsdf_input(input_name):
+    def setter(view, asset, mat, value):
+        mat.node_tree.nodes["bsdf"].inputs[input_name].default_value = float(value)
+    return setter
+
+
+def _set_specular_tint(view, asset, mat, value):
+    color = asset.color
+    base = (1.0, 1.0, 1.0) if isinstance(color, Texture) else tuple(color)[:3]
+    t = float(value)
+    tint = tuple((1.0 - t) + t * c for c in base) + (1.0,)
+    mat.node_tree.nodes["bsdf"].inputs["Specular Tint"].default_value = tint
+
+
+def _set_principled_color(view, asset, mat, value):
+    _connect_color(mat, mat.node_tree.nodes["bsdf"].inputs["Base Color"], value, "color")
+    _set_specular_tint(view, asset, mat, asset.specular_tint)
+
+
+def _set_emission(view, asset, mat, value):
+    mat.node_tree.nodes["bsdf"].inputs["Emission Color"].default_value = tuple(value)
+
+
+PRINCIPLED_SETTERS = {
+    "color": _set_principled_color,
+    "metallic": _bsdf_input("Metallic"),
+    "specular": _bsdf_input("Specular IOR Level"),
+    "specular_tint": _set_specular_tint,
+    "roughness": _bsdf_input("Roughness"),
+    "ior": _bsdf_input("IOR"),
+    "transmission": _bsdf_input("Transmission Weight"),
+    "emission": _set_emission,
+}
+
+
+def _color_keyframer(socket_of):
+    def key(view, asset, mat, frame):
+        value = asset.keyframes["color"][frame]
+        if isinstance(value, Texture):
+            return
+        socket = socket_of(mat)
+        socket.default_value = tuple(value)
+        socket.keyframe_insert("default_value", frame=frame)
+        if not isinstance(asset.color, Texture):
+            socket.default_value = tuple(asset.color)
+    return key
+
+
+PRINCIPLED_KEYFRAMERS = {
+    "color": _color_keyframer(lambda m: m.node_tree.nodes["bsdf"].inputs["Base Color"]),
+}
+
+
+# ---------------------------------------------------------------------------------- flat
+def build_flat(view, asset):
+    mat, out = _new_material(asset)
+    nodes, links = mat.node_tree.nodes, mat.node_tree.links
+    emission = nodes.new("ShaderNodeEmission")
+    emission.name = "emission"
+    emission.inputs["Strength"].default_value = 1.0
+    holdout = nodes.new("ShaderNodeHoldout")
+    holdout.name = "holdout"
+    transparent = nodes.new("ShaderNodeBsdfTransparent")
+    transparent.name = "transparent"
+    path = nodes.new("ShaderNodeLightPath")
+    path.name = "light_path"
+    mix = nodes.new("ShaderNodeMixShader")
+    mix.name = "mix"
+    links.new(path.outputs["Is Camera Ray"], mix.inputs["Fac"])
+    links.new(mix.outputs["Shader"], out.inputs["Surface"])
+    return mat
+
+
+def _rewire_flat(asset, mat):
+    nodes, links = mat.node_tree.nodes, mat.node_tree.links
+    mix = nodes["mix"]
+    for socket in (mix.inputs[1], mix.inputs[2]):
+        for link in list(socket.links):
+            links.remove(link)
+    camera_shader = nodes["holdout"] if asset.holdout else nodes["emission"]
+    other = nodes["emission"] if asset.indirect_visibility else nodes["transparent"]
+    links.new(other.outputs[0], mix.inputs[1])
+    links.new(camera_shader.outputs[0], mix.inputs[2])
+
+
+def _set_flat_color(view, asset, mat, value):
+    _connect_color(mat, mat.node_tree.nodes["emission"].inputs["Color"], value, "color")
+
+
+def _set_flat_switch(view, asset, mat, value):
+    _rewire_flat(asset, mat)
+
+
+FLAT_SETTERS = {
+    "color": _set_flat_color,
+    "holdout": _set_flat_switch,
+    "indirect_visibility": _set_flat_switch,
+}
+
+FLAT_KEYFRAMERS = {
+    "color": _color_keyframer(lambda m: m.node_tree.nodes["emission"].inputs["Color"]),
+}
+
+
+def default_material():
+    """The neutral grey used for objects whose material is UndefinedMaterial."""
+    mat = bpy.data.materials.get("kubric_default")
+    if mat is None:
+        mat = bpy.data.materials.new("kubric_default")
+        bsdf = next(n for n in mat.node_tree.nodes if n.type == "BSDF_PRINCIPLED")
+        bsdf.inputs["Base Color"].default_value = (0.8, 0.8, 0.8, 1.0)
+    return mat
