@@ -359,3 +359,21 @@ def test_removed_asset_disappears_from_render():
     scene += kb.Sphere(scale=1.5)
     seg = r.render_still(return_layers=("segmentation",))["segmentation"]
     assert seg.shape == (24, 32, 1) and (seg == 2).sum() > 50  # the sphere is asset 2 now
+
+
+def test_deleted_model_keyframes_leave_blender_too():
+    import bpy
+
+    scene = kb.Scene(resolution=(8, 8), frame_start=0, frame_end=4)
+    renderer = kb.renderer.Blender(scene, samples_per_pixel=1)
+    cube = kb.Cube()
+    scene += cube
+    for frame in range(5):
+        cube.position = (frame, 0, 0)
+        cube.keyframe_insert("position", frame)
+    obj = cube.linked_objects[renderer]
+    cube.keyframe_delete("position", 4)
+    bpy.context.scene.frame_set(4)
+    # with frame 4's key gone, Blender holds the last remaining key (frame 3), like the model
+    assert obj.location[0] == pytest.approx(3.0)
+    assert cube.get_value_at("position", 4)[0] == pytest.approx(3.0)

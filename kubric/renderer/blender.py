@@ -216,6 +216,18 @@ class Blender(TableView):
                            "Cycles finds no OPTIX/CUDA/HIP/oneAPI/Metal device; use device='CPU'")
 
     # ------------------------------------------------------------------ table helpers
+    def on_keyframe_delete(self, asset, name: str, frame: int) -> None:
+        """Drop the Blender key that the keyframer row of ``name`` inserted at ``frame``."""
+        obj = asset.linked_objects.get(self)
+        key = self._keyframers_for(type(asset)).get(name)
+        if obj is None or key is None:
+            return
+        owner, data_path = key.blender_path(obj)
+        try:
+            owner.keyframe_delete(data_path, frame=frame)
+        except RuntimeError:  # Blender has no key there (e.g. a Texture colour was keyed)
+            pass
+
     def destroy(self, asset, obj) -> None:
         if isinstance(obj, bpy.types.Object):
             bpy.data.objects.remove(obj, do_unlink=True)

@@ -157,6 +157,7 @@ def _color_keyframer(socket_of):
         socket.keyframe_insert("default_value", frame=frame)
         if not isinstance(asset.color, Texture):
             socket.default_value = tuple(asset.color)
+    key.blender_path = lambda mat: (socket_of(mat), "default_value")
     return key
 
 

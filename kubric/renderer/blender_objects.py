@@ -251,6 +251,7 @@ def keyframer(target, data_path, convert=None, setter=None):
         owner.keyframe_insert(data_path, frame=frame)
         setattr(owner, data_path, convert(getattr(asset, name)))
     key.model_name = None
+    key.blender_path = lambda obj: (target(obj), data_path)
     return key
 
 
@@ -290,6 +291,9 @@ def _key_quaternion(view, asset, obj, frame):
     obj.rotation_quaternion = tuple(float(v) for v in q)
     obj.keyframe_insert("rotation_quaternion", frame=frame)
     obj.rotation_quaternion = tuple(float(v) for v in asset.quaternion)
+
+
+_key_quaternion.blender_path = lambda obj: (obj, "rotation_quaternion")
 
 
 def object_keyframers():
