@@ -287,3 +287,15 @@ def test_keyframe_delete_notifies_and_names_missing_frames():
     assert cube.keyframes["position"] == {}
     with pytest.raises(KeyError, match=r"no keyframe of 'position' at frame 3; keyed frames: \[\]"):
         cube.keyframe_delete("position", 3)
+
+
+@pytest.mark.parametrize("resolution, expected", [(64, (64, 64)), ("320x240", (320, 240)),
+                                                  ("48", (48, 48)), ((30, 20), (30, 20))])
+def test_scene_from_flags_like_upstream_scripts(resolution, expected):
+    from types import SimpleNamespace
+    flags = SimpleNamespace(frame_start=1, frame_end=12, frame_rate=12, step_rate=240,
+                            resolution=resolution)
+    scene = kb.Scene.from_flags(flags)
+    assert scene.resolution == expected and scene.frame_end == 12 and scene.frame_rate == 12
+    with pytest.raises(ValueError, match="resolution must look like 256 or 320x240, got 'big'"):
+        kb.Scene.from_flags(SimpleNamespace(**{**vars(flags), "resolution": "big"}))

@@ -96,6 +96,24 @@ class Scene(kt.HasProperties):
         if not isinstance(self.camera, UndefinedCamera):
             self.add(self.camera)
 
+    @classmethod
+    def from_flags(cls, flags) -> Scene:
+        """A scene from parsed worker flags (``frame_start``, ``frame_end``, ``frame_rate``,
+        ``step_rate``, ``resolution``), as upstream scripts call it. ``resolution`` may be an int
+        (square), ``"WxH"``, ``"N"`` or a (width, height) pair."""
+        res = flags.resolution
+        if isinstance(res, str):
+            parts = res.lower().split("x")
+            try:
+                res = tuple(int(p) for p in parts)
+            except ValueError:
+                raise ValueError(f"resolution must look like 256 or 320x240, got {res!r}") from None
+        if isinstance(res, (int, float)) or (isinstance(res, tuple) and len(res) == 1):
+            side = res[0] if isinstance(res, tuple) else res
+            res = (side, side)
+        return cls(frame_start=flags.frame_start, frame_end=flags.frame_end,
+                   frame_rate=flags.frame_rate, step_rate=flags.step_rate, resolution=res)
+
     # ------------------------------------------------------------------ settings
     def set_rates(self, frame_rate: int, step_rate: int) -> None:
         """Change frame_rate and step_rate together (each alone must keep the multiple rule)."""
