@@ -1,0 +1,151 @@
+"""``kubric worker``, ``kubric generate``, ``kubric recipes`` and ``kubric inspect``."""
+
+from __future__ import annotations
+
+import ctypes
+import os
+import signal
+import sys
+
+from kubric.pipeline.options import OptionError
+
+
+def _error(command: str, message) -> int:
+    print(f"kubric {command}: error: {message}", file=sys.stderr)
+    return 2
+
+
+def _die_with_parent() -> None:
+    """When started by the local runner, die with it (Linux parent-death signal)."""
+    from kubric.pipeline.runner import PARENT_ENV
+    pid = os.environ.pop(PARENT_ENV, None)
+    if not pid:
+        return
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(1, int(signal.SIGTERM))  # PR_SET_PDEATHSIG
+    except (OSError, AttributeError):
+        return
+    if os.getppid() != int(pid):
+        sys.exit(143)
+
+
+def _terminate(signum, _frame):
+    raise SystemExit(128 + signum)
+
+
+def cmd_worker(args) -> int:
+    from kubric.pipeline.recipe import get_recipe
+    from kubric.pipeline.worker import run_scene
+    _die_with_parent()
+    signal.signal(signal.SIGTERM, _terminate)
+    seed = args.seed if args.seed is not None else args.first_seed + args.index
+    if seed < 0:
+        return _error("worker", f"seed must be ≥ 0, got {seed}")
+    try:
+        recipe = get_recipe(args.recipe).from_assignments(args.set)
+    except OptionError as err:
+        return _error("worker", err)
+    result = run_scene(recipe, seed, args.out)
+    print(f"{result.status}: {result.path} ({result.seconds:.1f} s)")
+    return 0
+
+
+def cmd_generate(args) -> int:
+    from kubric.pipeline.recipe import get_recipe, recipe_spec
+    from kubric.pipeline.runner import LocalRunner
+    if args.scenes < 1:
+        return _error("generate", f"--scenes must be ≥ 1, got {args.scenes}")
+    if args.first_seed < 0:
+        return _error("generate", f"--first-seed must be ≥ 0, got {args.first_seed}")
+    if args.workers is not None and args.workers < 1:
+        return _error("generate", f"--workers must be ≥ 1, got {args.workers}")
+    if args.retries < 0:
+        return _error("generate", f"--retries must be ≥ 0, got {args.retries}")
+    try:
+        cls = get_recipe(args.recipe)
+        cls.from_assignments(args.set).prepare()
+    except OptionError as err:
+        return _error("generate", err)
+    runner = LocalRunner(recipe_spec(cls), args.out,
+                         range(args.first_seed, args.first_seed + args.scenes),
+                         assignments=args.set, workers=args.workers, retries=args.retries,
+                         timeout=args.timeout, progress=not args.no_progress)
+    summary = runner.run()
+    print(summary.format(runner.out_root))
+    if summary.interrupted:
+        return 130
+    return 0 if summary.ok else 1
+
+
+def format_recipe(cls) -> str:
+    lines = [f"{cls.name}: {cls.description()}"]
+    width = max((len(n) for n in cls.options), default=0)
+    for name, opt in cls.options.items():
+        lines.append(f"    {name:<{width}}  {opt.type_name:<11} default {opt.default!r}: "
+                     f"{opt.help}")
+    return "\n".join(lines)
+
+
+def cmd_recipes(args) -> int:
+    from kubric.pipeline.recipe import get_recipe, load_builtin
+    try:
+        classes = [get_recipe(args.name)] if args.name else \
+            [cls for _, cls in sorted(load_builtin().items())]
+    except OptionError as err:
+        return _error("recipes", err)
+    print("\n\n".join(format_recipe(cls) for cls in classes))
+    return 0
+
+
+def cmd_inspect(args) -> int:
+    from kubric.pipeline.inspect import inspect_scene
+    try:
+        report = inspect_scene(args.scene_dir, args.sheet)
+    except (FileNotFoundError, ValueError) as err:
+        return _error("inspect", err)
+    print(report)
+    return 0
+
+
+def add_parser(subparsers) -> None:
+    p = subparsers.add_parser("worker", help="generate one scene (one seed) with a recipe",
+                              description="Write OUT/scene_{seed:08d}/ atomically (_SUCCESS "
+                              "last); a complete scene is skipped.")
+    p.add_argument("recipe", help="recipe name (see `kubric recipes`), module:Class or "
+                   "file.py:Class")
+    seed = p.add_mutually_exclusive_group(required=True)
+    seed.add_argument("--seed", type=int, help="the scene's seed (determines the scene)")
+    seed.add_argument("--index", type=int, help="array-job index (e.g. $SLURM_ARRAY_TASK_ID or "
+                      "$JOB_COMPLETION_INDEX): seed = --first-seed + index")
+    p.add_argument("--first-seed", type=int, default=0, help="seed of index 0 (default 0)")
+    p.add_argument("--out", required=True, help="output root directory")
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                   help="recipe option (repeatable)")
+    p.set_defaults(func=cmd_worker)
+
+    p = subparsers.add_parser("generate", help="generate many scenes locally (process pool)",
+                              description="One fresh worker process per scene; resumable.")
+    p.add_argument("recipe")
+    p.add_argument("--out", required=True, help="output root directory")
+    p.add_argument("--scenes", type=int, required=True, help="number of scenes")
+    p.add_argument("--first-seed", type=int, default=0, help="seed of the first scene")
+    p.add_argument("--workers", type=int, default=None, help="parallel workers (default: cores)")
+    p.add_argument("--retries", type=int, default=2, help="extra attempts per failed scene")
+    p.add_argument("--timeout", type=float, default=None, help="seconds per worker attempt")
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.set_defaults(func=cmd_generate)
+
+    p = subparsers.add_parser("recipes", help="list recipes and their options")
+    p.add_argument("name", nargs="?", help="only this recipe")
+    p.set_defaults(func=cmd_recipes)
+
+    p = subparsers.add_parser("inspect", help="summarise a scene directory, write a contact sheet")
+    p.add_argument("scene_dir")
+    p.add_argument("--sheet", default=None, help="contact sheet path (default: "
+                   "SCENE_DIR/contact_sheet.png; .gif for an animation)")
+    p.set_defaults(func=cmd_inspect)
+
+
+__all__ = ["add_parser"]

@@ -1,0 +1,207 @@
+"""Declared, typed recipe options (defaults, help, validation) and ``--set key=value`` parsing.
+
+An :class:`Option` is declared as a class attribute of a recipe::
+
+    class MyRecipe(Recipe, name="mine"):
+        resolution = Option((256, 256), "(width, height) in pixels", type=resolution)
+        samples = Option(64, "Cycles samples per pixel", low=1)
+
+Values arrive either as Python objects (API) or as strings (``--set samples=16``); both go through
+the same conversion and checks. Every failure raises :class:`OptionError` whose message is one
+line naming the recipe, the option, the bad value and what is allowed.
+"""
+
+from __future__ import annotations
+
+import pathlib
+from collections.abc import Callable, Mapping, Sequence
+from typing import Any
+
+_TRUE = {"1", "true", "yes", "on"}
+_FALSE = {"0", "false", "no", "off"}
+
+
+class OptionError(ValueError):
+    """A bad option value or name (one-line message)."""
+
+
+def _to_bool(value):
+    if isinstance(value, bool):
+        return value
+    if isinstance(value, str) and value.strip().lower() in _TRUE | _FALSE:
+        return value.strip().lower() in _TRUE
+    if isinstance(value, int) and value in (0, 1):
+        return bool(value)
+    raise ValueError(f"expected a boolean ({'/'.join(sorted(_TRUE | _FALSE))})")
+
+
+def _to_int(value):
+    if isinstance(value, bool):
+        raise ValueError("expected an integer")
+    if isinstance(value, str):
+        return int(value.strip())
+    if isinstance(value, float) and not value.is_integer():
+        raise ValueError("expected an integer")
+    return int(value)
+
+
+def _to_float(value):
+    if isinstance(value, bool):
+        raise ValueError("expected a number")
+    return float(value.strip() if isinstance(value, str) else value)
+
+
+def _to_str(value):
+    if not isinstance(value, str):
+        raise ValueError("expected a string")
+    return value
+
+
+def _to_path(value):
+    if not isinstance(value, (str, pathlib.Path)) or not str(value):
+        raise ValueError("expected a path")
+    return pathlib.Path(value).expanduser()
+
+
+_CONVERTERS: dict[Any, Callable[[Any], Any]] = {
+    bool: _to_bool, int: _to_int, float: _to_float, str: _to_str, pathlib.Path: _to_path,
+}
+
+
+def resolution(value) -> tuple[int, int]:
+    """Converter for (width, height): ``256``, ``"256"``, ``"320x240"`` or ``(320, 240)``."""
+    from kubric.utils import parse_resolution
+    return parse_resolution(value)
+
+
+def float_range(value) -> tuple[float, float]:
+    """Converter for a ``(low, high)`` pair with low ≤ high: ``"0.7,1.4"`` or ``(0.7, 1.4)``."""
+    if isinstance(value, str):
+        value = value.replace(":", ",").split(",")
+    try:
+        low, high = (float(v) for v in value)
+    except (TypeError, ValueError):
+        raise ValueError("expected two numbers low,high") from None
+    if low > high:
+        raise ValueError("expected low ≤ high")
+    return low, high
+
+
+class Option:
+    """One declared option.
+
+    Args:
+      default: the value when not given (None allowed with ``nullable=True``).
+      help: one line: meaning and unit.
+      type: ``bool``, ``int``, ``float``, ``str``, ``pathlib.Path`` or a converter
+        ``value -> value`` raising ValueError; default: the type of ``default``.
+      choices: allowed values (after conversion).
+      low, high: inclusive bounds for numbers (for tuples: every element).
+      must_exist: for paths: the path must exist when the recipe is built.
+      nullable: accept None (``--set key=none``).
+    """
+
+    def __init__(self, default: Any, help: str = "", *, type: Any = None,
+                 choices: Sequence | None = None, low: float | None = None,
+                 high: float | None = None, must_exist: bool = False, nullable: bool = False):
+        if type is None:
+            if default is None:
+                raise TypeError("Option(default=None) needs an explicit type=")
+            type = builtins_type(default)
+        self.default = default
+        self.help = help
+        self.type = type
+        self.convert_value = _CONVERTERS.get(type, type)
+        self.choices = tuple(choices) if choices is not None else None
+        self.low, self.high = low, high
+        self.must_exist = must_exist
+        self.nullable = nullable or default is None
+        self.name = "?"
+
+    def __set_name__(self, owner, name):
+        self.name = name
+
+    def __get__(self, obj, objtype=None):
+        if obj is None:
+            return self
+        return obj.values[self.name]
+
+    @property
+    def type_name(self) -> str:
+        return getattr(self.type, "__name__", str(self.type))
+
+    def allowed(self) -> str:
+        """Human description of the allowed values."""
+        parts = [self.type_name]
+        if self.choices is not None:
+            parts = ["one of " + ", ".join(map(str, self.choices))]
+        if self.low is not None:
+            parts.append(f"≥ {self.low}")
+        if self.high is not None:
+            parts.append(f"≤ {self.high}")
+        if self.must_exist:
+            parts.append("an existing path")
+        if self.nullable:
+            parts.append("or none")
+        return " ".join(parts)
+
+    def convert(self, value, owner: str = "recipe"):
+        """Converted, checked value; raises OptionError (one line)."""
+        where = f"{owner}: option {self.name}={value!r}"
+        if value is None or (isinstance(value, str) and value.strip().lower() == "none"
+                             and self.nullable):
+            if self.nullable:
+                return None
+            raise OptionError(f"{where}: a value is required ({self.allowed()})")
+        try:
+            v = self.convert_value(value)
+        except (TypeError, ValueError) as err:
+            raise OptionError(f"{where}: {err} (allowed: {self.allowed()})") from None
+        if self.choices is not None and v not in self.choices:
+            raise OptionError(f"{where}: not allowed (allowed: {self.allowed()})")
+        numbers = v if isinstance(v, tuple) else (v,)
+        for n in numbers:
+            if isinstance(n, (int, float)) and not isinstance(n, bool):
+                if (self.low is not None and n < self.low) or \
+                        (self.high is not None and n > self.high):
+                    raise OptionError(f"{where}: out of range (allowed: {self.allowed()})")
+        if self.must_exist and not pathlib.Path(v).exists():
+            raise OptionError(f"{where}: path does not exist")
+        return v
+
+
+def builtins_type(default):
+    if isinstance(default, bool):
+        return bool
+    if isinstance(default, pathlib.Path):
+        return pathlib.Path
+    for t in (int, float, str):
+        if isinstance(default, t):
+            return t
+    raise TypeError(f"Option default {default!r}: give type= explicitly")
+
+
+def parse_assignments(pairs: Sequence[str]) -> dict[str, str]:
+    """``["a=1", "b=x"]`` → ``{"a": "1", "b": "x"}``; raises OptionError on a malformed pair."""
+    out: dict[str, str] = {}
+    for pair in pairs or ():
+        key, sep, value = pair.partition("=")
+        if not sep or not key.strip():
+            raise OptionError(f"--set expects key=value, got {pair!r}")
+        out[key.strip()] = value
+    return out
+
+
+def convert_all(options: Mapping[str, Option], given: Mapping[str, Any],
+                owner: str) -> dict[str, Any]:
+    """All option values: ``given`` converted and checked, defaults for the rest. An unknown key
+    raises OptionError listing the known ones."""
+    unknown = sorted(set(given) - set(options))
+    if unknown:
+        raise OptionError(f"{owner}: unknown option {unknown[0]!r} "
+                          f"(options: {', '.join(sorted(options)) or 'none'})")
+    values = {}
+    for name, opt in options.items():
+        values[name] = opt.convert(given[name], owner) if name in given else \
+            (opt.default if opt.default is None else opt.convert(opt.default, owner))
+    return values

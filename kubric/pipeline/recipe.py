@@ -1,0 +1,177 @@
+"""The recipe (worker) contract and the recipe registry.
+
+A recipe turns ``(seed, options)`` into the files of one scene directory. Write one as a class::
+
+    class Tiny(Recipe, name="tiny"):
+        '''One line shown by `kubric recipes`.'''
+        frames = Option(4, "number of frames", low=1)
+
+        def generate(self, seed: int, out_dir: pathlib.Path) -> None:
+            ...  # write files into out_dir (never _SUCCESS: the worker writes it)
+
+or as a function with :func:`recipe`::
+
+    @recipe("tiny", frames=Option(4, "number of frames", low=1))
+    def tiny(seed, options, out_dir): ...
+
+Subclassing with ``name=`` registers the recipe. ``Recipe(**values)`` converts and checks every
+option at once (an :class:`~kubric.pipeline.options.OptionError` with a one-line message otherwise)
+and then calls :meth:`Recipe.check` for cross-option checks, all before any rendering. The seed
+alone determines the scene: ``generate`` must draw every random number from
+``numpy.random.RandomState(seed)`` (or generators derived from it).
+"""
+
+from __future__ import annotations
+
+import abc
+import importlib
+import importlib.util
+import pathlib
+import sys
+import types
+from collections.abc import Callable, Mapping
+from typing import Any, ClassVar
+
+from kubric.pipeline.options import Option, OptionError, convert_all, parse_assignments
+
+#: registered recipes by name.
+REGISTRY: dict[str, type[Recipe]] = {}
+
+#: modules imported to register the built-in recipes.
+BUILTIN_MODULES = ("kubric.workers",)
+
+
+class Recipe(abc.ABC):
+    """Base class of recipes (see module doc).
+
+    Attributes:
+      name: registry name (set by ``class X(Recipe, name="...")``).
+      options: ``{name: Option}`` declared on the class and its bases.
+      values: ``{name: value}`` of this instance, converted and checked.
+    """
+
+    name: ClassVar[str] = ""
+    options: ClassVar[dict[str, Option]] = {}
+
+    def __init_subclass__(cls, name: str | None = None, **kwargs):
+        super().__init_subclass__(**kwargs)
+        options: dict[str, Option] = {}
+        for klass in reversed(cls.__mro__):
+            for attr, value in vars(klass).items():
+                if isinstance(value, Option):
+                    options[attr] = value
+        cls.options = options
+        if name is not None:
+            if name in REGISTRY and REGISTRY[name].__qualname__ != cls.__qualname__:
+                raise ValueError(f"recipe name {name!r} is already taken by "
+                                 f"{REGISTRY[name].__module__}.{REGISTRY[name].__qualname__}")
+            cls.name = name
+            REGISTRY[name] = cls
+        elif not cls.name:
+            cls.name = cls.__name__
+
+    def __init__(self, **values: Any):
+        self.values = convert_all(self.options, values, self.name)
+        self.check()
+
+    @classmethod
+    def from_assignments(cls, pairs) -> Recipe:
+        """Build from ``["key=value", ...]`` (the CLI's ``--set``)."""
+        return cls(**parse_assignments(pairs))
+
+    @classmethod
+    def description(cls) -> str:
+        doc = (cls.__doc__ or "").strip()
+        return doc.splitlines()[0] if doc else ""
+
+    def check(self) -> None:
+        """Cross-option checks; raise OptionError with a one-line message. Default: none."""
+        return None
+
+    def prepare(self) -> None:
+        """Once per dataset, in the runner's process, before any worker starts (e.g. build the
+        default asset sources so that parallel workers do not race to build them)."""
+        return None
+
+    @abc.abstractmethod
+    def generate(self, seed: int, out_dir: pathlib.Path) -> None:
+        """Write the scene for ``seed`` into ``out_dir`` (which exists and is empty)."""
+
+    def flags(self, seed: int) -> dict[str, Any]:
+        """Every worker argument for ``metadata.json["flags"]``: recipe name, seed, options."""
+        out: dict[str, Any] = {"recipe": self.name, "seed": int(seed)}
+        for key, value in self.values.items():
+            out[key] = str(value) if isinstance(value, pathlib.Path) else value
+        return out
+
+
+def recipe(name: str, **options: Option) -> Callable[[Callable], type[Recipe]]:
+    """Register a function ``fn(seed, values: dict, out_dir)`` as a recipe named ``name``."""
+    def wrap(fn):
+        def generate(self, seed, out_dir):
+            fn(seed, dict(self.values), out_dir)
+        attrs = dict(options, generate=generate, __doc__=fn.__doc__, __module__=fn.__module__)
+        return types.new_class(fn.__name__, (Recipe,), {"name": name},
+                               lambda ns: ns.update(attrs))
+    return wrap
+
+
+def _load_module(spec: str):
+    path = pathlib.Path(spec)
+    if spec.endswith(".py") or path.is_file():
+        if not path.is_file():
+            raise OptionError(f"recipe module file {spec!r} does not exist")
+        mod_name = f"_kubric_recipe_{abs(hash(str(path.resolve())))}"
+        if mod_name in sys.modules:
+            return sys.modules[mod_name]
+        module_spec = importlib.util.spec_from_file_location(mod_name, path)
+        module = importlib.util.module_from_spec(module_spec)
+        sys.modules[mod_name] = module
+        module_spec.loader.exec_module(module)
+        return module
+    try:
+        return importlib.import_module(spec)
+    except ModuleNotFoundError as err:
+        raise OptionError(f"cannot import recipe module {spec!r}: {err}") from None
+
+
+def get_recipe(spec: str) -> type[Recipe]:
+    """The recipe class for ``spec``: a registered name (``movi_a``), ``module:Class`` or
+    ``path/to/file.py:Class``. Raises OptionError (one line) when there is none."""
+    if ":" in spec:
+        module_spec, _, attr = spec.rpartition(":")
+        module = _load_module(module_spec)
+        obj = getattr(module, attr, None)
+        if not (isinstance(obj, type) and issubclass(obj, Recipe)):
+            raise OptionError(f"{spec!r}: {module_spec} has no Recipe subclass named {attr!r}")
+        return obj
+    load_builtin()
+    if spec not in REGISTRY:
+        raise OptionError(f"unknown recipe {spec!r} (recipes: {', '.join(sorted(REGISTRY))})")
+    return REGISTRY[spec]
+
+
+def load_builtin() -> Mapping[str, type[Recipe]]:
+    """Import the built-in recipe modules; returns the registry."""
+    for module in BUILTIN_MODULES:
+        try:
+            importlib.import_module(module)
+        except ModuleNotFoundError as err:
+            if err.name != module:
+                raise
+    return REGISTRY
+
+
+def recipe_spec(cls: type[Recipe]) -> str:
+    """A string that :func:`get_recipe` maps back to ``cls`` in another process: the registered
+    name for built-in recipes, ``path/file.py:Class`` for recipes loaded from a file or
+    ``__main__``, ``module:Class`` otherwise."""
+    module_name = cls.__module__
+    if module_name.startswith("kubric.workers") and REGISTRY.get(cls.name) is cls:
+        return cls.name
+    if module_name == "__main__" or module_name.startswith("_kubric_recipe_"):
+        origin = getattr(sys.modules.get(module_name), "__file__", None)
+        if origin is None:
+            raise ValueError(f"recipe {cls.name!r} is defined in a module with no file")
+        return f"{pathlib.Path(origin).resolve()}:{cls.__qualname__}"
+    return f"{module_name}:{cls.__qualname__}"

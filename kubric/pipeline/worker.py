@@ -1,0 +1,112 @@
+"""Running one recipe for one seed into an atomic scene directory.
+
+Layout under the output root ``DIR``:
+
+* ``DIR/scene_{seed:08d}/`` — a scene; complete only when it contains ``_SUCCESS``;
+* ``DIR/.scene_{seed:08d}.incomplete-{pid}/`` — work in progress of process ``pid``.
+
+:func:`run_scene` writes into the work directory, renames it to the final name when the recipe
+returns, and then writes ``_SUCCESS`` (last). A complete scene is never touched again (skipped);
+an incomplete final directory, or a work directory whose process is gone, is removed and the
+scene redone. A reader that only trusts ``_SUCCESS`` therefore never sees partial data.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import pathlib
+import re
+import shutil
+import time
+from dataclasses import dataclass
+
+SUCCESS = "_SUCCESS"
+_WORK_RE = re.compile(r"^\.(scene_\d{8,})\.incomplete-(\d+)$")
+
+
+def scene_name(seed: int) -> str:
+    if isinstance(seed, bool) or int(seed) != seed or seed < 0:
+        raise ValueError(f"seed must be an integer ≥ 0, got {seed!r}")
+    return f"scene_{int(seed):08d}"
+
+
+def is_complete(scene_dir: pathlib.Path) -> bool:
+    """True when ``scene_dir`` holds ``_SUCCESS``."""
+    return (pathlib.Path(scene_dir) / SUCCESS).is_file()
+
+
+def _pid_alive(pid: int) -> bool:
+    if pid == os.getpid():
+        return True
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def stale_work_dirs(out_root: pathlib.Path, seed: int | None = None) -> list[pathlib.Path]:
+    """Work directories (of ``seed``, or of any seed) whose process no longer runs."""
+    out_root = pathlib.Path(out_root)
+    if not out_root.is_dir():
+        return []
+    stale = []
+    for entry in out_root.iterdir():
+        m = _WORK_RE.match(entry.name)
+        if not m or (seed is not None and m.group(1) != scene_name(seed)):
+            continue
+        if not _pid_alive(int(m.group(2))):
+            stale.append(entry)
+    return sorted(stale)
+
+
+def remove_stale(out_root: pathlib.Path, seed: int | None = None) -> list[pathlib.Path]:
+    """Delete stale work directories (see :func:`stale_work_dirs`); returns what was removed."""
+    removed = stale_work_dirs(out_root, seed)
+    for path in removed:
+        shutil.rmtree(path, ignore_errors=True)
+    return removed
+
+
+@dataclass
+class SceneResult:
+    seed: int
+    path: pathlib.Path
+    status: str          # "done" or "skipped"
+    seconds: float
+
+
+def run_scene(recipe, seed: int, out_root) -> SceneResult:
+    """Generate scene ``seed`` with ``recipe`` (a :class:`~kubric.pipeline.recipe.Recipe`
+    instance) under ``out_root`` atomically (see module doc)."""
+    start = time.time()
+    out_root = pathlib.Path(out_root)
+    final = out_root / scene_name(seed)
+    if is_complete(final):
+        return SceneResult(seed, final, "skipped", 0.0)
+    out_root.mkdir(parents=True, exist_ok=True)
+    remove_stale(out_root, seed)
+    work = out_root / f".{final.name}.incomplete-{os.getpid()}"
+    if work.exists():
+        shutil.rmtree(work)
+    work.mkdir()
+    try:
+        recipe.generate(seed, work)
+        if is_complete(final):  # another process finished the same seed meanwhile
+            shutil.rmtree(work, ignore_errors=True)
+            return SceneResult(seed, final, "skipped", time.time() - start)
+        if final.exists():  # an incomplete leftover (no _SUCCESS)
+            shutil.rmtree(final)
+        os.rename(work, final)
+    except BaseException:
+        shutil.rmtree(work, ignore_errors=True)
+        raise
+    seconds = time.time() - start
+    marker = final / (SUCCESS + ".tmp")
+    marker.write_text(json.dumps({"recipe": recipe.name, "seed": int(seed),
+                                  "seconds": round(seconds, 3)}) + "\n")
+    os.replace(marker, final / SUCCESS)
+    return SceneResult(seed, final, "done", seconds)

@@ -1,0 +1,276 @@
+"""The MOVi recipes A–F (variant table in recipes.md; shared steps in movi_base).
+
+* A: 3–10 CLEVR shapes (cube, cylinder, sphere), small 0.7 / large 1.4, 8 CLEVR colours, metal or
+  rubber; grey dome, 4 jittered lamps, ambient 0.05; camera at (7.48, −6.51, 5.34) + U[0,1)³.
+* B: 3–10 of the KuBasic shapes (all but the dome), size U(0.7, 1.4), random hue, metal or rubber;
+  dome of random hue; lamps as A; camera in the shell r ∈ [7, 9].
+* C: 3–10 objects of a mesh collection, size U(0.75, 3.0) relative to the largest bound, their own
+  textures, μ 0.5, e 0.5, mass from the asset; HDRI dome (floor and backdrop) and HDRI light.
+* D: 10–20 static + 1–3 dynamic objects; the static ones settle first (μ 1, e 0), then stop.
+* E: as D with a camera moving on a straight line (start in the shell [8, 12], length U(0, 4)).
+* F: as E with motion blur U(0, 2) frames and 512² images.
+
+Materials (A, B): metal = metallic 1, roughness 0.2, IOR 2.5, μ 0.4, e 0.3, density 2.7;
+rubber = metallic 0, roughness 0.7, specular 0.33, IOR 1.25, μ 0.8, e 0.7, density 1.1. Mass =
+the asset's mass (volume × density 1 at scale 1) × density × size³.
+"""
+
+from __future__ import annotations
+
+import abc
+import pathlib
+
+import numpy as np
+
+import kubric as kb
+from kubric.pipeline import Option, OptionError, float_range
+from kubric.randomness import CLEVR_COLORS, CLEVR_SHAPES, CLEVR_SIZES
+from kubric.workers.movi_base import (
+    DYNAMIC_SPAWN_REGION,
+    STATIC_SPAWN_REGION,
+    MoviBase,
+    _existing_source,
+    place_without_overlap,
+)
+
+#: CLEVR lamps: name → (class, kwargs, base position); positions are jittered by U[0,1)³.
+CLEVR_LIGHTS = (
+    ("sun", kb.DirectionalLight, {"color": "white", "shadow_softness": 0.2, "intensity": 0.45},
+     (11.6608, -6.62799, 25.8232)),
+    ("lamp_back", kb.RectAreaLight, {"color": "white", "intensity": 50.0},
+     (-1.1685, 2.64602, 5.81574)),
+    ("lamp_key", kb.RectAreaLight, {"color": "#ffedd0", "intensity": 100.0, "width": 0.5,
+                                    "height": 0.5}, (6.44671, -2.90517, 4.2584)),
+    ("lamp_fill", kb.RectAreaLight, {"color": "#c2d0ff", "intensity": 30.0, "width": 0.5,
+                                     "height": 0.5}, (-4.67112, -4.0136, 3.01122)),
+)
+CLEVR_CAMERA_POSITION = (7.48113, -6.50764, 5.34367)
+MATERIALS = {
+    "metal": ({"metallic": 1.0, "roughness": 0.2, "ior": 2.5}, 0.4, 0.3, 2.7),
+    "rubber": ({"metallic": 0.0, "roughness": 0.7, "specular": 0.33, "ior": 1.25}, 0.8, 0.7, 1.1),
+}
+
+
+def add_clevr_lights(scene, rng, jitter: float = 1.0) -> list:
+    lights = []
+    for name, cls, kwargs, position in CLEVR_LIGHTS:
+        light = cls(name=name, **kwargs)
+        light.position = np.asarray(position) + rng.rand(3) * jitter
+        light.look_at((0.0, 0.0, 0.0))
+        scene.add(light)
+        lights.append(light)
+    scene.ambient_illumination = kb.Color(0.05, 0.05, 0.05)
+    return lights
+
+
+def _choice(rng, items):
+    items = list(items)
+    return items[rng.randint(len(items))]
+
+
+class _ClevrLike(MoviBase):
+    """Shared by A and B: KuBasic shapes, metal or rubber, CLEVR lamps."""
+
+    min_num_objects = Option(3, "fewest objects", low=1, high=100)
+    max_num_objects = Option(10, "most objects", low=1, high=100)
+
+    def shape_ids(self, sources) -> list[str]:
+        return [i for i in sources["kubasic"].all_asset_ids if i != "dome"]
+
+    @abc.abstractmethod
+    def sample_look(self, rng):
+        """(size label, size, color label, Color) of a new object."""
+
+    def add_objects(self, scene, simulator, rng, sources):
+        shapes = self.shape_ids(sources)
+        for _ in range(rng.randint(self.min_num_objects, self.max_num_objects + 1)):
+            shape = _choice(rng, shapes)
+            size_label, size, color_label, color = self.sample_look(rng)
+            material_name = _choice(rng, sorted(MATERIALS))
+            params, friction, restitution, density = MATERIALS[material_name]
+            obj = sources["kubasic"].create(shape, scale=size, friction=friction,
+                                            restitution=restitution)
+            obj.mass = obj.mass * density * size ** 3
+            obj.material = kb.PrincipledBSDFMaterial(color=color, **params)
+            obj.metadata = {**obj.metadata, "shape": shape, "size": float(size),
+                            "size_label": size_label, "material": material_name,
+                            "color": np.asarray(color.rgb, dtype=np.float32),
+                            "color_label": color_label, "is_dynamic": True}
+            scene.add(obj)
+            if place_without_overlap(obj, simulator, DYNAMIC_SPAWN_REGION, rng):
+                self.initial_velocity(obj, rng)
+
+
+class MoviA(_ClevrLike, name="movi_a"):
+    """MOVi-A: 3–10 CLEVR shapes (metal / rubber, 8 colours, 2 sizes), grey dome, CLEVR lamps."""
+
+    def shape_ids(self, sources):
+        missing = [s for s in CLEVR_SHAPES if s not in sources["kubasic"]]
+        if missing:
+            raise OptionError(f"{self.name}: the KuBasic source lacks {missing}")
+        return list(CLEVR_SHAPES)
+
+    def sample_look(self, rng):
+        size_label = _choice(rng, sorted(CLEVR_SIZES))
+        color_label = _choice(rng, sorted(CLEVR_COLORS))
+        return size_label, CLEVR_SIZES[size_label], color_label, CLEVR_COLORS[color_label]
+
+    def build_background(self, scene, rng, sources):
+        floor = kb.get_color("gray")
+        self.add_dome(scene, sources, kb.PrincipledBSDFMaterial(color=floor, roughness=1.0,
+                                                                specular=0.0))
+        add_clevr_lights(scene, rng)
+        return floor.hexstr
+
+    def build_camera(self, scene, rng):
+        camera = kb.PerspectiveCamera(name="camera", focal_length=35.0, sensor_width=32.0)
+        camera.position = np.asarray(CLEVR_CAMERA_POSITION) + rng.rand(3)
+        camera.look_at((0.0, 0.0, 0.0))
+        scene.camera = camera
+
+
+class MoviB(_ClevrLike, name="movi_b"):
+    """MOVi-B: 3–10 KuBasic shapes, size U(0.7, 1.4), random hue, dome of random hue."""
+
+    size_range = Option((0.7, 1.4), "object scale range low,high", type=float_range, low=0.01)
+
+    def sample_look(self, rng):
+        size = float(rng.uniform(*self.size_range))
+        color = kb.random_hue_color(rng=rng)
+        return "", size, color.hexstr, color
+
+    def build_background(self, scene, rng, sources):
+        floor = kb.random_hue_color(saturation=0.5, value=0.7, rng=rng)
+        self.add_dome(scene, sources, kb.PrincipledBSDFMaterial(color=floor, roughness=1.0,
+                                                                specular=0.0))
+        add_clevr_lights(scene, rng)
+        return floor.hexstr
+
+
+class MoviC(MoviBase, name="movi_c"):
+    """MOVi-C: 3–10 scanned-like objects with their own textures on an HDRI dome, HDRI light."""
+
+    min_num_objects = Option(3, "fewest objects", low=1, high=100)
+    max_num_objects = Option(10, "most objects", low=1, high=100)
+    size_range = Option((0.75, 3.0), "largest extent range (m) low,high", type=float_range,
+                        low=0.01)
+    objects_source = Option(None, "mesh asset source folder (default: the converted "
+                            "pybullet_data collection)", type=pathlib.Path, must_exist=True)
+    hdri_source = Option(None, "HDRI asset source folder (default: the HDRIs shipped with bpy)",
+                         type=pathlib.Path, must_exist=True)
+    collection_limit = Option(None, "with the default objects_source: convert only this many of "
+                              "pybullet_data's random_urdfs (none = all 1000)", type=int, low=0)
+    split = Option("train", "asset / background split (10% of the sorted ids are held out)",
+                   choices=("train", "test"))
+
+    def open_sources(self):
+        from kubric import assets
+        sources = super().open_sources()
+        sources["objects"] = _existing_source(self.objects_source, "objects_source") \
+            if self.objects_source is not None else \
+            assets.ensure_pybullet_collection(limit=self.collection_limit)
+        sources["hdri"] = _existing_source(self.hdri_source, "hdri_source") \
+            if self.hdri_source is not None else assets.ensure_hdri_source()
+        for key in ("objects", "hdri"):
+            train, test = sources[key].get_test_split(fraction=0.1)
+            ids = test if self.split == "test" else train
+            if not ids:
+                raise OptionError(f"{self.name}: the {key} source has no {self.split} assets")
+            sources[key + "_ids"] = ids
+        return sources
+
+    def build_background(self, scene, rng, sources):
+        hdri_id = _choice(rng, sources["hdri_ids"])
+        hdri = sources["hdri"].create(hdri_id, mapping="environment")
+        scene.background = hdri
+        scene.ambient_illumination = hdri
+        self.add_dome(scene, sources, kb.PrincipledBSDFMaterial(color=hdri, roughness=1.0,
+                                                                specular=0.0))
+        return hdri_id
+
+    def new_object(self, scene, simulator, rng, sources, region, dynamic: bool):
+        asset_id = _choice(rng, sources["objects_ids"])
+        obj = sources["objects"].create(asset_id, friction=0.5, restitution=0.5)
+        size = float(rng.uniform(*self.size_range))
+        extent = float(np.max(obj.bounds[1] - obj.bounds[0]))
+        obj.scale = size / extent
+        obj.metadata = {**obj.metadata, "scale": size, "is_dynamic": dynamic}
+        scene.add(obj)
+        if not place_without_overlap(obj, simulator, region, rng):
+            return None
+        if dynamic:
+            self.initial_velocity(obj, rng)
+        return obj
+
+    def add_objects(self, scene, simulator, rng, sources):
+        for _ in range(rng.randint(self.min_num_objects, self.max_num_objects + 1)):
+            self.new_object(scene, simulator, rng, sources, DYNAMIC_SPAWN_REGION, True)
+
+
+class MoviD(MoviC, name="movi_d"):
+    """MOVi-D: 10–20 static objects that settle first, then 1–3 dynamic ones thrown in."""
+
+    min_num_objects = Option(10, "fewest static objects", low=0, high=100)
+    max_num_objects = Option(20, "most static objects", low=0, high=100)
+    min_num_dynamic = Option(1, "fewest dynamic objects", low=1, high=20)
+    max_num_dynamic = Option(3, "most dynamic objects", low=1, high=20)
+    settle_frames = Option(100, "frames the static objects settle for", low=0)
+
+    def add_objects(self, scene, simulator, rng, sources):
+        static = []
+        for _ in range(rng.randint(self.min_num_objects, self.max_num_objects + 1)):
+            obj = self.new_object(scene, simulator, rng, sources, STATIC_SPAWN_REGION, False)
+            if obj is not None:
+                obj.friction, obj.restitution = 1.0, 0.0
+                static.append(obj)
+        if static and self.settle_frames:
+            simulator.run(frame_start=-self.settle_frames, frame_end=0)
+        for obj in static:
+            obj.velocity = (0.0, 0.0, 0.0)
+            obj.angular_velocity = (0.0, 0.0, 0.0)
+            obj.friction, obj.restitution = 0.5, 0.5
+        for _ in range(rng.randint(self.min_num_dynamic, self.max_num_dynamic + 1)):
+            self.new_object(scene, simulator, rng, sources, DYNAMIC_SPAWN_REGION, True)
+
+
+def linear_camera_path(rng, inner: float, outer: float, max_length: float):
+    """(start, end): start uniform in the half-sphere shell, end = start + a random direction ×
+    U(0, max_length), resampled until the end also lies in the shell above z = 0.1."""
+    length = float(rng.uniform(0.0, max_length))
+    while True:
+        start = kb.sample_point_in_half_sphere_shell(inner, outer, 0.1, rng=rng)
+        direction = rng.rand(3) - 0.5
+        norm = np.linalg.norm(direction)
+        if norm < 1e-9:
+            continue
+        end = start + direction / norm * length
+        if inner <= np.linalg.norm(end) <= outer and end[2] > 0.1:
+            return start, end
+
+
+class MoviE(MoviD, name="movi_e"):
+    """MOVi-E: as D with the camera moving on a straight line, looking at the origin."""
+
+    max_camera_movement = Option(4.0, "largest camera path length (m)", low=0.0)
+
+    def build_camera(self, scene, rng):
+        camera = kb.PerspectiveCamera(name="camera", focal_length=35.0, sensor_width=32.0)
+        scene.camera = camera
+        start, end = linear_camera_path(rng, 8.0, 12.0, self.max_camera_movement)
+        first, last = scene.frame_start - 1, scene.frame_end + 1
+        for frame in range(min(first, 0), last + 1):
+            t = (frame - first) / (last - first)
+            camera.position = (1.0 - t) * start + t * end
+            camera.look_at((0.0, 0.0, 0.0))
+            camera.keyframe_insert("position", frame)
+            camera.keyframe_insert("quaternion", frame)
+
+
+class MoviF(MoviE, name="movi_f"):
+    """MOVi-F: as E with motion blur U(0, max_motion_blur) frames, 512² by default."""
+
+    resolution = Option((512, 512), MoviBase.resolution.help, type=MoviBase.resolution.type)
+    max_motion_blur = Option(2.0, "largest shutter length (frames)", low=0.0, high=10.0)
+
+    def motion_blur(self, rng):
+        return float(rng.uniform(0.0, self.max_motion_blur))

@@ -1,0 +1,217 @@
+"""The MOVi pipeline shared by the recipes ``movi_a`` … ``movi_f`` (see recipes.md).
+
+One scene = one seed: every random number comes from ``numpy.random.RandomState(seed)`` in a fixed
+order. Steps (each a method the variants override):
+
+1. ``open_sources``: asset sources (KuBasic; for C–F the mesh collection and the HDRIs);
+2. ``build_background``: floor / dome, lamps, ambient light, backdrop;
+3. ``build_camera``: fixed, random in a half-sphere shell, or moving on a straight line;
+4. ``add_objects``: objects placed without overlap by the simulator (D–F: static objects first
+   settle for ``settle_frames`` frames with friction 1 and restitution 0, then are stopped);
+5. simulate frames ``0 .. frame_end + 1`` (so flow is defined at both ends of the rendered range);
+6. render ``frame_start .. frame_end`` with Blender (linked after the simulation, so it sees the
+   final trajectories only);
+7. annotations: visibility → instance list sorted by visible pixels → segmentation relabelled →
+   2D boxes; write the layers, ``metadata.json`` and ``events.json``.
+
+Physics constants (recipes.md): dynamic objects spawn in (−5,−5,1)–(5,5,5) with velocity
+U([−4,−4,0],[4,4,0]) − [x, y, 0]; static objects in (−7,−7,0)–(7,7,10); floor μ 0.3, e 0.5.
+"""
+
+from __future__ import annotations
+
+import abc
+import logging
+import pathlib
+import tempfile
+
+import numpy as np
+
+import kubric as kb
+from kubric.pipeline import Option, OptionError, Recipe, resolution
+
+DYNAMIC_SPAWN_REGION = ((-5.0, -5.0, 1.0), (5.0, 5.0, 5.0))
+STATIC_SPAWN_REGION = ((-7.0, -7.0, 0.0), (7.0, 7.0, 10.0))
+VELOCITY_RANGE = ((-4.0, -4.0, 0.0), (4.0, 4.0, 0.0))
+FLOOR_FRICTION, FLOOR_RESTITUTION = 0.3, 0.5
+CAMERA_FOCAL_LENGTH, CAMERA_SENSOR_WIDTH = 35.0, 32.0
+logger = logging.getLogger(__name__)
+
+
+def _existing_source(path, what: str):
+    source = kb.AssetSource(path)
+    if not len(source):
+        raise OptionError(f"{what} {str(path)!r} holds no assets")
+    return source
+
+
+def place_without_overlap(obj, simulator, region, rng, max_trials: int = 1000) -> bool:
+    """Random rotation and position inside ``region`` until ``obj`` overlaps nothing.
+
+    Like :func:`kubric.randomness.move_until_no_overlap`, but (1) an object whose rotated box is
+    larger than the region along an axis is centred on the region along that axis instead of
+    failing (large MOVi objects are taller than the 4 m spawn region), and (2) when no free place
+    is found in ``max_trials`` the object is removed from the scene and False is returned (the
+    recipes count such objects in ``metadata["dropped_objects"]``) instead of making the seed
+    unusable. Returns True when placed.
+    """
+    region = np.asarray(region, dtype=np.float64)
+    for _ in range(max_trials):
+        obj.quaternion = kb.random_rotation(rng=rng)
+        box = obj.aabbox - np.asarray(obj.position, dtype=np.float64)
+        low, high = region[0] - box[0], region[1] - box[1]
+        mid = (low + high) / 2.0
+        low, high = np.where(low > high, mid, low), np.where(low > high, mid, high)
+        obj.position = rng.uniform(low, high)
+        if not simulator.check_overlap(obj):
+            return True
+    logger.warning("%s: no overlap-free place in %s after %d trials: dropped", obj.uid,
+                   region.tolist(), max_trials)
+    for scene in list(obj.scenes):
+        scene.remove(obj)
+        scene.metadata["dropped_objects"] = scene.metadata.get("dropped_objects", 0) + 1
+    return False
+
+
+class MoviBase(Recipe):
+    """Common options and steps of the MOVi recipes (not registered itself)."""
+
+    resolution = Option((256, 256), "(width, height) in pixels: N or WxH", type=resolution)
+    frame_start = Option(1, "first rendered frame", low=0)
+    frame_end = Option(24, "last rendered frame (simulation runs to frame_end + 1)", low=1)
+    frame_rate = Option(12, "frames per second", low=1)
+    step_rate = Option(240, "physics steps per second (a multiple of frame_rate)", low=1)
+    samples = Option(64, "Cycles samples per pixel", low=1, high=65536)
+    denoise = Option(True, "denoise the RGB render (OIDN)")
+    kubasic_source = Option(None, "KuBasic asset source folder (default: built locally)",
+                            type=pathlib.Path, must_exist=True)
+    save_state = Option(False, "also write scene.blend (animated) and scene.bullet (initial "
+                        "physics state)")
+
+    # ------------------------------------------------------------------ checks
+    def check(self) -> None:
+        if self.frame_end < self.frame_start:
+            raise OptionError(f"{self.name}: option frame_end={self.frame_end} must be ≥ "
+                              f"frame_start={self.frame_start}")
+        if self.step_rate % self.frame_rate:
+            raise OptionError(f"{self.name}: option step_rate={self.step_rate} must be a multiple "
+                              f"of frame_rate={self.frame_rate}")
+        for name, value in self.values.items():
+            if name.endswith("_source") and value is not None:
+                manifest = value / "manifest.json" if value.is_dir() else value
+                if not manifest.is_file() or manifest.name != "manifest.json":
+                    raise OptionError(f"{self.name}: option {name}={str(value)!r} is not an asset "
+                                      "source (a folder with manifest.json)")
+        for low, high in self.count_ranges():
+            if self.values[low] > self.values[high]:
+                raise OptionError(f"{self.name}: option {low}={self.values[low]} must be ≤ "
+                                  f"{high}={self.values[high]}")
+
+    def count_ranges(self) -> list[tuple[str, str]]:
+        """(min option, max option) pairs that must be ordered."""
+        return [(a, a.replace("min_", "max_")) for a in self.options if a.startswith("min_")
+                and a.replace("min_", "max_") in self.options]
+
+    def prepare(self) -> None:
+        """Build / open the asset sources once before parallel workers start."""
+        self.open_sources()
+
+    # ------------------------------------------------------------------ steps
+    def open_sources(self) -> dict:
+        from kubric import assets
+        if self.kubasic_source is not None:
+            return {"kubasic": _existing_source(self.kubasic_source, "kubasic_source")}
+        return {"kubasic": assets.ensure_kubasic()}
+
+    @abc.abstractmethod
+    def build_background(self, scene, rng, sources) -> str:
+        """Add floor / lights; return the background description for the metadata."""
+
+    @abc.abstractmethod
+    def add_objects(self, scene, simulator, rng, sources) -> None:
+        """Add the objects (placed without overlap, with their initial velocities)."""
+
+    def build_camera(self, scene, rng) -> None:
+        """Default: random position in the half-sphere shell r ∈ [7, 9], looking at the origin."""
+        camera = kb.PerspectiveCamera(name="camera", focal_length=CAMERA_FOCAL_LENGTH,
+                                      sensor_width=CAMERA_SENSOR_WIDTH)
+        camera.position = kb.sample_point_in_half_sphere_shell(7.0, 9.0, 0.1, rng=rng)
+        camera.look_at((0.0, 0.0, 0.0))
+        scene.camera = camera
+
+    def motion_blur(self, rng) -> float:
+        """Shutter length in frames (0 = none)."""
+        return 0.0
+
+    def add_dome(self, scene, sources, material):
+        dome = sources["kubasic"].create("dome", name="dome", static=True, background=True,
+                                         friction=FLOOR_FRICTION,
+                                         restitution=FLOOR_RESTITUTION)
+        dome.material = material
+        scene.add(dome)
+        return dome
+
+    @staticmethod
+    def initial_velocity(obj, rng) -> None:
+        """Random horizontal velocity, biased towards the centre (recipes.md)."""
+        low, high = (np.asarray(v) for v in VELOCITY_RANGE)
+        x, y, _ = obj.position
+        obj.velocity = rng.uniform(low, high) - np.array([x, y, 0.0])
+
+    # ------------------------------------------------------------------ the pipeline
+    def make_scene(self):
+        scene = kb.Scene(resolution=self.resolution, frame_start=self.frame_start,
+                         frame_end=self.frame_end)
+        scene.set_rates(self.frame_rate, self.step_rate)
+        scene.metadata["dropped_objects"] = 0
+        return scene
+
+    def generate(self, seed: int, out_dir: pathlib.Path) -> None:
+        kb.reset_uid_counters()
+        rng = np.random.RandomState(seed)
+        sources = self.open_sources()
+        scene = self.make_scene()
+        with tempfile.TemporaryDirectory(prefix="kubric_movi_") as scratch:
+            simulator = kb.simulator.PyBullet(scene, scratch)
+            background = self.build_background(scene, rng, sources)
+            self.build_camera(scene, rng)
+            blur = self.motion_blur(rng)
+            self.add_objects(scene, simulator, rng, sources)
+            if self.save_state:  # the initial state, before the simulation (as upstream)
+                simulator.save_state(out_dir / "scene.bullet")
+            _, collisions = simulator.run(frame_start=0, frame_end=scene.frame_end + 1)
+            renderer = kb.renderer.Blender(scene, scratch, samples_per_pixel=self.samples,
+                                           use_denoising=self.denoise, motion_blur=blur)
+            layers = renderer.render()
+            if self.save_state:
+                renderer.save_state(out_dir / "scene.blend")
+            render_settings = {"samples_per_pixel": self.samples, "engine": "CYCLES",
+                               "view_transform": "Standard", "denoising": self.denoise,
+                               "motion_blur": blur}
+            self.write_outputs(scene, layers, collisions, seed, out_dir, background,
+                               render_settings)
+            simulator.close()
+
+    def write_outputs(self, scene, layers, collisions, seed, out_dir, background,
+                      render_settings) -> list:
+        """Annotations + files; returns the instance list (sorted by visible pixels)."""
+        candidates = [a for a in scene.foreground_assets if isinstance(a, kb.PhysicalObject)]
+        if "uv" in layers:  # meshes may tile their textures (UV > 1): store the repeat phase
+            uv = layers["uv"]
+            layers["uv"] = np.concatenate([np.mod(uv[..., :2], 1.0), uv[..., 2:]], axis=-1)
+            render_settings = {**render_settings, "uv": "wrapped modulo 1 (textures repeat)"}
+        kb.compute_visibility(layers["segmentation"], scene.assets)
+        visible = kb.post_processing.visible_sorted(candidates)
+        layers["segmentation"] = kb.adjust_segmentation_idxs(layers["segmentation"],
+                                                             scene.assets, visible)
+        kb.compute_bboxes(layers["segmentation"], visible)
+        kb.write_image_dict(layers, out_dir)
+        meta = kb.get_scene_metadata(scene, seed=int(seed), num_instances=len(visible),
+                                     background=background, renderer=render_settings)
+        kb.write_json(data={"flags": self.flags(seed), "metadata": meta,
+                            "camera": kb.get_camera_info(scene.camera),
+                            "instances": kb.get_instance_info(scene, visible)},
+                      filename=out_dir / "metadata.json")
+        kb.write_json(data={"collisions": kb.process_collisions(collisions, scene, visible)},
+                      filename=out_dir / "events.json")
+        return visible
