@@ -78,6 +78,10 @@ def rotation_sampler(axis=None) -> Callable[[PhysicalObject, Any], None]:
     return sample
 
 
+class DoesNotFitError(ValueError):
+    """The object's rotated bounding box is larger than the sampling region on some axis."""
+
+
 def _region(region) -> np.ndarray:
     arr = np.asarray(region, dtype=np.float64)
     if arr.shape != (2, 3) or np.any(arr[0] > arr[1]):
@@ -95,8 +99,8 @@ def position_sampler(region) -> Callable[[PhysicalObject, Any], None]:
         box = obj.aabbox - np.asarray(obj.position, dtype=np.float64)
         low, high = region[0] - box[0], region[1] - box[1]
         if np.any(low > high):
-            raise ValueError(f"{obj.uid} (extent {(box[1] - box[0]).round(3).tolist()}) does not "
-                             f"fit in region {region.tolist()}")
+            raise DoesNotFitError(f"{obj.uid} (extent {(box[1] - box[0]).round(3).tolist()}) "
+                                  f"does not fit in region {region.tolist()}")
         obj.position = _uniform(rng, low, high)
     return sample
 
@@ -109,7 +113,7 @@ def bottom_sampler(region) -> Callable[[PhysicalObject, Any], None]:
         box = obj.aabbox - np.asarray(obj.position, dtype=np.float64)
         low, high = region[0] - box[0], region[1] - box[1]
         if np.any(low[:2] > high[:2]):
-            raise ValueError(f"{obj.uid} does not fit in region {region.tolist()}")
+            raise DoesNotFitError(f"{obj.uid} does not fit in region {region.tolist()}")
         xy = _uniform(rng, low[:2], high[:2])
         obj.position = (xy[0], xy[1], region[0, 2] - box[0, 2])
     return sample
@@ -119,25 +123,35 @@ def resample_while(asset, samplers: Sequence[Callable], condition: Callable[[Any
                    max_trials: int, *, rng) -> int:
     """Apply ``samplers`` (each ``(asset, rng)``) until ``condition(asset)`` is False.
 
-    Returns the number of trials used; raises ``RuntimeError`` naming the asset after
-    ``max_trials``.
+    A trial in which a sampler raises :class:`DoesNotFitError` (e.g. a rotation whose bounding box
+    is larger than the region) counts as rejected. Returns the number of trials used; raises
+    ``RuntimeError`` naming the asset after ``max_trials``. If no trial succeeded, the asset keeps
+    its last sampled pose.
     """
     _require_rng(rng, "resample_while")
     if max_trials < 1:
         raise ValueError(f"max_trials must be ≥ 1, got {max_trials}")
+    too_big = 0
     for trial in range(1, max_trials + 1):
-        for sampler in samplers:
-            sampler(asset, rng)
+        try:
+            for sampler in samplers:
+                sampler(asset, rng)
+        except DoesNotFitError:
+            too_big += 1
+            continue
         if not condition(asset):
             return trial
-    raise RuntimeError(f"{asset.uid}: no valid sample after {max_trials} trials "
+    detail = f"; {too_big} of them did not fit in the region" if too_big else ""
+    raise RuntimeError(f"{asset.uid}: no valid sample after {max_trials} trials{detail} "
                        f"(enlarge the region or allow more trials)")
 
 
 def move_until_no_overlap(asset, simulator, spawn_region=((-1, -1, -1), (1, 1, 1)),
                           max_trials: int = 100, *, rng) -> int:
-    """Give ``asset`` a random rotation and a position inside ``spawn_region`` until it overlaps
-    nothing in ``simulator`` (which must offer ``check_overlap(asset)``). Returns the trials used."""
+    """Give ``asset`` a random rotation and a position whose bounding box lies inside
+    ``spawn_region`` until it overlaps nothing in ``simulator`` (which must offer
+    ``check_overlap(asset)``). Rotations too large for the region are rejected trials. Returns the
+    trials used; ``RuntimeError`` naming the asset after ``max_trials``."""
     return resample_while(asset, samplers=[rotation_sampler(), position_sampler(spawn_region)],
                           condition=simulator.check_overlap, max_trials=max_trials, rng=rng)
 

@@ -66,6 +66,19 @@ def test_resample_while_counts_trials_and_gives_up_clearly():
         kb.resample_while(cube, [], condition=lambda obj: True, max_trials=3, rng=rng)
 
 
+def test_rotations_too_big_for_the_region_are_rejected_trials():
+    rng = np.random.RandomState(2)
+    big = kb.Cube(scale=1.4)  # 2.8 m cube: fits a 4 m tall region only in some rotations
+    region = [[-5, -5, 1], [5, 5, 5]]
+    samplers = [kb.rotation_sampler(), kb.position_sampler(region)]
+    for _ in range(20):
+        kb.resample_while(big, samplers, condition=lambda obj: False, max_trials=500, rng=rng)
+        assert big.aabbox[0, 2] >= 1 - 1e-5 and big.aabbox[1, 2] <= 5 + 1e-5
+    huge = kb.Cube(scale=3)
+    with pytest.raises(RuntimeError, match="after 7 trials; 7 of them did not fit in the region"):
+        kb.resample_while(huge, samplers, condition=lambda obj: False, max_trials=7, rng=rng)
+
+
 def test_half_sphere_shell():
     rng = np.random.RandomState(1)
     pts = np.array([kb.sample_point_in_half_sphere_shell(7, 9, rng=rng) for _ in range(500)])

@@ -46,27 +46,17 @@ def _existing_source(path, what: str):
 
 
 def place_without_overlap(obj, simulator, region, rng, max_trials: int = 1000) -> bool:
-    """Random rotation and position inside ``region`` until ``obj`` overlaps nothing.
-
-    Like :func:`kubric.randomness.move_until_no_overlap`, but (1) an object whose rotated box is
-    larger than the region along an axis is centred on the region along that axis instead of
-    failing (large MOVi objects are taller than the 4 m spawn region), and (2) when no free place
-    is found in ``max_trials`` the object is removed from the scene and False is returned (the
-    recipes count such objects in ``metadata["dropped_objects"]``) instead of making the seed
-    unusable. Returns True when placed.
+    """:func:`kubric.move_until_no_overlap` (random rotation, bounding box inside ``region``, no
+    overlap), except that an object with no free place after ``max_trials`` is removed from the
+    scene and counted in ``scene.metadata["dropped_objects"]`` instead of making the seed unusable.
+    Returns True when placed.
     """
-    region = np.asarray(region, dtype=np.float64)
-    for _ in range(max_trials):
-        obj.quaternion = kb.random_rotation(rng=rng)
-        box = obj.aabbox - np.asarray(obj.position, dtype=np.float64)
-        low, high = region[0] - box[0], region[1] - box[1]
-        mid = (low + high) / 2.0
-        low, high = np.where(low > high, mid, low), np.where(low > high, mid, high)
-        obj.position = rng.uniform(low, high)
-        if not simulator.check_overlap(obj):
-            return True
-    logger.warning("%s: no overlap-free place in %s after %d trials: dropped", obj.uid,
-                   region.tolist(), max_trials)
+    try:
+        kb.move_until_no_overlap(obj, simulator, spawn_region=region, max_trials=max_trials,
+                                 rng=rng)
+        return True
+    except RuntimeError as err:
+        logger.warning("%s: dropped (%s)", obj.uid, err)
     for scene in list(obj.scenes):
         scene.remove(obj)
         scene.metadata["dropped_objects"] = scene.metadata.get("dropped_objects", 0) + 1
