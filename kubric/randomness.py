@@ -1,5 +1,9 @@
-"""Random scene sampling. Every function takes an explicit ``rng`` (``numpy.random.RandomState`` or
+"""Random scene sampling. Every function takes an ``rng`` (``numpy.random.RandomState`` or
 ``numpy.random.Generator``); nothing here creates a random generator, so one seed fixes a scene.
+
+Upstream scripts sometimes omit ``rng``. For them, ``rng=None`` means *the worker's rng*: the one
+:func:`kubric.utils.setup` seeded from ``--seed`` (and recorded in the metadata). Without a prior
+``kb.setup(flags)``, ``rng=None`` is a ``TypeError`` — there is no hidden, unseeded default.
 """
 
 from __future__ import annotations
@@ -26,7 +30,24 @@ CLEVR_SIZES = {"small": 0.7, "large": 1.4}
 CLEVR_SHAPES = ("cube", "cylinder", "sphere")
 
 
+_worker_rng: list = []  # the rng bound by kubric.utils.setup (at most one)
+
+
+def bind_worker_rng(rng) -> None:
+    """Make ``rng`` the one used where a caller passes ``rng=None`` (called by ``kb.setup``)."""
+    _worker_rng[:] = [_require_rng(rng, "bind_worker_rng")]
+
+
+def unbind_worker_rng() -> None:
+    _worker_rng.clear()
+
+
 def _require_rng(rng, where: str):
+    if rng is None:
+        if _worker_rng:
+            return _worker_rng[0]
+        raise TypeError(f"{where} needs rng=numpy.random.RandomState(seed) (or call "
+                        "kb.setup(flags) first, which seeds the worker's rng from --seed)")
     if not isinstance(rng, (np.random.RandomState, np.random.Generator)):
         raise TypeError(f"{where} needs rng=numpy.random.RandomState(...) or "
                         f"numpy.random.default_rng(...), got {rng!r}")
@@ -43,24 +64,24 @@ def _choice_index(rng, n: int) -> int:
     return int(rng.randint(n))
 
 
-def random_hue_color(saturation: float = 1.0, value: float = 1.0, *, rng) -> Color:
+def random_hue_color(saturation: float = 1.0, value: float = 1.0, rng=None) -> Color:
     """A colour of uniformly random hue with the given HSV saturation and value."""
-    _require_rng(rng, "random_hue_color")
+    rng = _require_rng(rng, "random_hue_color")
     return Color.from_hsv(float(_uniform(rng)), saturation, value)
 
 
-def random_clevr_color(*, rng) -> tuple[str, Color]:
+def random_clevr_color(rng=None) -> tuple[str, Color]:
     """(name, Color) of a uniformly chosen CLEVR colour."""
-    _require_rng(rng, "random_clevr_color")
+    rng = _require_rng(rng, "random_clevr_color")
     names = sorted(CLEVR_COLORS)
     name = names[_choice_index(rng, len(names))]
     return name, CLEVR_COLORS[name]
 
 
-def random_rotation(axis: str | Sequence[float] | None = None, *, rng) -> tuple[float, ...]:
+def random_rotation(axis: str | Sequence[float] | None = None, rng=None) -> tuple[float, ...]:
     """A uniformly random rotation (WXYZ tuple): about ``axis`` ("X", "Y", "Z" or a vector) by a
     uniform angle, or uniform over SO(3) when ``axis`` is None."""
-    _require_rng(rng, "random_rotation")
+    rng = _require_rng(rng, "random_rotation")
     if axis is None:
         # Shoemake's method: uniform over SO(3).
         u1, u2, u3 = (float(v) for v in _uniform(rng, size=3))
@@ -120,7 +141,7 @@ def bottom_sampler(region) -> Callable[[PhysicalObject, Any], None]:
 
 
 def resample_while(asset, samplers: Sequence[Callable], condition: Callable[[Any], bool],
-                   max_trials: int, *, rng) -> int:
+                   max_trials: int = 100, rng=None) -> int:
     """Apply ``samplers`` (each ``(asset, rng)``) until ``condition(asset)`` is False.
 
     A trial in which a sampler raises :class:`DoesNotFitError` (e.g. a rotation whose bounding box
@@ -128,7 +149,7 @@ def resample_while(asset, samplers: Sequence[Callable], condition: Callable[[Any
     ``RuntimeError`` naming the asset after ``max_trials``. If no trial succeeded, the asset keeps
     its last sampled pose.
     """
-    _require_rng(rng, "resample_while")
+    rng = _require_rng(rng, "resample_while")
     if max_trials < 1:
         raise ValueError(f"max_trials must be ≥ 1, got {max_trials}")
     too_big = 0
@@ -147,7 +168,7 @@ def resample_while(asset, samplers: Sequence[Callable], condition: Callable[[Any
 
 
 def move_until_no_overlap(asset, simulator, spawn_region=((-1, -1, -1), (1, 1, 1)),
-                          max_trials: int = 100, *, rng) -> int:
+                          max_trials: int = 100, rng=None) -> int:
     """Give ``asset`` a random rotation and a position whose bounding box lies inside
     ``spawn_region`` until it overlaps nothing in ``simulator`` (which must offer
     ``check_overlap(asset)``). Rotations too large for the region are rejected trials. Returns the
@@ -157,10 +178,10 @@ def move_until_no_overlap(asset, simulator, spawn_region=((-1, -1, -1), (1, 1, 1
 
 
 def sample_point_in_half_sphere_shell(inner_radius: float, outer_radius: float,
-                                      offset: float = 0.0, *, rng) -> np.ndarray:
+                                      offset: float = 0.0, rng=None) -> np.ndarray:
     """A point (3,) uniformly distributed in the upper half of a spherical shell
     (inner_radius ≤ |p| ≤ outer_radius, z ≥ offset)."""
-    _require_rng(rng, "sample_point_in_half_sphere_shell")
+    rng = _require_rng(rng, "sample_point_in_half_sphere_shell")
     if not 0 <= inner_radius <= outer_radius:
         raise ValueError(f"need 0 ≤ inner_radius ≤ outer_radius, got {inner_radius}, "
                          f"{outer_radius}")
@@ -171,3 +192,31 @@ def sample_point_in_half_sphere_shell(inner_radius: float, outer_radius: float,
                                 (outer_radius, outer_radius, outer_radius)), dtype=np.float64)
         if inner_radius <= np.linalg.norm(v) <= outer_radius:
             return v
+
+
+def sample_color(strategy: str, rng=None) -> tuple[str | None, Color]:
+    """(label, colour) by strategy: ``"clevr"`` (a CLEVR colour and its name), ``"uniform_hue"``
+    (random hue, label None) or ``"gray"``."""
+    rng = _require_rng(rng, "sample_color")
+    if strategy == "clevr":
+        return random_clevr_color(rng=rng)
+    if strategy == "uniform_hue":
+        return None, random_hue_color(rng=rng)
+    if strategy == "gray":
+        return "gray", Color.from_name("gray")
+    raise ValueError(f"unknown colour strategy {strategy!r}; allowed: clevr, uniform_hue, gray")
+
+
+def sample_sizes(strategy: str, rng=None) -> tuple[str | None, float]:
+    """(label, scale) by strategy: ``"clevr"`` (small 0.7 / large 1.4), ``"uniform"``
+    (U(0.7, 1.4), label None) or ``"const"`` (1)."""
+    rng = _require_rng(rng, "sample_sizes")
+    if strategy == "clevr":
+        labels = list(CLEVR_SIZES)
+        label = labels[_choice_index(rng, len(labels))]
+        return label, CLEVR_SIZES[label]
+    if strategy == "uniform":
+        return None, float(_uniform(rng, 0.7, 1.4))
+    if strategy == "const":
+        return None, 1.0
+    raise ValueError(f"unknown size strategy {strategy!r}; allowed: clevr, uniform, const")

@@ -16,6 +16,7 @@ import tempfile
 
 import numpy as np
 
+from kubric import randomness
 from kubric.annotations.metadata import (
     get_camera_info,
     get_instance_info,
@@ -118,7 +119,8 @@ def setup(flags):
     """Upstream's worker preamble: logging, flags, seed, scene and directories.
 
     Returns ``(scene, rng, output_dir, scratch_dir)``: ``rng`` is a
-    ``numpy.random.RandomState(seed)``; ``scene`` has the flags' frame range, rates and
+    ``numpy.random.RandomState(seed)``, also used by sampling functions called without ``rng``
+    (see :mod:`kubric.randomness`); ``scene`` has the flags' frame range, rates and
     resolution, and ``scene.metadata["seed"]``.
     """
     global _active_output_dir
@@ -127,6 +129,7 @@ def setup(flags):
         flags.seed = draw_seed()
     log_my_flags(flags)
     rng = np.random.RandomState(seed=flags.seed)
+    randomness.bind_worker_rng(rng)  # upstream calls that omit rng= use this seeded one
     scene = Scene(frame_start=flags.frame_start, frame_end=flags.frame_end,
                   frame_rate=flags.frame_rate, step_rate=flags.step_rate,
                   resolution=parse_resolution(flags.resolution))

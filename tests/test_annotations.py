@@ -186,3 +186,10 @@ def test_scene_metadata():
     assert meta["background"] == "#ff0000ff"
     np.testing.assert_allclose(meta["gravity"], [0, 0, -10])
     assert "bpy" in meta["versions"] and "pybullet" in meta["versions"]
+
+
+def test_get_camera_info_merges_extra_keys_like_upstream():
+    scene = kb.Scene(resolution=(16, 8), frame_start=1, frame_end=2)
+    scene += kb.PerspectiveCamera(position=(0, -5, 1), look_at=(0, 0, 0))
+    info = kb.get_camera_info(scene.camera, rig="left")
+    assert info["rig"] == "left" and info["positions"].shape == (2, 3)

@@ -275,6 +275,19 @@ def test_lights_and_materials_validate():
     assert kb.Scene(background=tex).background is tex
 
 
+def test_texture_projection_height_validates():
+    tex = kb.Texture(filename="sky.exr", mapping="environment")
+    assert tex.projection_height == 0.0  # default: plain lookup by direction
+    tex.projection_height = 1.75
+    assert tex.projection_height == pytest.approx(1.75)
+    for bad in (-0.5, float("inf"), float("nan")):
+        with pytest.raises(ValueError, match=r"Texture.projection_height must be in \[0, inf\]"):
+            kb.Texture(projection_height=bad)
+    with pytest.raises(TypeError, match="Texture.projection_height must be a number"):
+        tex.projection_height = "high"
+    assert tex.projection_height == pytest.approx(1.75)  # a rejected value changes nothing
+
+
 def test_keyframe_delete_notifies_and_names_missing_frames():
     scene = kb.Scene()
     view = RecordingView(scene)
@@ -299,3 +312,19 @@ def test_scene_from_flags_like_upstream_scripts(resolution, expected):
     assert scene.resolution == expected and scene.frame_end == 12 and scene.frame_rate == 12
     with pytest.raises(ValueError, match="resolution must look like 256 or 320x240, got 'big'"):
         kb.Scene.from_flags(SimpleNamespace(**{**vars(flags), "resolution": "big"}))
+
+
+def test_upstream_color_and_quaternion_spellings():
+    assert kb.get_color(0xFF8000) == kb.Color(1, 128 / 255, 0)
+    assert kb.Color.from_hexint(0x0000FF, alpha=0.5).a == 0.5
+    assert kb.Color.from_hsv(0, 1, 1, alpha=0.25) == (1, 0, 0, 0.25)
+    assert kb.Color(1, 0, 0).hexstr_short == "#ff0000"
+    assert kb.PointLight(color=0xFFEDD0).color.hexstr_short == "#ffedd0"
+    with pytest.raises(ValueError, match=r"hex integer colour must be in \[0, 0xFFFFFF\]"):
+        kb.get_color(0x1000000)
+    q = kb.Quaternion(axis=[1, 0, 0], degrees=90)
+    np.testing.assert_allclose(np.asarray(q), kb.Quaternion(axis="X", radians=np.pi / 2))
+    assert q.degrees == pytest.approx(90) and q.angle == pytest.approx(np.pi / 2)
+    np.testing.assert_allclose(q.axis, [1, 0, 0])
+    with pytest.raises(TypeError, match="give the rotation angle once"):
+        kb.Quaternion(axis="X", angle=1, degrees=2)

@@ -9,11 +9,26 @@ import kubric as kb
 from kubric import randomness
 
 
-def test_no_function_has_a_default_rng():
+def test_no_function_has_a_default_rng_object():
     for name, fn in inspect.getmembers(randomness, inspect.isfunction):
         params = inspect.signature(fn).parameters
         if "rng" in params:
-            assert params["rng"].default is inspect.Parameter.empty, name
+            assert params["rng"].default in (None, inspect.Parameter.empty), name
+
+
+def test_omitted_rng_needs_setup_and_then_uses_the_seeded_worker_rng(tmp_path):
+    with pytest.raises(TypeError, match=r"needs rng=.*or call kb.setup\(flags\) first"):
+        kb.random_hue_color()
+    parser = kb.ArgumentParser()
+    for attempt in range(2):
+        flags = parser.parse_args(["--seed", "7", "--job-dir", str(tmp_path / f"out{attempt}")])
+        _, rng, _, _ = kb.setup(flags)
+        # upstream style: positional axis + rng, and calls without rng at all
+        first = (kb.random_rotation([0, 0, 1], rng), kb.random_hue_color(),
+                 kb.sample_point_in_half_sphere_shell(7, 9).tolist())
+        if attempt == 0:
+            expected = first
+    assert first == expected  # the seed fixes what rng-less calls return
 
 
 def test_same_seed_same_samples_and_rng_required():
@@ -84,6 +99,20 @@ def test_half_sphere_shell():
     pts = np.array([kb.sample_point_in_half_sphere_shell(7, 9, rng=rng) for _ in range(500)])
     r = np.linalg.norm(pts, axis=1)
     assert np.all((r >= 7) & (r <= 9)) and np.all(pts[:, 2] >= 0)
+
+
+def test_upstream_sample_color_and_sizes():
+    rng = np.random.RandomState(0)
+    label, color = randomness.sample_color("clevr", rng)
+    assert color == randomness.CLEVR_COLORS[label]
+    assert randomness.sample_color("uniform_hue", rng)[0] is None
+    assert randomness.sample_color("gray", rng) == ("gray", kb.get_color("gray"))
+    label, size = randomness.sample_sizes("clevr", rng)
+    assert randomness.CLEVR_SIZES[label] == size
+    assert 0.7 <= randomness.sample_sizes("uniform", rng)[1] <= 1.4
+    assert randomness.sample_sizes("const", rng) == (None, 1.0)
+    with pytest.raises(ValueError, match="unknown size strategy 'huge'; allowed: clevr"):
+        randomness.sample_sizes("huge", rng)
 
 
 def test_clevr_palette_values():

@@ -77,8 +77,10 @@ def get_scene_metadata(scene, frames: Sequence[float] | None = None, **kwargs) -
     return meta
 
 
-def get_camera_info(camera, frames: Sequence[float] | None = None, resolution=None) -> dict:
-    """Camera metadata over ``frames`` (default: the camera's scene's frame range).
+def get_camera_info(camera, frames: Sequence[float] | None = None, resolution=None,
+                    **extra) -> dict:
+    """Camera metadata over ``frames`` (default: the camera's scene's frame range); ``extra``
+    keyword arguments are added to the result as they are (as upstream did).
 
     Returns: ``focal_length`` and ``sensor_width`` (mm), ``field_of_view`` (horizontal, rad)
     (perspective) or ``orthographic_scale`` (m); ``positions`` (T,3) and ``quaternions`` (T,4
@@ -111,6 +113,7 @@ def get_camera_info(camera, frames: Sequence[float] | None = None, resolution=No
         info["sensor_width"] = float(camera.sensor_width)
         info["field_of_view"] = float(camera.field_of_view)
         info["intrinsics_pixels"] = geo.pixel_intrinsics(camera, resolution)
+    info.update(extra)
     return info
 
 

@@ -85,6 +85,11 @@ class Color(tuple):
         """``"#rrggbbaa"``."""
         return "#" + "".join(f"{int(round(v * 255)):02x}" for v in self)
 
+    @property
+    def hexstr_short(self) -> str:
+        """``"#rrggbb"`` (alpha dropped)."""
+        return self.hexstr[:7]
+
     def __repr__(self) -> str:
         return "Color(r={:.4g}, g={:.4g}, b={:.4g}, a={:.4g})".format(*self)
 
@@ -99,11 +104,20 @@ class Color(tuple):
         return cls(*vals)
 
     @classmethod
-    def from_hsv(cls, h: float, s: float, v: float, a: float = 1.0) -> Color:
+    def from_hexint(cls, hexint: int, alpha: float = 1.0) -> Color:
+        """From an integer ``0xRRGGBB``."""
+        if isinstance(hexint, bool) or not isinstance(hexint, (int, np.integer)) \
+                or not 0 <= int(hexint) <= 0xFFFFFF:
+            raise ValueError(f"hex integer colour must be in [0, 0xFFFFFF], got {hexint!r}")
+        v = int(hexint)
+        return cls(((v >> 16) & 255) / 255.0, ((v >> 8) & 255) / 255.0, (v & 255) / 255.0, alpha)
+
+    @classmethod
+    def from_hsv(cls, h: float, s: float, v: float, alpha: float = 1.0) -> Color:
         for label, x in zip("hsv", (h, s, v), strict=True):
             if not 0.0 <= float(x) <= 1.0:
                 raise ValueError(f"HSV component {label} must be in [0, 1], got {x!r}")
-        return cls(*colorsys.hsv_to_rgb(h, s, v), a)
+        return cls(*colorsys.hsv_to_rgb(h, s, v), alpha)
 
     @classmethod
     def from_name(cls, name: str) -> Color:
@@ -116,9 +130,12 @@ class Color(tuple):
 
 
 def get_color(color) -> Color:
-    """A :class:`Color` from a Color, a CSS name, a hex string or 3–4 floats in [0, 1]."""
+    """A :class:`Color` from a Color, a CSS name, a hex string, an int ``0xRRGGBB`` or 3–4 floats
+    in [0, 1]."""
     if isinstance(color, Color):
         return color
+    if isinstance(color, (int, np.integer)) and not isinstance(color, bool):
+        return Color.from_hexint(color)
     if isinstance(color, str):
         if color.startswith("#") or (len(color) in (3, 4, 6, 8)
                                      and all(c in "0123456789abcdefABCDEF" for c in color)

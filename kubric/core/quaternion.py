@@ -34,13 +34,21 @@ class Quaternion:
     """An immutable WXYZ quaternion.
 
     Construct from four numbers ``Quaternion(w, x, y, z)``, a sequence ``Quaternion((w, x, y, z))``,
-    ``Quaternion(axis=(x, y, z), angle=radians)`` or ``Quaternion(matrix=R)`` (3×3 or 4×4 rotation).
+    ``Quaternion(axis=(x, y, z), angle=radians)`` (``radians=`` / ``degrees=`` also accepted, as in
+    pyquaternion) or ``Quaternion(matrix=R)`` (3×3 or 4×4 rotation).
     Iterating yields ``w, x, y, z``; ``np.asarray(q)`` gives the float64 array of the four elements.
     """
 
     __slots__ = ("_q",)
 
-    def __init__(self, *args, axis=None, angle=None, matrix=None):
+    def __init__(self, *args, axis=None, angle=None, matrix=None, radians=None, degrees=None):
+        given = [v for v in (angle, radians, degrees) if v is not None]
+        if len(given) > 1:
+            raise TypeError("give the rotation angle once: angle=, radians= or degrees=")
+        if degrees is not None:
+            angle = np.deg2rad(float(degrees))
+        elif radians is not None:
+            angle = radians
         if axis is not None or angle is not None:
             if args or matrix is not None or axis is None or angle is None:
                 raise TypeError("Quaternion(axis=..., angle=...) takes both and nothing else")
@@ -156,6 +164,22 @@ class Quaternion:
         angle = 2.0 * np.arctan2(s, q[0])
         axis = q[1:] / s if s > 1e-12 else np.array([1.0, 0.0, 0.0])
         return axis, float(angle)
+
+    @property
+    def axis(self) -> np.ndarray:
+        """Unit rotation axis (x axis for the identity)."""
+        return self.axis_angle[0]
+
+    @property
+    def angle(self) -> float:
+        """Rotation angle in radians, in [0, π]."""
+        return self.axis_angle[1]
+
+    radians = angle
+
+    @property
+    def degrees(self) -> float:
+        return float(np.rad2deg(self.angle))
 
     @classmethod
     def from_euler(cls, euler_xyz) -> Quaternion:
