@@ -20,6 +20,7 @@ writes atomically (temporary file in the same directory, then :func:`os.replace`
 
 from kubric.io.json_io import dumps_json, read_json, read_pkl, to_jsonable, write_json, write_pkl
 from kubric.io.layers import (
+    BATCH_WRITERS,
     DATA_RANGES_FILE,
     LAYERS,
     read_image_dict,
@@ -41,7 +42,10 @@ from kubric.io.png_io import (
 )
 from kubric.io.tiff_io import decode_tiff, encode_tiff, read_tiff, write_tiff
 
-__all__ = [
+# upstream's write_rgba_batch, write_depth_batch, write_segmentation_batch, ...
+globals().update(BATCH_WRITERS)
+
+__all__ = sorted(BATCH_WRITERS) + [
     "DATA_RANGES_FILE", "LAYERS", "as_path", "atomic_write_bytes", "decode_png", "decode_tiff",
     "default_palette", "dumps_json", "encode_png", "encode_tiff", "read_image_dict", "read_json",
     "read_layer", "read_palette_png", "read_pkl", "read_png", "read_scaled_png",

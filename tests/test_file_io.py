@@ -547,3 +547,18 @@ def test_kb_exports_resolve_to_file_io():
                  "read_json", "read_pkl", "read_palette_png", "read_scaled_png",
                  "read_image_dict", "read_segmentation"):
         assert getattr(kb, name) is getattr(fio, name), name
+
+
+def test_upstream_batch_writers_use_the_layer_encodings(tmp_path):
+    from kubric import file_io
+    rgba = np.random.RandomState(0).randint(0, 256, (2, 4, 5, 4)).astype(np.uint8)
+    file_io.write_rgba_batch(rgba, tmp_path)
+    depth = np.full((2, 4, 5, 1), 3.5, np.float32)
+    file_io.write_depth_batch(depth, tmp_path, file_template="d_{:05d}.tiff")
+    seg = np.arange(40, dtype=np.uint32).reshape(2, 4, 5, 1) % 7
+    file_io.write_segmentation_batch(seg, tmp_path)
+    back = file_io.read_image_dict(tmp_path, layers=["rgba", "segmentation"])
+    np.testing.assert_array_equal(back["rgba"], rgba)
+    np.testing.assert_array_equal(back["segmentation"], seg)
+    np.testing.assert_array_equal(file_io.read_tiff(tmp_path / "d_00001.tiff"), depth[1])
+    assert file_io.write_coordinates_batch is file_io.write_object_coordinates_batch

@@ -283,3 +283,22 @@ def read_segmentation(directory: PathLike, file_template: str | None = None) -> 
     """All segmentation frames of a scene directory, (T, H, W, 1) uint32 labels."""
     templates = None if file_template is None else {"segmentation": file_template}
     return read_layer(directory, "segmentation", templates)
+
+
+# -------------------------------------------------------------------------------- batch writers
+def _batch_writer(layer: str):
+    default = LAYERS[layer].template
+
+    def write_batch(data, directory: PathLike, file_template: str = default,
+                    max_write_threads: int = 16) -> dict[str, dict[str, float]]:
+        return write_image_dict({layer: data}, directory, {layer: file_template},
+                                max_write_threads)
+    write_batch.__name__ = f"write_{layer}_batch"
+    write_batch.__doc__ = (f"Write a (T, H, W, C) ``{layer}`` layer as ``{default}`` files "
+                           "(upstream's batch writer; same encoding as :func:`write_image_dict`).")
+    return write_batch
+
+
+#: upstream's per-layer batch writers: name → function
+BATCH_WRITERS = {f"write_{layer}_batch": _batch_writer(layer) for layer in LAYERS}
+BATCH_WRITERS["write_coordinates_batch"] = BATCH_WRITERS["write_object_coordinates_batch"]
