@@ -377,3 +377,57 @@ def test_deleted_model_keyframes_leave_blender_too():
     # with frame 4's key gone, Blender holds the last remaining key (frame 3), like the model
     assert obj.location[0] == pytest.approx(3.0)
     assert cube.get_value_at("position", 4)[0] == pytest.approx(3.0)
+
+
+def _equirect_png(path, w=512, h=256):
+    """A smooth synthetic equirectangular image: R encodes the elevation (0 at the nadir, 255 at
+    the zenith), G = 128 + 100·cos(2π·u) the image column u ∈ [0, 1); returns the analytic
+    expectation ``(elevation, u) -> (R, G)`` in 8-bit values."""
+    from PIL import Image
+    rows = 1.0 - (np.arange(h) + 0.5) / h
+    cols = (np.arange(w) + 0.5) / w
+    img = np.zeros((h, w, 3), np.uint8)
+    img[..., 0] = np.round(255 * rows)[:, None]
+    img[..., 1] = np.round(128 + 100 * np.cos(2 * np.pi * cols))[None, :]
+    Image.fromarray(img).save(path)
+    return lambda elev, u: (255 * (elev / np.pi + 0.5), 128 + 100 * np.cos(2 * np.pi * u))
+
+
+@pytest.mark.blender
+def test_environment_ground_projection(tmp_path):
+    """A floor whose environment texture has projection_height h shows, at floor point p, the
+    texel in direction p − (origin + (0, 0, h)): the nadir texel right below the projection centre,
+    rows towards the horizon far away; h = 0 gives the horizon row everywhere (radial streaks)."""
+    from kubric.core import camera_geometry as geo
+    expect = _equirect_png(tmp_path / "env.png")
+    origin, height, top = np.array([1.0, -2.0, 0.0]), 5.0, 0.01
+    w = 32
+    renders = {}
+    for h in (height, 0.0):
+        kb.reset_uid_counters()
+        scene = kb.Scene(resolution=(w, w), frame_start=1, frame_end=1)
+        tex = kb.Texture(filename=str(tmp_path / "env.png"), mapping="environment",
+                         projection_height=h)
+        scene += kb.Cube(position=origin, scale=(40, 40, top),
+                         material=kb.FlatMaterial(color=tex))
+        scene += kb.OrthographicCamera(position=(1.0, -2.001, 10.0), look_at=(1.0, -2.0, 0.0),
+                                       orthographic_scale=20.0)
+        renders[h] = _blender(scene, samples_per_pixel=8).render(return_layers=("rgba",))
+        renders[h] = renders[h]["rgba"][0][..., :3].astype(float)
+    # floor point of each pixel centre (orthographic rays straight down onto z = top)
+    cols, rows = np.meshgrid(np.arange(w) + 0.5, np.arange(w) + 0.5)
+    origins, dirs = geo.pixel_rays(scene.camera, np.stack([cols, rows], -1))
+    points = origins + dirs * ((origins[..., 2] - top) / -dirs[..., 2])[..., None]
+    d = points - (origin + (0.0, 0.0, height))
+    elev = np.arctan2(d[..., 2], np.hypot(d[..., 0], d[..., 1]))
+    u = 0.5 - np.arctan2(d[..., 1], d[..., 0]) / (2 * np.pi)  # Blender's equirect column
+    red, green = expect(elev, u)
+    got = renders[height]
+    assert np.abs(got[..., 0] - red).max() < 6
+    off_axis = np.hypot(d[..., 0], d[..., 1]) > 1.0  # the column is undefined at the nadir
+    assert np.abs(got[..., 1] - green)[off_axis].max() < 12
+    centre = np.unravel_index(np.argmin(np.hypot(d[..., 0], d[..., 1])), elev.shape)
+    assert got[centre][0] < 15  # straight below the centre: the nadir texel (R = 0)
+    assert 85 < got[0, 0, 0] < 110  # a corner 14 m away: 20° below the horizon row (R = 127)
+    flat = renders[0.0][..., 0]  # no projection height: every floor point looks at the horizon
+    assert np.abs(flat - 127.5).max() < 4

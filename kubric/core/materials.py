@@ -20,12 +20,20 @@ class Texture(Asset):
         direction, for HDRI lighting, backdrops and domes).
       rotation: extrinsic XYZ Euler angles (radians) applied to environment lookups.
       strength: multiplier of the image's values (≥ 0).
+      projection_height: metres (≥ 0); for ``"environment"`` mapping on an object, the lookup
+        direction of a shaded point p is ``p − (origin + (0, 0, projection_height))``
+        (a *ground projection*: a floor at the origin's height shows the image's lower
+        hemisphere as seen from that height, the nadir texel straight below it, and points
+        far away tend to the horizon row). 0 = plain lookup by direction from the origin.
+        Ignored by ``"uv"`` mapping and by scene backgrounds (those are infinitely far).
     """
 
     filename = kt.Property("", kt.as_str(), "image path")
     mapping = kt.Property("uv", kt.as_choice(["uv", "environment"]), "uv or environment")
     rotation = kt.Vector3D((0.0, 0.0, 0.0), "Euler XYZ (radians) of environment lookups")
     strength = kt.Float(1.0, low=0.0, doc="multiplier of the image values")
+    projection_height = kt.Float(0.0, low=0.0, doc="height (m) above the object's origin of "
+                                 "the viewpoint of environment lookups (ground projection)")
 
 
 def _as_color_or_texture():

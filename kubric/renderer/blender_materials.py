@@ -11,8 +11,10 @@
   show the object because they are rendered with an override material).
 * A colour that is a :class:`~kubric.core.materials.Texture`: ``"uv"`` mapping → Image Texture on
   the mesh UVs; ``"environment"`` mapping → equirectangular lookup by the direction from the
-  object's origin to the shaded point (world axes, rotated by ``texture.rotation``), which lets a
-  dome show an HDRI as floor + backdrop. ``texture.strength`` multiplies the colour.
+  projection centre ``origin + (0, 0, texture.projection_height)`` to the shaded point (world
+  axes, rotated by ``texture.rotation``), which lets a dome show an HDRI as floor + backdrop (with
+  a height > 0 the floor shows the HDRI's ground, not its horizon row smeared radially).
+  ``texture.strength`` multiplies the colour.
 """
 
 from __future__ import annotations
@@ -65,16 +67,20 @@ def texture_color_output(node_tree, texture: Texture, prefix: str):
         tex = nodes.new("ShaderNodeTexEnvironment")
         geom = nodes.new("ShaderNodeNewGeometry")
         info = nodes.new("ShaderNodeObjectInfo")
+        centre = nodes.new("ShaderNodeVectorMath")  # the projection centre above the origin
+        centre.operation = "ADD"
+        centre.inputs[1].default_value = (0.0, 0.0, float(texture.projection_height))
         sub = nodes.new("ShaderNodeVectorMath")
         sub.operation = "SUBTRACT"
         mapping = nodes.new("ShaderNodeMapping")
         mapping.vector_type = "VECTOR"
         mapping.inputs["Rotation"].default_value = tuple(float(v) for v in texture.rotation)
+        links.new(info.outputs["Location"], centre.inputs[0])
         links.new(geom.outputs["Position"], sub.inputs[0])
-        links.new(info.outputs["Location"], sub.inputs[1])
+        links.new(centre.outputs["Vector"], sub.inputs[1])
         links.new(sub.outputs["Vector"], mapping.inputs["Vector"])
         links.new(mapping.outputs["Vector"], tex.inputs["Vector"])
-        for n in (geom, info, sub, mapping):
+        for n in (geom, info, centre, sub, mapping):
             n.name = f"{prefix}:{n.name}"
     tex.image = image
     tex.name = f"{prefix}:{tex.name}"

@@ -6,6 +6,8 @@
   dome of random hue; lamps as A; camera in the shell r ∈ [7, 9].
 * C: 3–10 objects of a mesh collection, size U(0.75, 3.0) relative to the largest bound, their own
   textures, μ 0.5, e 0.5, mass from the asset; HDRI dome (floor and backdrop) and HDRI light.
+  The dome is a FlatMaterial (unlit, invisible to non-camera rays) showing the HDRI ground-projected
+  from ``HDRI_PROJECTION_HEIGHT`` m above the floor centre, so objects cast no shadow on it.
 * D: 10–20 static + 1–3 dynamic objects; the static ones settle first (μ 1, e 0), then stop.
 * E: as D with a camera moving on a straight line (start in the shell [8, 12], length U(0, 4)).
 * F: as E with motion blur U(0, 2) frames and 512² images.
@@ -45,6 +47,9 @@ CLEVR_LIGHTS = (
                                      "height": 0.5}, (-4.67112, -4.0136, 3.01122)),
 )
 CLEVR_CAMERA_POSITION = (7.48113, -6.50764, 5.34367)
+#: C–F: height (m) above the floor of the viewpoint from which the dome looks up the HDRI (about
+#: an HDRI's capture height): the floor shows the HDRI's ground, the backdrop its horizon and sky.
+HDRI_PROJECTION_HEIGHT = 2.0
 MATERIALS = {
     "metal": ({"metallic": 1.0, "roughness": 0.2, "ior": 2.5}, 0.4, 0.3, 2.7),
     "rubber": ({"metallic": 0.0, "roughness": 0.7, "specular": 0.33, "ior": 1.25}, 0.8, 0.7, 1.1),
@@ -182,10 +187,14 @@ class MoviC(MoviBase, name="movi_c"):
     def build_background(self, scene, rng, sources):
         hdri_id = _choice(rng, sources["hdri_ids"])
         hdri = sources["hdri"].create(hdri_id, mapping="environment")
+        # The dome shows the HDRI ground-projected and unlit (its texel values exactly, so it
+        # matches the world background); it is invisible to every other ray, so the objects
+        # are lit (and reflect) the HDRI itself and the dome's wall does not block it.
         scene.background = hdri
         scene.ambient_illumination = hdri
-        self.add_dome(scene, sources, kb.PrincipledBSDFMaterial(color=hdri, roughness=1.0,
-                                                                specular=0.0))
+        ground = sources["hdri"].create(hdri_id, mapping="environment",
+                                        projection_height=HDRI_PROJECTION_HEIGHT)
+        self.add_dome(scene, sources, kb.FlatMaterial(color=ground, indirect_visibility=False))
         return hdri_id
 
     def new_object(self, scene, simulator, rng, sources, region, dynamic: bool):
