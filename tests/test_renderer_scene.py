@@ -431,3 +431,35 @@ def test_environment_ground_projection(tmp_path):
     assert 85 < got[0, 0, 0] < 110  # a corner 14 m away: 20° below the horizon row (R = 127)
     flat = renders[0.0][..., 0]  # no projection height: every floor point looks at the horizon
     assert np.abs(flat - 127.5).max() < 4
+
+
+@pytest.mark.blender
+def test_upstream_hdri_shortcuts_missing_textures_and_save_state_replace(tmp_path):
+    import bpy
+    scene = _scene(w=8, h=6)
+    r = _blender(scene)
+    hdri = HDRI_DIR / "forest.exr"
+    r._set_ambient_light_hdri(str(hdri), hdri_rotation=(0, 0, 1.0), strength=0.5)
+    r._set_background_hdri(str(hdri))
+    assert scene.ambient_illumination.strength == 0.5
+    assert scene.ambient_illumination.rotation.tolist() == [0, 0, 1]
+    assert scene.background.filename == str(hdri)
+    bright = r.render_still(1, return_layers=("rgba",))["rgba"]
+    assert bright[..., :3].mean() > 5  # the world is lit by the HDRI
+    # a texture whose file vanished is an error naming it, unless explicitly ignored
+    gone = tmp_path / "gone.png"
+    from PIL import Image
+    Image.new("RGB", (4, 4), (255, 0, 0)).save(gone)
+    scene += kb.Cube(material=kb.FlatMaterial(color=kb.Texture(filename=str(gone))))
+    r._sync()
+    gone.unlink()
+    with pytest.raises(FileNotFoundError, match="missing texture file.*gone.png"):
+        r.render_still(1, return_layers=("rgba",))
+    assert r.render_still(1, return_layers=("segmentation",),
+                          ignore_missing_textures=True)["segmentation"].max() > 0
+    # saving twice replaces the file (no .blend1 backup) and packs images
+    path = tmp_path / "s.blend"
+    r.save_state(path)
+    r.save_state(path)
+    assert path.is_file() and not (tmp_path / "s.blend1").exists()
+    assert any(img.packed_file is not None for img in bpy.data.images if img.filepath)

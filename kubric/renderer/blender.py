@@ -369,11 +369,18 @@ class Blender(TableView):
         return files
 
     # ------------------------------------------------------------------ public API
-    def render(self, frames=None, return_layers=bp.ALL_LAYERS, ignore_missing=False):
+    def render(self, frames=None, return_layers=bp.ALL_LAYERS, ignore_missing_textures=False):
         """Render ``frames`` (default: the scene's frame range) → {layer: (T, H, W, C) array}.
 
         ``return_layers`` is any subset of ``("rgba",) + ANNOTATION_LAYERS`` (see module doc).
+        An image texture whose file is missing is an error naming it, unless
+        ``ignore_missing_textures`` (Blender then renders it magenta).
         """
+        if not ignore_missing_textures:
+            missing = missing_texture_files()
+            if missing:
+                raise FileNotFoundError(f"Blender.render: missing texture file(s) {missing}; "
+                                        "pass ignore_missing_textures=True to render anyway")
         frames = list(self.scene.frames if frames is None else frames)
         if not frames:
             raise ValueError("Blender.render: frames is empty")
@@ -412,21 +419,64 @@ class Blender(TableView):
                     out[k].append(layers[k])
         return {k: np.stack(v) for k, v in out.items()}
 
-    def render_still(self, frame=None, return_layers=bp.ALL_LAYERS):
+    def render_still(self, frame=None, return_layers=bp.ALL_LAYERS, ignore_missing_textures=False):
         """Render one frame (default: Blender's current frame) → {layer: (H, W, C) array}."""
         frame = self.bpy_scene.frame_current if frame is None else frame
-        return {k: v[0] for k, v in self.render([frame], return_layers).items()}
+        rendered = self.render([frame], return_layers, ignore_missing_textures)
+        return {k: v[0] for k, v in rendered.items()}
 
-    def save_state(self, path):
-        """Write the scene as a .blend file (RGB settings, animation included) for the UI."""
+    def save_state(self, path, pack_textures=True):
+        """Write the scene as a .blend file (RGB settings, animation included) for the UI.
+
+        An existing file is replaced (no ``.blend1`` backup is left). With ``pack_textures`` the
+        image files are packed into the .blend, so it opens elsewhere with its textures (missing
+        files stay unpacked references).
+        """
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
         self._sync()
         self._object_tables()
         self._configure_rgb(self.scratch_dir / "rgba_")
+        path.unlink(missing_ok=True)
         with self.quiet():
+            if pack_textures:
+                missing = set(missing_texture_files())
+                for img in bpy.data.images:
+                    if (img.source == "FILE" and img.filepath and img.packed_file is None
+                            and str(Path(bpy.path.abspath(img.filepath))) not in missing):
+                        img.pack()
             bpy.ops.wm.save_as_mainfile(filepath=str(path.resolve()), copy=True)
         return path
+
+    # ------------------------------------------------------------------ upstream shortcuts
+    def set_ambient_light_hdri(self, hdri_filepath, hdri_rotation=(0.0, 0.0, 0.0),
+                               strength=1.0) -> None:
+        """Light the scene with an HDRI: sets ``scene.ambient_illumination`` to an environment
+        :class:`~kubric.core.materials.Texture` (Euler XYZ ``hdri_rotation`` in radians)."""
+        self.scene.ambient_illumination = materials.Texture(
+            filename=str(hdri_filepath), mapping="environment", rotation=hdri_rotation,
+            strength=strength)
+
+    def set_background_hdri(self, hdri_filepath, hdri_rotation=(0.0, 0.0, 0.0)) -> None:
+        """Show an HDRI behind everything: sets ``scene.background`` to an environment Texture."""
+        self.scene.background = materials.Texture(
+            filename=str(hdri_filepath), mapping="environment", rotation=hdri_rotation)
+
+    # upstream workers called these private names
+    _set_ambient_light_hdri = set_ambient_light_hdri
+    _set_background_hdri = set_background_hdri
+
+
+def missing_texture_files() -> list[str]:
+    """Paths of file-backed, unpacked Blender images whose file does not exist."""
+    missing = []
+    for img in bpy.data.images:
+        if img.source != "FILE" or img.packed_file is not None or not img.filepath:
+            continue
+        path = Path(bpy.path.abspath(img.filepath))
+        if not path.exists():
+            missing.append(str(path))
+    return sorted(missing)
 
 
 def linear_interpolation():
