@@ -193,3 +193,15 @@ def test_get_camera_info_merges_extra_keys_like_upstream():
     scene += kb.PerspectiveCamera(position=(0, -5, 1), look_at=(0, 0, 0))
     info = kb.get_camera_info(scene.camera, rig="left")
     assert info["rig"] == "left" and info["positions"].shape == (2, 3)
+
+
+def test_get_instance_info_skips_lights_by_default_and_rejects_them_explicitly():
+    scene = kb.Scene(resolution=(16, 16), frame_start=1, frame_end=2)
+    scene += kb.PerspectiveCamera(position=(0, -5, 1), look_at=(0, 0, 0))
+    light = kb.PointLight(position=(-2.5, -1, 5), intensity=300)
+    cube = kb.Cube(position=(0, 0, 1))
+    scene.add([light, cube])
+    infos = kb.get_instance_info(scene)
+    assert [i["asset_id"] for i in infos] == [cube.uid]
+    with pytest.raises(TypeError, match=r"\['PointLight'\] are not PhysicalObjects"):
+        kb.get_instance_info(scene, [light, cube])

@@ -16,6 +16,7 @@ import numpy as np
 from kubric.core import camera_geometry as geo
 from kubric.core.color import Color
 from kubric.core.materials import Texture
+from kubric.core.objects import PhysicalObject
 
 CAMERA_CONVENTIONS = (
     "world: right-handed, z up, metres; quaternions WXYZ. matrices_world (T,4,4) and R map camera "
@@ -130,7 +131,8 @@ def bboxes_3d_over_time(asset, frames: Sequence[float]) -> np.ndarray:
 def get_instance_info(scene, assets_subset: Sequence | None = None,
                       frames: Sequence[float] | None = None) -> list[dict]:
     """Per-instance metadata, one dict per asset of ``assets_subset`` (default: the scene's
-    foreground assets), in that order.
+    foreground objects with geometry — lights and cameras are not instances), in that order.
+    An explicit subset may only hold :class:`~kubric.core.objects.PhysicalObject` s.
 
     Each dict starts from a copy of ``asset.metadata`` (recipe extras such as ``shape``,
     ``color_label`` and the ``visibility`` / ``bboxes`` / ``bbox_frames`` set by the
@@ -139,7 +141,14 @@ def get_instance_info(scene, assets_subset: Sequence | None = None,
     ``velocities`` (T,3), ``angular_velocities`` (T,3), ``image_positions`` (T,2 normalised
     (x, y), y down, projected at each frame's camera pose) and ``bboxes_3d`` (T,8,3).
     """
-    assets = list(scene.foreground_assets if assets_subset is None else assets_subset)
+    if assets_subset is None:
+        assets = [a for a in scene.foreground_assets if isinstance(a, PhysicalObject)]
+    else:
+        assets = list(assets_subset)
+        wrong = [a.uid for a in assets if not isinstance(a, PhysicalObject)]
+        if wrong:
+            raise TypeError(f"get_instance_info: {wrong} are not PhysicalObjects (instances have "
+                            "mass, bounds and a trajectory)")
     frames = _frames(scene, frames)
     camera = scene.camera
     infos = []

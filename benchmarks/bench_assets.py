@@ -1,0 +1,140 @@
+"""Asset-source measurements (not a test): KuBasic build time, the full pybullet_data conversion,
+and V-HACD vs CoACD on the non-convex meshes of the test collection.
+
+Run: ``python benchmarks/bench_assets.py [--out DIR] [--workers N] [--limit N] [--skip-full]``.
+CoACD is optional (``pip install coacd``); without it only V-HACD is measured.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+
+def bench_kubasic(out: Path, workers: int) -> dict:
+    from kubric.assets.kubasic import build_kubasic
+
+    t0 = time.perf_counter()
+    build_kubasic(out / "KuBasic", workers=workers)
+    return {"kubasic_seconds": round(time.perf_counter() - t0, 1), "workers": workers}
+
+
+def bench_full_conversion(out: Path, workers: int, limit: int | None) -> dict:
+    from kubric.assets.pybullet_collection import build_pybullet_collection
+
+    t0 = time.perf_counter()
+    report = build_pybullet_collection(out / "PybulletObjects", limit=limit, workers=workers)
+    seconds = time.perf_counter() - t0
+    manifest = json.loads((out / "PybulletObjects" / "manifest.json").read_text())
+    methods: dict[str, int] = {}
+    for entry in manifest["assets"].values():
+        m = entry["metadata"]["collision_method"]
+        methods[m] = methods.get(m, 0) + 1
+    return {"seconds": round(seconds, 1), "total": report["total"],
+            "converted": report["converted"], "reused": report["reused"],
+            "skipped": report["skipped"], "decomposition_methods": methods,
+            "workers": workers}
+
+
+def verify_source(path: Path) -> dict:
+    """Load every asset of a source in PyBullet (drop test: comes to rest on a plane) and in
+    Blender (glTF/OBJ import; bounds equal the manifest's). Returns failure lists."""
+    import sys
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+    from test_assets_checks import assert_rests_on_floor, blender_import_bounds, drop_test
+
+    from kubric.assets import AssetSource
+
+    source = AssetSource(path)
+    failures = {"pybullet": [], "blender": [], "still_rolling_after_10s": []}
+    t0 = time.perf_counter()
+    for asset_id in source.all_asset_ids:
+        obj = source.create(asset_id)
+        if obj.static:
+            continue
+        state = drop_test(obj.simulation_filename, obj.bounds, obj.mass)
+        try:
+            assert_rests_on_floor(state, obj.mass)
+        except AssertionError as err:
+            size = state["size"]
+            on_floor = -0.02 * size - 0.005 < state["aabb"][0, 2] < 0.05 * size + 0.005
+            if on_floor and abs(state["mass"] - obj.mass) <= 1e-5 * obj.mass:
+                failures["still_rolling_after_10s"].append(
+                    f"{asset_id}: |v| {state['speed']:.4f} m/s, |w| {state['spin']:.3f} rad/s")
+            else:
+                failures["pybullet"].append(f"{asset_id}: {err}")
+        bounds = np.asarray(obj.bounds, dtype=np.float64)
+        got = blender_import_bounds(obj.render_filename, dict(obj.render_import_kwargs))
+        if not np.allclose(got, bounds, atol=1e-5 + 1e-4 * np.ptp(bounds)):
+            failures["blender"].append(f"{asset_id}: {got.tolist()} vs {bounds.tolist()}")
+    return {"checked": len(source), "seconds": round(time.perf_counter() - t0, 1), **failures}
+
+
+def bench_decomposition() -> list[dict]:
+    """Time, hull count and Σ hull volume / mesh volume for each non-convex test mesh."""
+    from kubric.assets import physics, shapes
+    from kubric.assets.converter import load_mesh
+    from kubric.assets.pybullet_collection import TEXTURED_MODELS, pybullet_jobs
+
+    meshes = {}
+    for job in pybullet_jobs(limit=0):
+        if job.asset_id in TEXTURED_MODELS:
+            mesh = load_mesh(job.mesh_path, job.up, job.scale)
+            closed, ok = physics.make_watertight(mesh)
+            if physics.convex_parts_if_any(closed if ok else mesh) is None:
+                meshes[job.asset_id] = (closed if ok else mesh, ok)
+    for name in ("gear", "sponge", "teapot", "torus", "torus_knot", "spot"):
+        m = getattr(shapes, name)()
+        meshes[f"kubasic/{name}"] = (m, bool(m.is_watertight))
+    try:
+        import coacd  # noqa: F401
+        methods = {"vhacd": physics.vhacd, "coacd": physics.coacd}
+    except ImportError:
+        methods = {"vhacd": physics.vhacd}
+    rows = []
+    for name, (mesh, watertight) in sorted(meshes.items()):
+        row = {"mesh": name, "faces": len(mesh.faces)}
+        for method, fn in methods.items():
+            t0 = time.perf_counter()
+            hulls = fn(mesh)
+            row[f"{method}_s"] = round(time.perf_counter() - t0, 2)
+            row[f"{method}_hulls"] = len(hulls)
+            if watertight:
+                row[f"{method}_vol_ratio"] = round(sum(h.volume for h in hulls) / mesh.volume, 3)
+        rows.append(row)
+    return rows
+
+
+def main(argv=None) -> dict:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--out", default=None, help="output folder (default: a temp folder)")
+    parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--limit", type=int, default=None, help="random_urdfs (default all)")
+    parser.add_argument("--skip-full", action="store_true", help="skip the full conversion")
+    args = parser.parse_args(argv)
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(args.out or tmp)
+        results = {"kubasic": bench_kubasic(out, args.workers)}
+        print(json.dumps(results["kubasic"]))
+        if not args.skip_full:
+            results["pybullet_data"] = bench_full_conversion(out, args.workers, args.limit)
+            print(json.dumps(results["pybullet_data"], indent=1))
+            results["verify"] = verify_source(out / "PybulletObjects")
+            print(json.dumps(results["verify"], indent=1))
+        results["decomposition"] = bench_decomposition()
+        for row in results["decomposition"]:
+            print(json.dumps(row))
+        ratios = [r.get("vhacd_vol_ratio") for r in results["decomposition"]]
+        print("median V-HACD Σhull/mesh volume:",
+              float(np.median([r for r in ratios if r is not None])))
+    return results
+
+
+if __name__ == "__main__":
+    main()

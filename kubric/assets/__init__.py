@@ -1,0 +1,43 @@
+"""Asset sources: manifests + archives, safe extraction, and the builders of our own sources.
+
+``import kubric.assets`` is light (numpy only); trimesh, PyBullet and bpy are imported inside the
+functions that need them. See ``shared/spec/assets.md`` for the format.
+
+- :class:`AssetSource` — open a source (``manifest.json``), ``create(asset_id, **overrides)``.
+- :func:`cache_dir` — ``$KUBRIC_CACHE_DIR`` or ``~/.cache/kubric``.
+- :func:`ensure_kubasic`, :func:`ensure_hdri_source`, :func:`ensure_pybullet_collection` — the
+  sources this project builds on the user's machine, built into the cache on first use.
+"""
+
+from kubric.assets.archive import (
+    AssetArchiveError,
+    CorruptArchiveError,
+    UnsafeArchiveError,
+    safe_extract,
+)
+from kubric.assets.asset_source import AssetSource, ManifestError, cache_dir, validate_manifest
+
+
+def ensure_kubasic(cache=None, workers=None):
+    """KuBasic source, built into ``cache_dir()/KuBasic`` on first use (see kubric.assets.kubasic)."""
+    from kubric.assets.kubasic import ensure_kubasic as _ensure
+    return _ensure(cache, workers=workers)
+
+
+def ensure_hdri_source(cache=None):
+    """HDRI backgrounds from the bpy wheel's world HDRIs, built on first use (kubric.assets.hdri)."""
+    from kubric.assets.hdri import ensure_hdri_source as _ensure
+    return _ensure(cache)
+
+
+def ensure_pybullet_collection(limit=None, cache=None, workers=None):
+    """pybullet_data objects as a source (kubric.assets.pybullet_collection)."""
+    from kubric.assets.pybullet_collection import ensure_pybullet_collection as _ensure
+    return _ensure(limit=limit, cache=cache, workers=workers)
+
+
+__all__ = [
+    "AssetSource", "ManifestError", "cache_dir", "validate_manifest", "safe_extract",
+    "AssetArchiveError", "CorruptArchiveError", "UnsafeArchiveError", "ensure_kubasic",
+    "ensure_hdri_source", "ensure_pybullet_collection",
+]

@@ -1,0 +1,258 @@
+"""Asset sources: a folder with ``manifest.json`` plus one archive per asset.
+
+Manifest (compatible with upstream Kubric's)::
+
+    {"name": str, "version": str, "data_dir": str (optional, default: the manifest's folder),
+     "assets": {asset_id: {"id", "asset_type", "license", "kwargs", "metadata", "path"?}}}
+
+``asset_type`` is ``"FileBasedObject"`` or ``"Texture"``; ``path`` (default ``<id>.tar.gz``) is
+relative to ``data_dir``. String values of ``kwargs`` that start with ``{asset_dir}/`` point into
+the extracted archive. Archives are extracted lazily, once, with :func:`safe_extract`, into a
+per-source folder of the cache (see :func:`cache_dir`).
+"""
+
+from __future__ import annotations
+
+import difflib
+import json
+import os
+import shutil
+from collections.abc import Iterable
+from pathlib import Path
+
+import numpy as np
+
+from kubric.assets.archive import safe_extract
+
+ASSET_TYPES = ("FileBasedObject", "Texture")
+ENTRY_FIELDS = ("id", "asset_type", "license", "kwargs", "metadata")
+MANIFEST_FIELDS = ("name", "assets")
+ASSET_DIR = "{asset_dir}"
+
+
+class ManifestError(ValueError):
+    """A manifest that is missing a field, has a wrong type or an unknown asset type."""
+
+
+def cache_dir() -> Path:
+    """Where generated and extracted assets live: ``$KUBRIC_CACHE_DIR`` or ``~/.cache/kubric``."""
+    env = os.environ.get("KUBRIC_CACHE_DIR")
+    return Path(env).expanduser() if env else Path.home() / ".cache" / "kubric"
+
+
+def validate_manifest(manifest, where: str = "manifest") -> dict:
+    """Check the structure of a loaded manifest; raise :class:`ManifestError` naming the problem."""
+    if not isinstance(manifest, dict):
+        raise ManifestError(f"{where}: must be a JSON object, got {type(manifest).__name__}")
+    for field in MANIFEST_FIELDS:
+        if field not in manifest:
+            raise ManifestError(f"{where}: missing required field {field!r} "
+                                f"(required: {list(MANIFEST_FIELDS)})")
+    assets = manifest["assets"]
+    if not isinstance(assets, dict):
+        raise ManifestError(f"{where}: 'assets' must be an object {{id: entry}}, "
+                            f"got {type(assets).__name__}")
+    for key, entry in assets.items():
+        here = f"{where}: asset {key!r}"
+        if not isinstance(entry, dict):
+            raise ManifestError(f"{here}: entry must be an object, got {type(entry).__name__}")
+        for field in ENTRY_FIELDS:
+            if field not in entry:
+                raise ManifestError(f"{here}: missing required field {field!r} "
+                                    f"(required: {list(ENTRY_FIELDS)})")
+        if entry["id"] != key:
+            raise ManifestError(f"{here}: 'id' is {entry['id']!r}, must equal its key {key!r}")
+        if entry["asset_type"] not in ASSET_TYPES:
+            raise ManifestError(f"{here}: unknown asset_type {entry['asset_type']!r}; "
+                                f"allowed: {list(ASSET_TYPES)}")
+        for field in ("kwargs", "metadata"):
+            if not isinstance(entry[field], dict):
+                raise ManifestError(f"{here}: {field!r} must be an object, "
+                                    f"got {type(entry[field]).__name__}")
+        if "path" in entry and not isinstance(entry["path"], str):
+            raise ManifestError(f"{here}: 'path' must be a string, got {entry['path']!r}")
+    return manifest
+
+
+def _resolve(value, asset_dir: Path):
+    if isinstance(value, str) and value.startswith(ASSET_DIR + "/"):
+        return str(asset_dir / value[len(ASSET_DIR) + 1:])
+    if isinstance(value, dict):
+        return {k: _resolve(v, asset_dir) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_resolve(v, asset_dir) for v in value]
+    return value
+
+
+def _safe_name(text: str) -> str:
+    return "".join(c if c.isalnum() or c in "-_." else "_" for c in text)
+
+
+class AssetSource:
+    """A collection of assets described by a ``manifest.json``.
+
+    Args:
+      path: the source folder (containing ``manifest.json``) or the manifest file itself.
+      scratch_dir: where archives are extracted; default ``cache_dir()/extracted/<name>-<hash>``.
+
+    Attributes:
+      name, version: from the manifest. all_asset_ids: sorted ids. db: ``{id: entry}``.
+    """
+
+    def __init__(self, path: str | os.PathLike, scratch_dir: str | os.PathLike | None = None):
+        path = Path(path).expanduser()
+        manifest_path = path / "manifest.json" if path.is_dir() else path
+        if not manifest_path.is_file():
+            raise FileNotFoundError(f"AssetSource: no manifest.json at {str(manifest_path)!r}")
+        try:
+            manifest = json.loads(manifest_path.read_text())
+        except json.JSONDecodeError as err:
+            raise ManifestError(f"{manifest_path}: not valid JSON: {err}") from None
+        validate_manifest(manifest, str(manifest_path))
+        self.manifest_path = manifest_path.resolve()
+        self.manifest = manifest
+        self.name = str(manifest["name"])
+        self.version = str(manifest.get("version", ""))
+        data_dir = manifest.get("data_dir")
+        base = self.manifest_path.parent
+        self.data_dir = (base / data_dir).resolve() if data_dir else base
+        self.db: dict[str, dict] = dict(manifest["assets"])
+        if scratch_dir is None:
+            import hashlib
+            digest = hashlib.sha1(str(self.manifest_path).encode()).hexdigest()[:10]
+            scratch_dir = cache_dir() / "extracted" / f"{_safe_name(self.name)}-{digest}"
+        self.scratch_dir = Path(scratch_dir)
+
+    @classmethod
+    def from_manifest(cls, manifest_path: str | os.PathLike, **kwargs) -> AssetSource:
+        """Open the source described by ``manifest_path`` (a file or its folder)."""
+        return cls(manifest_path, **kwargs)
+
+    def __repr__(self) -> str:
+        return f"AssetSource({self.name!r}, {len(self.db)} assets, {str(self.data_dir)!r})"
+
+    def __len__(self) -> int:
+        return len(self.db)
+
+    def __contains__(self, asset_id) -> bool:
+        return asset_id in self.db
+
+    @property
+    def all_asset_ids(self) -> list[str]:
+        """Every asset id, sorted."""
+        return sorted(self.db)
+
+    @property
+    def categories(self) -> list[str]:
+        """Sorted distinct ``metadata.category`` values (assets without one are left out)."""
+        return sorted({str(e["metadata"]["category"]) for e in self.db.values()
+                       if e["metadata"].get("category")})
+
+    def asset_ids_in(self, category: str) -> list[str]:
+        """Sorted ids of the assets whose ``metadata.category`` is ``category``."""
+        return sorted(k for k, e in self.db.items() if e["metadata"].get("category") == category)
+
+    def get_test_split(self, fraction: float = 0.1, seed: int = 42) -> tuple[list[str], list[str]]:
+        """(train ids, held-out ids): ``round(fraction * n)`` of the sorted ids chosen by ``seed``.
+
+        Deterministic for a given manifest, fraction and seed; both lists are sorted.
+        """
+        if not 0.0 <= float(fraction) <= 1.0:
+            raise ValueError(f"AssetSource.get_test_split: fraction must be in [0, 1], "
+                             f"got {fraction!r}")
+        ids = self.all_asset_ids
+        n_test = int(round(float(fraction) * len(ids)))
+        rng = np.random.RandomState(seed)
+        held = set(rng.choice(ids, size=n_test, replace=False).tolist()) if n_test else set()
+        return [i for i in ids if i not in held], sorted(held)
+
+    def _entry(self, asset_id: str) -> dict:
+        try:
+            return self.db[asset_id]
+        except (KeyError, TypeError):
+            close = difflib.get_close_matches(str(asset_id), self.all_asset_ids, n=3)
+            hint = f"; did you mean {close}?" if close else ""
+            shown = self.all_asset_ids[:20]
+            more = f" (and {len(self.db) - 20} more)" if len(self.db) > 20 else ""
+            raise KeyError(f"AssetSource {self.name!r} has no asset {asset_id!r}{hint} "
+                           f"Known ids: {shown}{more}") from None
+
+    def archive_path(self, asset_id: str) -> Path:
+        entry = self._entry(asset_id)
+        return self.data_dir / entry.get("path", f"{asset_id}.tar.gz")
+
+    def fetch(self, asset_id: str) -> Path:
+        """Extract the asset's archive (once; later calls reuse it) and return its folder.
+
+        The folder name includes the archive's size and modification time, so a rebuilt
+        archive is extracted afresh instead of reusing a stale copy.
+        """
+        self._entry(asset_id)
+        archive = self.archive_path(asset_id)
+        try:
+            st = archive.stat()
+            stamp = f"-{st.st_size:x}-{st.st_mtime_ns:x}"
+        except OSError:
+            stamp = ""  # missing: safe_extract raises the error naming the asset
+        target = self.scratch_dir / (_safe_name(asset_id) + stamp)
+        if not target.is_dir():
+            safe_extract(archive, target, asset_id)
+        return target
+
+    def get_asset_kwargs(self, asset_id: str) -> dict:
+        """The entry's ``kwargs`` with ``{asset_dir}/...`` resolved (extracts the archive)."""
+        entry = self._entry(asset_id)
+        return _resolve(entry["kwargs"], self.fetch(asset_id))
+
+    def create(self, asset_id: str, **kwargs):
+        """A new asset (``FileBasedObject`` or ``Texture``) for ``asset_id``.
+
+        ``kwargs`` override the manifest's (e.g. ``material=``, ``scale=``, ``position=``).
+        ``metadata`` holds the entry's metadata, with ``asset_id`` and ``license`` added.
+        """
+        import kubric.core as core
+
+        entry = self._entry(asset_id)
+        merged = self.get_asset_kwargs(asset_id)
+        merged.update(kwargs)
+        metadata = dict(entry["metadata"])
+        metadata.update({"asset_id": asset_id, "license": entry["license"]})
+        metadata.update(merged.pop("metadata", {}) or {})
+        merged.setdefault("name", _safe_name(asset_id))
+        if entry["asset_type"] == "FileBasedObject":
+            return core.FileBasedObject(asset_id=asset_id, metadata=metadata, **merged)
+        return core.Texture(metadata=metadata, **merged)
+
+    def cleanup(self) -> None:
+        """Delete every extracted archive of this source (the source itself is kept)."""
+        shutil.rmtree(self.scratch_dir, ignore_errors=True)
+
+    def iter_entries(self, asset_ids: Iterable[str] | None = None):
+        """Yield ``(id, entry)`` for ``asset_ids`` (default: all, sorted)."""
+        for asset_id in (self.all_asset_ids if asset_ids is None else asset_ids):
+            yield asset_id, self._entry(asset_id)
+
+
+def build_once(target: str | os.PathLike, build) -> Path:
+    """Run ``build(tmp_dir)`` unless ``target/manifest.json`` exists, then rename tmp → target.
+
+    The build happens in a temporary sibling folder, so a crash never leaves a half-built source
+    and concurrent builders never see one; if another process finished first, its copy is kept.
+    """
+    import tempfile
+
+    target = Path(target)
+    if (target / "manifest.json").is_file():
+        return target
+    target.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{target.name}.", dir=target.parent))
+    try:
+        build(tmp)
+        try:
+            os.rename(tmp, target)
+        except OSError:
+            if not (target / "manifest.json").is_file():
+                raise
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    return target

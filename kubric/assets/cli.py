@@ -1,0 +1,137 @@
+"""``kubric assets ...``: build asset sources on this machine.
+
+Sub-commands: ``kubasic --out DIR``; ``convert SRC_DIR --out DIR --name NAME [--workers N]``;
+``hdri SRC_DIR --out DIR``; ``pybullet --out DIR [--limit N]``; ``list SOURCE``; ``cache``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+
+
+def _kubasic(args) -> int:
+    from kubric.assets.kubasic import build_kubasic
+
+    t0 = time.perf_counter()
+    manifest = build_kubasic(args.out, workers=args.workers, progress=True)
+    print(f"KuBasic: {manifest} ({time.perf_counter() - t0:.1f} s)")
+    return 0
+
+
+def _print_report(report: dict, seconds: float) -> int:
+    print(f"{report['name']}: {report['converted']} converted, {report['reused']} reused, "
+          f"{len(report['skipped'])} skipped of {report['total']} ({seconds:.1f} s)")
+    for item in report["skipped"]:
+        print(f"  skipped {item['id']} ({item['source']}): {item['reason']}")
+    return 0 if report["converted"] + report["reused"] > 0 else 1
+
+
+def _convert(args) -> int:
+    from kubric.assets.converter import convert_collection
+
+    t0 = time.perf_counter()
+    report = convert_collection(args.src_dir, args.out, args.name, license=args.license,
+                                workers=args.workers, up=args.up, scale=args.scale,
+                                decomposition=args.decomposition)
+    return _print_report(report, time.perf_counter() - t0)
+
+
+def _pybullet(args) -> int:
+    from kubric.assets.pybullet_collection import build_pybullet_collection
+
+    t0 = time.perf_counter()
+    report = build_pybullet_collection(args.out, limit=args.limit, workers=args.workers)
+    return _print_report(report, time.perf_counter() - t0)
+
+
+def _hdri(args) -> int:
+    from kubric.assets.hdri import bpy_world_hdri_dir, build_hdri_source
+
+    src = args.src_dir or bpy_world_hdri_dir()
+    license_ = args.license
+    if args.src_dir is None and license_ is None:
+        from kubric.assets.hdri import BPY_WORLD_LICENSE
+        license_ = BPY_WORLD_LICENSE
+    manifest = build_hdri_source(src, args.out, name=args.name, license=license_)
+    print(f"HDRIs from {src}: {manifest}")
+    return 0
+
+
+def _list(args) -> int:
+    from kubric.assets.asset_source import AssetSource
+
+    source = AssetSource(args.source)
+    print(f"{source.name} {source.version}: {len(source)} assets")
+    for asset_id, entry in source.iter_entries():
+        meta = entry["metadata"]
+        print(f"  {asset_id:30s} {entry['asset_type']:16s} {meta.get('category', '')}")
+    return 0
+
+
+def _cache(args) -> int:
+    from kubric.assets.asset_source import cache_dir
+
+    print(cache_dir())
+    return 0
+
+
+def add_parser(subparsers) -> argparse.ArgumentParser:
+    """Register ``kubric assets`` and its sub-commands on ``subparsers``."""
+    parser = subparsers.add_parser("assets", help="build and inspect asset sources",
+                                   description=__doc__.splitlines()[0])
+    sub = parser.add_subparsers(dest="assets_command", metavar="SUBCOMMAND")
+    parser.set_defaults(func=lambda args: (parser.print_help(), 2)[1])
+
+    p = sub.add_parser("kubasic", help="generate the KuBasic shapes + dome")
+    p.add_argument("--out", required=True, help="output folder (manifest.json + archives)")
+    p.add_argument("--workers", type=int, default=None, help="processes (default: cores, ≤ 4)")
+    p.set_defaults(func=_kubasic)
+
+    p = sub.add_parser("convert", help="convert a folder of meshes into a source")
+    p.add_argument("src_dir", help="folder with OBJ/GLB/GLTF/PLY/STL files (recursive)")
+    p.add_argument("--out", required=True, help="output folder")
+    p.add_argument("--name", required=True, help="source name written to the manifest")
+    p.add_argument("--workers", type=int, default=None, help="processes (default: all cores)")
+    p.add_argument("--license", default="unknown (user-provided meshes)",
+                   help="licence recorded for every asset (a sidecar <stem>.json may override)")
+    p.add_argument("--up", choices=["z", "y"], default="z", help="up axis of OBJ/PLY/STL files")
+    p.add_argument("--scale", type=float, default=1.0, help="uniform scale to metres")
+    p.add_argument("--decomposition", choices=["auto", "vhacd", "coacd"], default="auto",
+                   help="convex decomposition: auto = the mesh's own convex parts, else V-HACD "
+                        "(default); coacd = tighter but 10-100x slower (pip install coacd)")
+    p.set_defaults(func=_convert)
+
+    p = sub.add_parser("pybullet", help="convert pybullet_data's random_urdfs + textured models")
+    p.add_argument("--out", required=True, help="output folder")
+    p.add_argument("--limit", type=int, default=None, help="number of random_urdfs (default all)")
+    p.add_argument("--workers", type=int, default=None, help="processes (default: all cores)")
+    p.set_defaults(func=_pybullet)
+
+    p = sub.add_parser("hdri", help="environment maps (.hdr/.exr) → Texture source")
+    p.add_argument("src_dir", nargs="?", default=None,
+                   help="folder of .hdr/.exr files (default: the bpy wheel's world HDRIs)")
+    p.add_argument("--out", required=True, help="output folder")
+    p.add_argument("--name", default="HDRIs", help="source name")
+    p.add_argument("--license", default=None, help="licence (default: the folder's license.txt)")
+    p.set_defaults(func=_hdri)
+
+    p = sub.add_parser("list", help="list the assets of a source")
+    p.add_argument("source", help="source folder or manifest.json")
+    p.set_defaults(func=_list)
+
+    p = sub.add_parser("cache", help="print the cache directory")
+    p.set_defaults(func=_cache)
+    return parser
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(prog="kubric")
+    add_parser(parser.add_subparsers(dest="command"))
+    args = parser.parse_args(argv)
+    return int(args.func(args) or 0)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,241 @@
+"""Write one asset (archive + manifest entry) and whole manifests, deterministically.
+
+An object archive holds ``data.json`` (the manifest entry), the visual mesh
+(``visual_geometry.obj`` — z up, for KuBasic — or ``visual_geometry.glb`` — glTF's y-up convention
+with embedded textures, so Blender's glTF importer brings it in z up), ``collision_geometry.obj``
+(convex hulls, one ``o`` object each) and ``object.urdf`` (one link; the mesh is centred on its
+centre of mass, so the inertial origin is 0).
+
+Numbers in JSON are rounded to 9 significant digits and keys are sorted: building the same
+source twice gives byte-identical manifests and archives.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from kubric.assets import physics
+from kubric.assets.archive import write_archive
+
+OBJ_IMPORT_KWARGS = {"forward_axis": "Y", "up_axis": "Z"}  # z-up OBJ into Blender unchanged
+
+
+def clean_number(x):
+    """Round floats to 9 significant digits (and -0 → 0) for stable JSON."""
+    if isinstance(x, dict):
+        return {k: clean_number(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [clean_number(v) for v in x]
+    if isinstance(x, np.ndarray):
+        return clean_number(x.tolist())
+    if isinstance(x, (float, np.floating)):
+        v = float(f"{float(x):.9g}")
+        return 0.0 if v == 0 else v
+    if isinstance(x, np.integer):
+        return int(x)
+    return x
+
+
+def dumps(obj) -> str:
+    return json.dumps(clean_number(obj), indent=2, sort_keys=True) + "\n"
+
+
+def write_manifest(path: str | os.PathLike, name: str, version: str, entries: dict) -> Path:
+    """Write ``manifest.json`` atomically (entries sorted by id)."""
+    path = Path(path)
+    text = dumps({"name": name, "version": version,
+                  "assets": {k: entries[k] for k in sorted(entries)}})
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(text)
+    os.replace(tmp, path)
+    return path
+
+
+@dataclass
+class Collision:
+    """Collision geometry of an object.
+
+    kind: ``"box"`` (params: size (3,)), ``"sphere"`` (radius), ``"cylinder"`` (radius, length;
+    axis z), ``"hulls"`` (the convex hulls in ``hulls``) or ``"concave"`` (the visual mesh as a
+    static triangle mesh; only for static objects such as the dome).
+    """
+
+    kind: str
+    params: tuple = ()
+    hulls: list = field(default_factory=list)
+    method: str = ""
+
+
+def _geometry_xml(col: Collision) -> str:
+    if col.kind == "box":
+        return '<box size="{} {} {}"/>'.format(*(physics._fmt(v) for v in col.params))
+    if col.kind == "sphere":
+        return f'<sphere radius="{physics._fmt(col.params[0])}"/>'
+    if col.kind == "cylinder":
+        r, h = (physics._fmt(v) for v in col.params)
+        return f'<cylinder radius="{r}" length="{h}"/>'
+    if col.kind in ("hulls", "concave"):
+        return '<mesh filename="collision_geometry.obj" scale="1 1 1"/>'
+    raise ValueError(f"Collision.kind must be box, sphere, cylinder, hulls or concave, "
+                     f"got {col.kind!r}")
+
+
+def urdf_text(name: str, mass: float, inertia: np.ndarray, col: Collision,
+              visual_file: str, friction: float = 0.5) -> str:
+    """A one-link URDF: inertial at the origin (mesh centred on its centre of mass)."""
+    f = physics._fmt
+    i = np.asarray(inertia, dtype=np.float64)
+    concave = ' concave="yes"' if col.kind == "concave" else ""
+    return "\n".join([
+        '<?xml version="1.0"?>',
+        f'<robot name="{name}">',
+        f'  <link name="base"{concave}>',
+        "    <contact>",
+        f'      <lateral_friction value="{f(friction)}"/>',
+        "    </contact>",
+        "    <inertial>",
+        '      <origin xyz="0 0 0" rpy="0 0 0"/>',
+        f'      <mass value="{f(mass)}"/>',
+        f'      <inertia ixx="{f(i[0, 0])}" ixy="{f(i[0, 1])}" ixz="{f(i[0, 2])}" '
+        f'iyy="{f(i[1, 1])}" iyz="{f(i[1, 2])}" izz="{f(i[2, 2])}"/>',
+        "    </inertial>",
+        "    <visual>",
+        '      <origin xyz="0 0 0" rpy="0 0 0"/>',
+        f'      <geometry><mesh filename="{visual_file}" scale="1 1 1"/></geometry>',
+        "    </visual>",
+        f"    <collision{concave}>",
+        '      <origin xyz="0 0 0" rpy="0 0 0"/>',
+        f"      <geometry>{_geometry_xml(col)}</geometry>",
+        "    </collision>",
+        "  </link>",
+        "</robot>",
+        "",
+    ])
+
+
+def _write_visual_obj(mesh, path: Path) -> None:
+    """z-up OBJ with UVs when the mesh has them (no materials)."""
+    f = physics._fmt
+    lines = ["v " + " ".join(f(x) for x in v) for v in mesh.vertices]
+    uv = getattr(mesh.visual, "uv", None)
+    if uv is not None and len(uv) == len(mesh.vertices):
+        lines += ["vt " + " ".join(f(x) for x in t) for t in uv]
+        lines += ["f " + " ".join(f"{i + 1}/{i + 1}" for i in face) for face in mesh.faces]
+    else:
+        lines += ["f " + " ".join(str(i + 1) for i in face) for face in mesh.faces]
+    path.write_text("\n".join(lines) + "\n")
+
+
+def _write_visual_glb(mesh, path: Path) -> None:
+    """GLB in glTF's y-up convention: (x, y, z) z-up → (x, z, -y)."""
+    to_gltf = np.array([[1, 0, 0, 0], [0, 0, 1, 0], [0, -1, 0, 0], [0, 0, 0, 1]], dtype=float)
+    m = mesh.copy()
+    m.apply_transform(to_gltf)
+    path.write_bytes(m.export(file_type="glb"))
+
+
+def package_object(asset_id: str, visual, out_dir: str | os.PathLike, *, collision: Collision,
+                   license: str, metadata: dict | None = None, physics_parts=None,
+                   visual_format: str = "obj", static: bool = False,
+                   extra_kwargs: dict | None = None) -> dict:
+    """Centre, measure and write one FileBasedObject asset; return its manifest entry.
+
+    Args:
+      visual: trimesh mesh (z up, metres) as it should look.
+      collision: see :class:`Collision`; hull coordinates are in the same frame as ``visual``.
+      physics_parts: closed meshes whose mass properties define the object (default: the
+        collision hulls, or ``visual`` itself for primitive collision shapes).
+      static: static objects get mass 0 and ``static: true``.
+    """
+    out_dir = Path(out_dir)
+    metadata = dict(metadata or {})
+    if static:
+        props = {"volume": 0.0, "center_mass": np.zeros(3), "inertia": np.zeros((3, 3))}
+    else:
+        if physics_parts is None:
+            physics_parts = collision.hulls if collision.kind == "hulls" else [visual]
+        props = physics.mass_properties(physics_parts)
+    com = props["center_mass"]
+    inertia = np.asarray(props["inertia"], dtype=np.float64)
+    inertia = np.where(np.abs(inertia) < 1e-12 * max(np.trace(inertia), 1e-30), 0.0, inertia)
+    props["inertia"] = inertia
+    visual = visual.copy()
+    visual.apply_translation(-com)
+    hulls = []
+    for h in collision.hulls:
+        h = h.copy()
+        h.apply_translation(-com)
+        hulls.append(h)
+    bounds = np.stack([visual.vertices.min(axis=0), visual.vertices.max(axis=0)])
+    mass = props["volume"]
+    vis_name = f"visual_geometry.{visual_format}"
+    urdf_visual = vis_name if visual_format == "obj" else "collision_geometry.obj"
+    metadata.update({
+        "nr_faces": int(len(visual.faces)), "nr_vertices": int(len(visual.vertices)),
+        "volume": props["volume"], "surface_area": float(visual.area),
+        "inertia": props["inertia"], "collision": collision.kind,
+        "collision_method": collision.method or collision.kind,
+    })
+    kwargs = {"bounds": bounds, "mass": mass,
+              "render_filename": "{asset_dir}/" + vis_name,
+              "simulation_filename": "{asset_dir}/object.urdf"}
+    if visual_format == "obj":
+        kwargs["render_import_kwargs"] = dict(OBJ_IMPORT_KWARGS)
+    if static:
+        kwargs["static"] = True
+    kwargs.update(extra_kwargs or {})
+    entry = clean_number({"id": asset_id, "asset_type": "FileBasedObject", "license": license,
+                          "kwargs": kwargs, "metadata": metadata})
+    archive = out_dir / f"{asset_id}.tar.gz"
+    archive.parent.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory(prefix=".stage_", dir=archive.parent) as tmp:
+        stage = Path(tmp)
+        if visual_format == "obj":
+            _write_visual_obj(visual, stage / vis_name)
+        elif visual_format == "glb":
+            _write_visual_glb(visual, stage / vis_name)
+        else:
+            raise ValueError(f"visual_format must be 'obj' or 'glb', got {visual_format!r}")
+        if collision.kind == "concave":
+            _write_visual_obj(visual, stage / "collision_geometry.obj")
+        else:
+            write_hulls_or_hull(hulls, visual, stage / "collision_geometry.obj")
+        name = "".join(c if c.isalnum() else "_" for c in asset_id)
+        (stage / "object.urdf").write_text(urdf_text(name, mass, props["inertia"], collision,
+                                                     urdf_visual))
+        (stage / "data.json").write_text(dumps(entry))
+        write_archive(stage, archive)
+    return entry
+
+
+def write_hulls_or_hull(hulls, visual, path: Path) -> None:
+    """Write ``hulls``, or the visual mesh's convex hull when there are none (convex primitives)."""
+    physics.write_hulls_obj(hulls if hulls else [visual.convex_hull], path)
+
+
+def package_texture(asset_id: str, image_path: str | os.PathLike, out_dir: str | os.PathLike, *,
+                    license: str, metadata: dict | None = None,
+                    extra_kwargs: dict | None = None) -> dict:
+    """Write a Texture asset (an image, e.g. an HDRI) and return its manifest entry."""
+    image_path = Path(image_path)
+    out_dir = Path(out_dir)
+    fname = "texture" + image_path.suffix.lower()
+    kwargs = {"filename": "{asset_dir}/" + fname, "mapping": "environment"}
+    kwargs.update(extra_kwargs or {})
+    entry = clean_number({"id": asset_id, "asset_type": "Texture", "license": license,
+                          "kwargs": kwargs, "metadata": dict(metadata or {})})
+    archive = out_dir / f"{asset_id}.tar.gz"
+    archive.parent.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory(prefix=".stage_", dir=archive.parent) as tmp:
+        stage = Path(tmp)
+        shutil.copyfile(image_path, stage / fname)
+        (stage / "data.json").write_text(dumps(entry))
+        write_archive(stage, archive)
+    return entry
