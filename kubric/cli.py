@@ -15,7 +15,9 @@ SUBCOMMAND_MODULES = (
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="kubric", description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(
+        prog="kubric", description="Kubric: generate synthetic computer-vision datasets (scene "
+        "recipes, local runner, asset sources, scene inspection).")
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name in SUBCOMMAND_MODULES:
         try:
