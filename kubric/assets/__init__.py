@@ -5,6 +5,8 @@ functions that need them. See ``shared/spec/assets.md`` for the format.
 
 - :class:`AssetSource` — open a source (``manifest.json``), ``create(asset_id, **overrides)``.
 - :func:`cache_dir` — ``$KUBRIC_CACHE_DIR`` or ``~/.cache/kubric``.
+- ``kubric.assets.utils`` (also ``kb.assets.utils``, loaded on first access) —
+  :func:`~kubric.assets.utils.get_clevr_lights`.
 - :func:`ensure_kubasic`, :func:`ensure_hdri_source`, :func:`ensure_pybullet_collection` — the
   sources this project builds on the user's machine, built into the cache on first use.
 """
@@ -34,6 +36,15 @@ def ensure_pybullet_collection(limit=None, cache=None, workers=None):
     """pybullet_data objects as a source (kubric.assets.pybullet_collection)."""
     from kubric.assets.pybullet_collection import ensure_pybullet_collection as _ensure
     return _ensure(limit=limit, cache=cache, workers=workers)
+
+
+def __getattr__(name):
+    """``kubric.assets.utils`` on first access (so ``kb.assets.utils.get_clevr_lights`` works
+    after a plain ``import kubric``)."""
+    if name == "utils":
+        import importlib
+        return importlib.import_module("kubric.assets.utils")
+    raise AttributeError(f"module 'kubric.assets' has no attribute {name!r}")
 
 
 __all__ = [

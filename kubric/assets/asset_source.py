@@ -96,7 +96,12 @@ class AssetSource:
       scratch_dir: where archives are extracted; default ``cache_dir()/extracted/<name>-<hash>``.
 
     Attributes:
-      name, version: from the manifest. all_asset_ids: sorted ids. db: ``{id: entry}``.
+      name, version: from the manifest. all_asset_ids: sorted ids. db: ``{id: entry}``
+      (``_assets`` is the same dict, under the name upstream Kubric's scripts use).
+
+    ``close()`` (or leaving a ``with AssetSource(path) as source:`` block) deletes the folders that
+    this instance extracted; folders it found already extracted (by another instance or process,
+    which may still use them) are left alone. Using the source after ``close()`` extracts afresh.
     """
 
     def __init__(self, path: str | os.PathLike, scratch_dir: str | os.PathLike | None = None):
@@ -122,11 +127,23 @@ class AssetSource:
             digest = hashlib.sha1(str(self.manifest_path).encode()).hexdigest()[:10]
             scratch_dir = cache_dir() / "extracted" / f"{_safe_name(self.name)}-{digest}"
         self.scratch_dir = Path(scratch_dir)
+        self._extracted: list[Path] = []  # folders this instance extracted (removed by close())
 
     @classmethod
     def from_manifest(cls, manifest_path: str | os.PathLike, **kwargs) -> AssetSource:
         """Open the source described by ``manifest_path`` (a file or its folder)."""
         return cls(manifest_path, **kwargs)
+
+    @property
+    def _assets(self) -> dict[str, dict]:
+        """``{asset_id: manifest entry}`` — alias of :attr:`db` (upstream Kubric's name)."""
+        return self.db
+
+    def __enter__(self) -> AssetSource:
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        self.close()
 
     def __repr__(self) -> str:
         return f"AssetSource({self.name!r}, {len(self.db)} assets, {str(self.data_dir)!r})"
@@ -197,6 +214,7 @@ class AssetSource:
         target = self.scratch_dir / (_safe_name(asset_id) + stamp)
         if not target.is_dir():
             safe_extract(archive, target, asset_id)
+            self._extracted.append(target)
         return target
 
     def get_asset_kwargs(self, asset_id: str) -> dict:
@@ -204,19 +222,26 @@ class AssetSource:
         entry = self._entry(asset_id)
         return _resolve(entry["kwargs"], self.fetch(asset_id))
 
-    def create(self, asset_id: str, **kwargs):
+    def create(self, asset_id: str, add_metadata: bool = True, **kwargs):
         """A new asset (``FileBasedObject`` or ``Texture``) for ``asset_id``.
 
         ``kwargs`` override the manifest's (e.g. ``material=``, ``scale=``, ``position=``).
-        ``metadata`` holds the entry's metadata, with ``asset_id`` and ``license`` added.
+        With ``add_metadata`` (default) the asset's ``metadata`` holds the entry's metadata with
+        ``asset_id`` and ``license`` added; with ``add_metadata=False`` nothing of the manifest is
+        copied into it. A ``metadata=`` keyword is merged on top either way.
         """
         import kubric.core as core
 
+        if not isinstance(add_metadata, bool):
+            raise TypeError(f"AssetSource.create({asset_id!r}): add_metadata must be True or "
+                            f"False, got {add_metadata!r}")
         entry = self._entry(asset_id)
         merged = self.get_asset_kwargs(asset_id)
         merged.update(kwargs)
-        metadata = dict(entry["metadata"])
-        metadata.update({"asset_id": asset_id, "license": entry["license"]})
+        metadata = {}
+        if add_metadata:
+            metadata.update(entry["metadata"])
+            metadata.update({"asset_id": asset_id, "license": entry["license"]})
         metadata.update(merged.pop("metadata", {}) or {})
         merged.setdefault("name", _safe_name(asset_id))
         if entry["asset_type"] == "FileBasedObject":
@@ -226,6 +251,16 @@ class AssetSource:
     def cleanup(self) -> None:
         """Delete every extracted archive of this source (the source itself is kept)."""
         shutil.rmtree(self.scratch_dir, ignore_errors=True)
+        self._extracted.clear()
+
+    def close(self) -> None:
+        """Delete the folders this instance extracted (idempotent; the source itself is kept)."""
+        while self._extracted:
+            shutil.rmtree(self._extracted.pop(), ignore_errors=True)
+        try:
+            self.scratch_dir.rmdir()  # only when nothing else is left in it
+        except OSError:
+            pass
 
     def iter_entries(self, asset_ids: Iterable[str] | None = None):
         """Yield ``(id, entry)`` for ``asset_ids`` (default: all, sorted)."""

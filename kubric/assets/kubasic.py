@@ -4,8 +4,14 @@
 (cube, sphere, cylinder, cone) collide with their exact shape (URDF box / sphere / cylinder, the
 cone as its convex hull); the others with a V-HACD convex decomposition. Mass properties (density
 1) come from the mesh itself when it is closed, otherwise (teapot, suzanne) from the convex hulls.
-The dome is static, mass 0, and collides as a concave triangle mesh. Building twice gives
-byte-identical manifests and archives.
+The dome is static, mass 0, and collides as a concave triangle mesh. Its OBJ has UVs and a
+material (``visual_geometry.mtl``, ``map_Kd texture.png``, a small uniform grey placeholder), so
+Blender's importer gives it a material whose node ``"Image Texture"`` scripts can point at another
+image (upstream's MOVi-C–F workers put the HDRI there). Building twice gives byte-identical
+manifests and archives.
+
+The cache (``<cache>/KuBasic``) is rebuilt when its manifest's ``version`` is not
+:data:`VERSION`; bump it whenever the generated content changes.
 """
 
 from __future__ import annotations
@@ -16,7 +22,10 @@ from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 NAME = "KuBasic"
-VERSION = "1.0"
+VERSION = "1.1"  # 1.1: the dome got a textured material
+#: the dome's placeholder texture: DOME_TEXTURE_SIZE² pixels of this sRGB grey (0–255)
+DOME_TEXTURE_SIZE = 4
+DOME_TEXTURE_GREY = 200
 GENERATED_LICENSE = "CC0-1.0 (generated procedurally by kubric)"
 
 #: shape → (collision kind, licence, description)
@@ -37,6 +46,19 @@ SHAPES = {
     "dome": ("concave", GENERATED_LICENSE,
              "static floor and backdrop: disc of radius 25 m bending up into a 40 m wall"),
 }
+
+
+def dome_texture_png() -> bytes:
+    """The dome's placeholder image: a uniform grey RGB PNG (deterministic bytes)."""
+    import io
+
+    import png
+
+    buf = io.BytesIO()
+    row = [DOME_TEXTURE_GREY] * (3 * DOME_TEXTURE_SIZE)
+    png.Writer(DOME_TEXTURE_SIZE, DOME_TEXTURE_SIZE, greyscale=False, bitdepth=8).write(
+        buf, [row] * DOME_TEXTURE_SIZE)
+    return buf.getvalue()
 
 
 def build_shape(name: str, out_dir: str | os.PathLike) -> dict:
@@ -66,9 +88,10 @@ def build_shape(name: str, out_dir: str | os.PathLike) -> dict:
     else:
         col = Collision("concave", method="static triangle mesh")
     metadata = {"category": name, "description": description}
+    texture = dome_texture_png() if name == "dome" else None
     return package_object(name, mesh, out_dir, collision=col, license=license_,
                           metadata=metadata, physics_parts=physics_parts,
-                          static=(kind == "concave"))
+                          static=(kind == "concave"), texture_png=texture)
 
 
 def _build_shape_job(args):
@@ -115,14 +138,40 @@ def build_kubasic(out_dir: str | os.PathLike, workers: int | None = None,
     return write_manifest(out / "manifest.json", NAME, VERSION, entries)
 
 
+def _discard_if_stale(target: Path) -> None:
+    """Remove ``target`` when its manifest is from another :data:`VERSION` (or unreadable)."""
+    import json
+    import shutil
+    import tempfile
+
+    manifest = target / "manifest.json"
+    if not manifest.is_file():
+        return
+    try:
+        version = json.loads(manifest.read_text()).get("version")
+    except (OSError, ValueError, AttributeError):
+        version = None
+    if version == VERSION:
+        return
+    # rename first (atomic), so concurrent callers either see the old folder or none at all
+    aside = Path(tempfile.mkdtemp(prefix=f".{target.name}.stale.", dir=target.parent))
+    try:
+        os.rename(target, aside / target.name)
+    except OSError:
+        pass  # another process moved it already
+    shutil.rmtree(aside, ignore_errors=True)
+
+
 def ensure_kubasic(cache: str | os.PathLike | None = None, workers: int | None = None):
     """The KuBasic :class:`AssetSource`, built into ``<cache>/KuBasic`` on first use.
 
     ``cache`` defaults to :func:`kubric.assets.cache_dir`. The build happens in a temporary
     sibling folder that is renamed when complete, so concurrent callers never see half a source.
+    A cached source whose manifest ``version`` is not :data:`VERSION` is moved aside and rebuilt.
     """
     from kubric.assets.asset_source import AssetSource, build_once, cache_dir
 
     root = Path(cache) if cache is not None else cache_dir()
+    _discard_if_stale(root / NAME)
     target = build_once(root / NAME, lambda tmp: build_kubasic(tmp, workers=workers))
     return AssetSource(target)

@@ -2,7 +2,9 @@
 
 An object archive holds ``data.json`` (the manifest entry), the visual mesh
 (``visual_geometry.obj`` — z up, for KuBasic — or ``visual_geometry.glb`` — glTF's y-up convention
-with embedded textures, so Blender's glTF importer brings it in z up), ``collision_geometry.obj``
+with embedded textures, so Blender's glTF importer brings it in z up), optionally a material for
+the OBJ (``visual_geometry.mtl`` whose ``map_Kd`` is ``texture.png``: Blender's OBJ importer turns
+it into a material with a node named ``"Image Texture"``, as the dome needs), ``collision_geometry.obj``
 (convex hulls, one ``o`` object each) and ``object.urdf`` (one link; the mesh is centred on its
 centre of mass, so the inertial origin is 0).
 
@@ -120,15 +122,30 @@ def urdf_text(name: str, mass: float, inertia: np.ndarray, col: Collision,
     ])
 
 
-def _write_visual_obj(mesh, path: Path) -> None:
-    """z-up OBJ with UVs when the mesh has them (no materials)."""
+MTL_NAME = "visual_geometry.mtl"
+TEXTURE_NAME = "texture.png"
+
+
+def mtl_text(material_name: str) -> str:
+    """A matte material whose diffuse colour is the image ``texture.png`` (white × texture)."""
+    return "\n".join([f"newmtl {material_name}", "Ka 0 0 0", "Kd 1 1 1", "Ks 0 0 0", "Ns 0",
+                      "d 1", "illum 1", f"map_Kd {TEXTURE_NAME}", ""])
+
+
+def _write_visual_obj(mesh, path: Path, material: str | None = None) -> None:
+    """z-up OBJ with UVs when the mesh has them; ``material``: use that material of
+    ``visual_geometry.mtl`` (written by the caller) for every face."""
     f = physics._fmt
-    lines = ["v " + " ".join(f(x) for x in v) for v in mesh.vertices]
+    lines = [f"mtllib {MTL_NAME}"] if material else []
+    lines += ["v " + " ".join(f(x) for x in v) for v in mesh.vertices]
     uv = getattr(mesh.visual, "uv", None)
     if uv is not None and len(uv) == len(mesh.vertices):
         lines += ["vt " + " ".join(f(x) for x in t) for t in uv]
+        lines += [f"usemtl {material}"] if material else []
         lines += ["f " + " ".join(f"{i + 1}/{i + 1}" for i in face) for face in mesh.faces]
     else:
+        if material:
+            raise ValueError("a textured OBJ needs UVs: the mesh has none (or not one per vertex)")
         lines += ["f " + " ".join(str(i + 1) for i in face) for face in mesh.faces]
     path.write_text("\n".join(lines) + "\n")
 
@@ -144,7 +161,7 @@ def _write_visual_glb(mesh, path: Path) -> None:
 def package_object(asset_id: str, visual, out_dir: str | os.PathLike, *, collision: Collision,
                    license: str, metadata: dict | None = None, physics_parts=None,
                    visual_format: str = "obj", static: bool = False,
-                   extra_kwargs: dict | None = None) -> dict:
+                   extra_kwargs: dict | None = None, texture_png: bytes | None = None) -> dict:
     """Centre, measure and write one FileBasedObject asset; return its manifest entry.
 
     Args:
@@ -153,6 +170,8 @@ def package_object(asset_id: str, visual, out_dir: str | os.PathLike, *, collisi
       physics_parts: closed meshes whose mass properties define the object (default: the
         collision hulls, or ``visual`` itself for primitive collision shapes).
       static: static objects get mass 0 and ``static: true``.
+      texture_png: PNG bytes; with an OBJ visual (which must have UVs) the archive gets
+        ``texture.png`` and ``visual_geometry.mtl`` (material ``<asset_id>``, ``map_Kd`` = the PNG).
     """
     out_dir = Path(out_dir)
     metadata = dict(metadata or {})
@@ -198,7 +217,15 @@ def package_object(asset_id: str, visual, out_dir: str | os.PathLike, *, collisi
     with tempfile.TemporaryDirectory(prefix=".stage_", dir=archive.parent) as tmp:
         stage = Path(tmp)
         if visual_format == "obj":
-            _write_visual_obj(visual, stage / vis_name)
+            material = None
+            if texture_png is not None:
+                material = "".join(c if c.isalnum() else "_" for c in asset_id)
+                (stage / MTL_NAME).write_text(mtl_text(material))
+                (stage / TEXTURE_NAME).write_bytes(bytes(texture_png))
+            _write_visual_obj(visual, stage / vis_name, material)
+        elif texture_png is not None:
+            raise ValueError(f"{asset_id}: texture_png is only supported with visual_format "
+                             f"'obj', got {visual_format!r}")
         elif visual_format == "glb":
             _write_visual_glb(visual, stage / vis_name)
         else:

@@ -25,6 +25,7 @@ import pathlib
 import numpy as np
 
 import kubric as kb
+from kubric.assets.utils import get_clevr_lights
 from kubric.pipeline import Option, OptionError, float_range
 from kubric.randomness import CLEVR_COLORS, CLEVR_SHAPES, CLEVR_SIZES
 from kubric.workers.movi_base import (
@@ -35,17 +36,6 @@ from kubric.workers.movi_base import (
     place_without_overlap,
 )
 
-#: CLEVR lamps: name → (class, kwargs, base position); positions are jittered by U[0,1)³.
-CLEVR_LIGHTS = (
-    ("sun", kb.DirectionalLight, {"color": "white", "shadow_softness": 0.2, "intensity": 0.45},
-     (11.6608, -6.62799, 25.8232)),
-    ("lamp_back", kb.RectAreaLight, {"color": "white", "intensity": 50.0},
-     (-1.1685, 2.64602, 5.81574)),
-    ("lamp_key", kb.RectAreaLight, {"color": "#ffedd0", "intensity": 100.0, "width": 0.5,
-                                    "height": 0.5}, (6.44671, -2.90517, 4.2584)),
-    ("lamp_fill", kb.RectAreaLight, {"color": "#c2d0ff", "intensity": 30.0, "width": 0.5,
-                                     "height": 0.5}, (-4.67112, -4.0136, 3.01122)),
-)
 CLEVR_CAMERA_POSITION = (7.48113, -6.50764, 5.34367)
 #: C–F: height (m) above the floor of the viewpoint from which the dome looks up the HDRI (about
 #: an HDRI's capture height): the floor shows the HDRI's ground, the backdrop its horizon and sky.
@@ -57,13 +47,9 @@ MATERIALS = {
 
 
 def add_clevr_lights(scene, rng, jitter: float = 1.0) -> list:
-    lights = []
-    for name, cls, kwargs, position in CLEVR_LIGHTS:
-        light = cls(name=name, **kwargs)
-        light.position = np.asarray(position) + rng.rand(3) * jitter
-        light.look_at((0.0, 0.0, 0.0))
-        scene.add(light)
-        lights.append(light)
+    """Add the CLEVR lamps (:func:`kubric.assets.utils.get_clevr_lights`) and ambient 0.05."""
+    lights = get_clevr_lights(light_jitter=jitter, rng=rng)
+    scene.add(lights)
     scene.ambient_illumination = kb.Color(0.05, 0.05, 0.05)
     return lights
 
