@@ -463,3 +463,22 @@ def test_upstream_hdri_shortcuts_missing_textures_and_save_state_replace(tmp_pat
     r.save_state(path)
     assert path.is_file() and not (tmp_path / "s.blend1").exists()
     assert any(img.packed_file is not None for img in bpy.data.images if img.filepath)
+
+
+@pytest.mark.blender
+def test_uv_layer_wraps_tiled_coordinates(tmp_path):
+    # a 4 m quad whose UVs run from 0 to 2.5 along x (a texture tiled 2.5 times)
+    obj = tmp_path / "tiled.obj"
+    obj.write_text("v -2 -2 0\nv 2 -2 0\nv 2 2 0\nv -2 2 0\n"
+                   "vt 0 0\nvt 2.5 0\nvt 2.5 1\nvt 0 1\nf 1/1 2/2 3/3 4/4\n")
+    scene = kb.Scene(resolution=(40, 8), frame_start=1, frame_end=1)
+    scene += kb.OrthographicCamera(position=(0, 0, 5), orthographic_scale=4,
+                                   quaternion=(1, 0, 0, 0))  # looks down −z, x right, y up
+    scene += kb.FileBasedObject(render_filename=str(obj), bounds=((-2, -2, 0), (2, 2, 0)))
+    uv = _blender(scene).render_still(1, return_layers=("uv",))["uv"]
+    x = (np.arange(40) + 0.5) / 40 * 4 - 2  # world x of each pixel centre
+    expected_u = np.mod((x + 2) / 4 * 2.5, 1.0)
+    row = uv[4, :, 0]
+    assert np.all((uv[..., :2] >= 0) & (uv[..., :2] < 1))
+    interior = np.abs(expected_u - np.round(expected_u)) > 0.05  # away from the wrap seams
+    np.testing.assert_allclose(row[interior], expected_u[interior], atol=1e-3)

@@ -34,7 +34,8 @@ the RGB sample count):
      * normal: world-space shading normal (smooth for spheres), 0 on background.
      * object_coordinates: (p_local − bounds_min) / (bounds_max − bounds_min) per object with the
        model's unscaled local bounds, clipped to [0, 1]; 0 on background.
-     * uv: (u, v, 0) from the UV pass (the mesh's first UV map), 0 on background.
+     * uv: (u, v, 0) from the UV pass (the mesh's first UV map), wrapped into [0, 1) as a
+       repeating texture lookup sees them (meshes may tile textures with UV > 1); 0 on background.
 """
 
 from __future__ import annotations
@@ -76,10 +77,10 @@ def read_multilayer_exr(path) -> dict[str, np.ndarray]:
 
     Blender 5 writes one EXR part per pass, channels named ``<layer>.<pass>.<component>``; the
     components are returned in the file's channel order sorted by Blender's component letters
-    (X Y Z W / R G B A / U V A).
+    (X Y Z W / R G B A / U V A: alpha always after the colour or UV components).
     """
     import OpenEXR
-    order = {c: i for i, c in enumerate("XYZWRGBAUV")}
+    order = {c: i for i, c in enumerate("XYZWRGBUVA")}
     passes: dict[str, dict[str, np.ndarray]] = {}
     with OpenEXR.File(str(path), separate_channels=True) as f:
         for part in f.parts:
@@ -137,7 +138,7 @@ def decode(passes, camera, frame, label_lut, bounds_lut, wanted) -> dict[str, np
     if "uv" in wanted:
         uv = _find(passes, "UV")
         res = np.zeros(uv.shape[:2] + (3,), np.float32)
-        res[..., :2] = uv[..., :2]
+        res[..., :2] = np.mod(uv[..., :2], 1.0)  # the repeat phase: what a texture lookup uses
         out["uv"] = np.where(hit[..., None], res, 0.0).astype(np.float32)
     if "object_coordinates" in wanted:
         p = _find(passes, AOV_NAME)[..., :3].astype(np.float64)

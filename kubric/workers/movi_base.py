@@ -186,9 +186,7 @@ class MoviBase(Recipe):
                       render_settings) -> list:
         """Annotations + files; returns the instance list (sorted by visible pixels)."""
         candidates = [a for a in scene.foreground_assets if isinstance(a, kb.PhysicalObject)]
-        if "uv" in layers:  # meshes may tile their textures (UV > 1): store the repeat phase
-            uv = layers["uv"]
-            layers["uv"] = np.concatenate([np.mod(uv[..., :2], 1.0), uv[..., 2:]], axis=-1)
+        if "uv" in layers:
             render_settings = {**render_settings, "uv": "wrapped modulo 1 (textures repeat)"}
         kb.compute_visibility(layers["segmentation"], scene.assets)
         visible = kb.post_processing.visible_sorted(candidates)
