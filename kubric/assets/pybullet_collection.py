@@ -4,16 +4,23 @@
 of textured models (duck, teddy, domino, ...), converted with :mod:`kubric.assets.converter` at
 the size their own URDF gives them (the URDF's mesh ``scale``). Ids: ``"random_urdfs/023"``,
 ``"duck"``, ...; categories ``"random_urdfs"`` and ``"textured_models"``.
+
+Appearance: a mesh's own texture or MTL colours are kept; a mesh without either gets its URDF's
+visual material colour (``<visual><material><color rgba>``), see :mod:`kubric.assets.converter`.
+:data:`VERSION` is the manifest version; a cached collection whose manifest carries another
+version is converted again (see :func:`ensure_pybullet_collection`).
 """
 
 from __future__ import annotations
 
+import json
 import os
 import re
 from pathlib import Path
 
 NAME = "PybulletObjects"
-VERSION = "1.0"
+#: 2.0: visual GLBs carry the source's appearance (texture, MTL colour or URDF colour)
+VERSION = "2.0"
 ZLIB = "zlib (pybullet_data, Bullet Physics / Erwin Coumans)"
 
 #: id → (mesh, URDF giving its scale or None, licence, description)
@@ -47,6 +54,36 @@ def urdf_mesh_scale(urdf: Path) -> tuple[float, float, float]:
     return tuple(vals * 3)[:3] if len(vals) == 1 else tuple(vals[:3])
 
 
+def urdf_visual_color(urdf: Path) -> tuple[float, float, float, float] | None:
+    """RGBA of the first link visual's ``<material>`` in a URDF (None if it gives no colour).
+
+    The material may hold the ``<color>`` itself or name a robot-level ``<material>`` that does.
+    """
+    import xml.etree.ElementTree as ET
+
+    from kubric.assets.converter import as_rgba
+
+    try:
+        robot = ET.parse(urdf).getroot()
+    except ET.ParseError as err:
+        raise ValueError(f"URDF {urdf} is not valid XML: {err}") from err
+    named = {m.get("name"): m for m in robot.findall("material")}
+    material = robot.find("./link/visual/material")
+    if material is None:
+        return None
+    color = material.find("color")
+    if color is None and material.get("name") in named:
+        color = named[material.get("name")].find("color")
+    if color is None or color.get("rgba") is None:
+        return None
+    try:
+        values = [float(v) for v in color.get("rgba").split()]
+    except ValueError as err:
+        raise ValueError(f"URDF {urdf}: color rgba must be numbers, got "
+                         f"{color.get('rgba')!r}") from err
+    return as_rgba(values, f"URDF {urdf} color rgba")
+
+
 def pybullet_jobs(limit: int | None = None, textured: bool = True):
     """Conversion jobs: the first ``limit`` random_urdfs (all if None) + the textured models."""
     import pybullet_data
@@ -60,15 +97,18 @@ def pybullet_jobs(limit: int | None = None, textured: bool = True):
         mesh, urdf = d / f"{d.name}.obj", d / f"{d.name}.urdf"
         if not mesh.is_file():
             continue
-        scale = urdf_mesh_scale(urdf) if urdf.is_file() else (1.0, 1.0, 1.0)
+        has_urdf = urdf.is_file()
+        scale = urdf_mesh_scale(urdf) if has_urdf else (1.0, 1.0, 1.0)
         jobs.append(ConvertJob(f"random_urdfs/{d.name}", str(mesh), ZLIB, scale, "z",
                                {"category": "random_urdfs",
-                                "description": f"random object {d.name} from pybullet_data"}))
+                                "description": f"random object {d.name} from pybullet_data"},
+                               color=urdf_visual_color(urdf) if has_urdf else None))
     if textured:
         for asset_id, (mesh, urdf, lic, desc) in sorted(TEXTURED_MODELS.items()):
             scale = urdf_mesh_scale(root / urdf) if urdf else (1.0, 1.0, 1.0)
             jobs.append(ConvertJob(asset_id, str(root / mesh), lic, scale, "z",
-                                   {"category": "textured_models", "description": desc}))
+                                   {"category": "textured_models", "description": desc},
+                                   color=urdf_visual_color(root / urdf) if urdf else None))
     return jobs
 
 
@@ -95,7 +135,10 @@ def ensure_pybullet_collection(limit: int | None = None, cache=None, workers=Non
     """The pybullet_data objects as an :class:`AssetSource` in ``<cache>/PybulletObjects``.
 
     Converts what is missing (re-running reuses existing archives); ``limit`` bounds the number
-    of random_urdfs (default: all 1000, several minutes per core).
+    of random_urdfs (default: all 1000, several minutes per core). The cache counts as complete
+    when its ``manifest.json`` exists and carries :data:`VERSION`; otherwise the collection is
+    (re)built: archives from an older converter are converted again, each replaced atomically,
+    and the new manifest is written (atomically) last, so an interrupted rebuild is redone.
     """
     from kubric.assets.asset_source import AssetSource, cache_dir
 
@@ -103,6 +146,14 @@ def ensure_pybullet_collection(limit: int | None = None, cache=None, workers=Non
     target = root / NAME
     if limit is not None:
         target = root / f"{NAME}-{int(limit)}"
-    if not (target / "manifest.json").is_file():
+    if manifest_version(target / "manifest.json") != VERSION:
         build_pybullet_collection(target, limit=limit, workers=workers, progress=True)
     return AssetSource(target)
+
+
+def manifest_version(path: Path) -> str | None:
+    """The ``version`` of a manifest file, or None if it is missing or unreadable."""
+    try:
+        return str(json.loads(Path(path).read_text()).get("version"))
+    except (OSError, ValueError, AttributeError):
+        return None
