@@ -27,7 +27,7 @@ def test_options_convert_and_reject_with_one_line_errors(tmp_path):
     assert r.resolution == (16, 12) and r.frames == 5 and r.flaky is True
     assert r.assets == tmp_path and r.sleep == 0.0
     cases = {
-        "resolution=-3": "option resolution='-3'",
+        "resolution=-3": "(allowed: N or WxH with positive integers",
         "frames=2.5": "option frames='2.5'",
         "frames=101": "out of range",
         "nope=1": "unknown option 'nope'",

@@ -74,6 +74,9 @@ def resolution(value) -> tuple[int, int]:
     return parse_resolution(value)
 
 
+resolution.allowed = "N or WxH with positive integers, e.g. 256 or 320x240"
+
+
 def float_range(value) -> tuple[float, float]:
     """Converter for a ``(low, high)`` pair with low ≤ high: ``"0.7,1.4"`` or ``(0.7, 1.4)``."""
     if isinstance(value, str):
@@ -85,6 +88,9 @@ def float_range(value) -> tuple[float, float]:
     if low > high:
         raise ValueError("expected low ≤ high")
     return low, high
+
+
+float_range.allowed = "two numbers low,high with low ≤ high, e.g. 0.7,1.4,"
 
 
 class Option:
@@ -132,7 +138,7 @@ class Option:
 
     def allowed(self) -> str:
         """Human description of the allowed values."""
-        parts = [self.type_name]
+        parts = [getattr(self.type, "allowed", self.type_name)]
         if self.choices is not None:
             parts = ["one of " + ", ".join(map(str, self.choices))]
         if self.low is not None:
