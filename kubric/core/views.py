@@ -82,24 +82,21 @@ class TableView(View):
 
     def __init_subclass__(cls, **kwargs):
         super().__init_subclass__(**kwargs)
-        cls._setter_cache = {}
-        cls._keyframer_cache = {}
-        cls._deleter_cache = {}
+        cls._row_cache = {}
+
+    def _rows(self, table: str, cls: type) -> dict:
+        """The rows of table ``table`` ("setters", "keyframers", "keyframe_deleters") that apply
+        to model class ``cls``, merged along its MRO (cached per view class)."""
+        key = (table, cls)
+        if key not in self._row_cache:
+            self._row_cache[key] = _merged(getattr(self, table), cls)
+        return self._row_cache[key]
 
     def _setters_for(self, cls: type) -> dict[str, Setter]:
-        if cls not in self._setter_cache:
-            self._setter_cache[cls] = _merged(self.setters, cls)
-        return self._setter_cache[cls]
+        return self._rows("setters", cls)
 
     def _keyframers_for(self, cls: type) -> dict[str, Keyframer]:
-        if cls not in self._keyframer_cache:
-            self._keyframer_cache[cls] = _merged(self.keyframers, cls)
-        return self._keyframer_cache[cls]
-
-    def _deleters_for(self, cls: type) -> dict[str, Keyframer]:
-        if cls not in self._deleter_cache:
-            self._deleter_cache[cls] = _merged(self.keyframe_deleters, cls)
-        return self._deleter_cache[cls]
+        return self._rows("keyframers", cls)
 
     def backend_object(self, item):
         """The backend counterpart of ``item`` in this view, or None if it has none."""
@@ -149,6 +146,6 @@ class TableView(View):
         obj = asset.linked_objects.get(self)
         if obj is None:
             return
-        deleter = self._deleters_for(type(asset)).get(name)
+        deleter = self._rows("keyframe_deleters", type(asset)).get(name)
         if deleter is not None:
             deleter(self, asset, obj, frame)
