@@ -43,16 +43,6 @@ def _new_material(asset):
     return mat, out
 
 
-def _color_node(mat, name):
-    """The node feeding colour ``name``: an RGB node replaced by texture nodes when needed."""
-    nodes = mat.node_tree.nodes
-    node = nodes.get(name)
-    if node is None:
-        node = nodes.new("ShaderNodeRGB")
-        node.name = name
-    return node
-
-
 def texture_color_output(node_tree, texture: Texture, prefix: str):
     """Build (or reuse) the nodes that turn ``texture`` into a colour; return the colour socket."""
     nodes, links = node_tree.nodes, node_tree.links
