@@ -35,7 +35,9 @@ _worker_rng: list = []  # the rng bound by kubric.utils.setup (at most one)
 
 def bind_worker_rng(rng) -> None:
     """Make ``rng`` the one used where a caller passes ``rng=None`` (called by ``kb.setup``)."""
-    _worker_rng[:] = [_require_rng(rng, "bind_worker_rng")]
+    if not isinstance(rng, (np.random.RandomState, np.random.Generator)):
+        raise TypeError(f"bind_worker_rng needs a numpy RandomState or Generator, got {rng!r}")
+    _worker_rng[:] = [rng]
 
 
 def unbind_worker_rng() -> None:
