@@ -106,8 +106,13 @@ def project_points(camera, points, frame: float | None = None, resolution=None) 
     Returns (..., 3): ``u``, ``v`` (origin top-left, v down) and ``+1`` for points in front of the
     camera, ``-1`` behind it (upstream's ``project_point`` format).
     """
-    pts = np.asarray(points, dtype=np.float64)
-    cam = pts @ world_to_camera(camera, frame)[:3, :3].T + world_to_camera(camera, frame)[:3, 3]
+    m = world_to_camera(camera, frame)
+    cam = np.asarray(points, dtype=np.float64) @ m[:3, :3].T + m[:3, 3]
+    return _project_camera_points(camera, cam, resolution)
+
+
+def _project_camera_points(camera, cam: np.ndarray, resolution) -> np.ndarray:
+    """(u, v, ±1) of points (..., 3) already in the camera frame."""
     w, h = _resolution(camera, resolution)
     cx, cy = principal_point(camera, (w, h))
     if is_orthographic(camera):
@@ -130,11 +135,9 @@ def project_to_pixels(camera, points, frame: float | None = None, resolution=Non
     """World points (..., 3) → (pixel xy (..., 2), depth (...)): depth is the distance to the camera
     centre (perspective) or to the image plane (orthographic)."""
     w, h = _resolution(camera, resolution)
-    uvs = project_points(camera, points, frame, (w, h))
-    xy = uvs[..., :2] * np.array([w, h], dtype=np.float64)
-    pts = np.asarray(points, dtype=np.float64)
     m = world_to_camera(camera, frame)
-    cam = pts @ m[:3, :3].T + m[:3, 3]
+    cam = np.asarray(points, dtype=np.float64) @ m[:3, :3].T + m[:3, 3]
+    xy = _project_camera_points(camera, cam, (w, h))[..., :2] * np.array([w, h], dtype=np.float64)
     depth = -cam[..., 2] if is_orthographic(camera) else np.linalg.norm(cam, axis=-1)
     return xy, depth
 
