@@ -128,6 +128,52 @@ def test_asset_source_close_and_context_manager(cube_source, tmp_path):
     first.close()
 
 
+def test_close_keeps_folders_another_instance_still_uses(cube_source):
+    manifest, scratch = cube_source
+    first = AssetSource(manifest, scratch_dir=scratch)
+    folder = first.fetch("box")  # first extracts
+    second = AssetSource(manifest, scratch_dir=scratch)
+    assert second.fetch("box") == folder  # second reuses it and may still be rendering with it
+    first.close()
+    assert (folder / "object.urdf").is_file()
+    second.close()
+    assert (folder / "object.urdf").is_file()  # the last closer did not extract it: kept
+    third = AssetSource(manifest, scratch_dir=scratch)
+    third.cleanup()  # the forced variant removes everything
+    assert not scratch.exists()
+
+
+def test_close_keeps_folders_another_process_still_uses(cube_source):
+    import subprocess
+    import sys
+    import textwrap
+
+    manifest, scratch = cube_source
+    first = AssetSource(manifest, scratch_dir=scratch)
+    folder = first.fetch("box")
+    code = textwrap.dedent(f"""
+        import sys
+        from kubric.assets import AssetSource
+        src = AssetSource({str(manifest)!r}, scratch_dir={str(scratch)!r})
+        print(src.fetch("box"), flush=True)
+        sys.stdin.readline()  # hold the source open until the parent says so
+        print((src.fetch("box") / "object.urdf").is_file(), flush=True)
+        src.close()
+    """)
+    child = subprocess.Popen([sys.executable, "-c", code], stdin=subprocess.PIPE,
+                             stdout=subprocess.PIPE, text=True)
+    try:
+        assert child.stdout.readline().strip() == str(folder)
+        first.close()  # another process holds the source: nothing may be deleted
+        assert (folder / "object.urdf").is_file()
+        out, _ = child.communicate("go\n", timeout=60)
+    finally:
+        child.kill()
+    assert out.strip() == "True" and child.returncode == 0
+    # nobody holds it now and the child extracted nothing: the folder stays in the cache
+    assert (folder / "object.urdf").is_file()
+
+
 # ------------------------------------------------------------------------ the dome
 @pytest.fixture(scope="module")
 def dome_source(tmp_path_factory):

@@ -135,10 +135,12 @@ def safe_extract(archive_path: str | os.PathLike, target_dir: str | os.PathLike,
                     raise CorruptArchiveError(f"asset {asset_id!r}: archive "
                                               f"{str(archive_path)!r} is corrupt or truncated "
                                               f"(member {member.name!r}): {err}") from None
-        if target.exists():  # another process finished first: keep theirs
-            shutil.rmtree(staging)
-        else:
-            os.replace(staging, target)
+        try:
+            os.rename(staging, target)
+        except OSError:
+            if not target.is_dir():
+                raise
+            shutil.rmtree(staging)  # another process finished first: keep theirs
     except BaseException:
         shutil.rmtree(staging, ignore_errors=True)
         raise

@@ -100,8 +100,11 @@ class AssetSource:
       (``_assets`` is the same dict, under the name upstream Kubric's scripts use).
 
     ``close()`` (or leaving a ``with AssetSource(path) as source:`` block) deletes the folders that
-    this instance extracted; folders it found already extracted (by another instance or process,
-    which may still use them) are left alone. Using the source after ``close()`` extracts afresh.
+    this instance extracted, unless another ``AssetSource`` on the same extraction folder is still
+    open in this or any other process (workers running in parallel share the cache): each open
+    instance holds a shared ``flock`` on the folder from its first extraction until ``close()``,
+    and only a closer that can take the exclusive lock deletes anything. Folders it found already
+    extracted are never deleted by it. Using the source after ``close()`` extracts afresh.
     """
 
     def __init__(self, path: str | os.PathLike, scratch_dir: str | os.PathLike | None = None):
@@ -128,6 +131,7 @@ class AssetSource:
             scratch_dir = cache_dir() / "extracted" / f"{_safe_name(self.name)}-{digest}"
         self.scratch_dir = Path(scratch_dir)
         self._extracted: list[Path] = []  # folders this instance extracted (removed by close())
+        self._hold: int | None = None  # fd of scratch_dir, flock'ed shared while this is open
 
     @classmethod
     def from_manifest(cls, manifest_path: str | os.PathLike, **kwargs) -> AssetSource:
@@ -144,6 +148,11 @@ class AssetSource:
 
     def __exit__(self, exc_type, exc, tb) -> None:
         self.close()
+
+    def __del__(self) -> None:
+        fd, self._hold = getattr(self, "_hold", None), None
+        if fd is not None:
+            os.close(fd)  # release the lock; a dropped instance deletes nothing
 
     def __repr__(self) -> str:
         return f"AssetSource({self.name!r}, {len(self.db)} assets, {str(self.data_dir)!r})"
@@ -212,10 +221,25 @@ class AssetSource:
         except OSError:
             stamp = ""  # missing: safe_extract raises the error naming the asset
         target = self.scratch_dir / (_safe_name(asset_id) + stamp)
+        self._hold_scratch_dir()
         if not target.is_dir():
             safe_extract(archive, target, asset_id)
             self._extracted.append(target)
         return target
+
+    def _hold_scratch_dir(self) -> None:
+        """Take (once) a shared lock on the extraction folder, so that no other instance's
+        ``close()`` deletes folders while this one may still use them."""
+        if self._hold is not None:
+            return
+        while True:
+            self.scratch_dir.mkdir(parents=True, exist_ok=True)
+            fd = os.open(self.scratch_dir, os.O_RDONLY)
+            _flock(fd, shared=True)
+            if os.fstat(fd).st_nlink > 0:  # not removed by a closer while we waited
+                self._hold = fd
+                return
+            os.close(fd)
 
     def get_asset_kwargs(self, asset_id: str) -> dict:
         """The entry's ``kwargs`` with ``{asset_dir}/...`` resolved (extracts the archive)."""
@@ -249,23 +273,49 @@ class AssetSource:
         return core.Texture(metadata=metadata, **merged)
 
     def cleanup(self) -> None:
-        """Delete every extracted archive of this source (the source itself is kept)."""
+        """Delete every extracted archive of this source now, whoever else uses them (the source
+        itself is kept). Prefer :meth:`close` when other workers may share the cache."""
+        fd, self._hold = self._hold, None
+        if fd is not None:
+            os.close(fd)
         shutil.rmtree(self.scratch_dir, ignore_errors=True)
         self._extracted.clear()
 
     def close(self) -> None:
-        """Delete the folders this instance extracted (idempotent; the source itself is kept)."""
-        while self._extracted:
-            shutil.rmtree(self._extracted.pop(), ignore_errors=True)
+        """Release the extraction folder; delete the folders this instance extracted if no other
+        instance (in any process) has it open. Idempotent; the source itself is kept."""
+        fd, self._hold = self._hold, None
+        if fd is None:
+            self._extracted.clear()
+            return
         try:
-            self.scratch_dir.rmdir()  # only when nothing else is left in it
-        except OSError:
-            pass
+            if _flock(fd, shared=False, wait=False):  # nobody else holds it
+                while self._extracted:
+                    shutil.rmtree(self._extracted.pop(), ignore_errors=True)
+                try:
+                    self.scratch_dir.rmdir()  # only when nothing else is left in it
+                except OSError:
+                    pass
+            self._extracted.clear()
+        finally:
+            os.close(fd)  # releases the lock
 
     def iter_entries(self, asset_ids: Iterable[str] | None = None):
         """Yield ``(id, entry)`` for ``asset_ids`` (default: all, sorted)."""
         for asset_id in (self.all_asset_ids if asset_ids is None else asset_ids):
             yield asset_id, self._entry(asset_id)
+
+
+def _flock(fd: int, shared: bool, wait: bool = True) -> bool:
+    """``flock`` ``fd`` shared or exclusive; returns False if ``wait`` is False and it is taken."""
+    import fcntl
+
+    mode = fcntl.LOCK_SH if shared else fcntl.LOCK_EX
+    try:
+        fcntl.flock(fd, mode if wait else mode | fcntl.LOCK_NB)
+    except BlockingIOError:
+        return False
+    return True
 
 
 def build_once(target: str | os.PathLike, build) -> Path:
