@@ -1,9 +1,15 @@
 """The paper's Figure 3 worker, with ``kb.AssetSource`` pointed at the KuBasic source we build.
 
 Run: ``python examples/figure3.py [--output output] [--resolution 640] [--frames 48]
-[--samples 128]``. Defaults reproduce the listing (640², frames 1–48, 128 spp: slow on a CPU);
-the KuBasic source is built into the cache (``kubric assets kubasic``) on first use.
-Writes ``scene.blend``, the image layers and ``metadata.json`` into the output folder.
+[--samples 128] [--spawn-region X0 Y0 Z0 X1 Y1 Z1]``. Defaults reproduce the listing (640², frames
+1–48, 128 spp: slow on a CPU); the KuBasic source is built into the cache (``kubric assets
+kubasic``) on first use. Writes ``scene.blend``, the image layers and ``metadata.json`` into the
+output folder.
+
+With the listing's spawn region ``[[-1, -1, 0], [1, 1, 1]]`` the placement stops with a
+``RuntimeError``: KuBasic shapes are ±1 m (``shared/spec/assets.md``), so not even one randomly
+rotated shape fits 1 m of height above the floor, let alone eight in 2 × 2 m. ``--spawn-region
+-4 -4 0.5 4 4 5`` runs the whole listing.
 """
 
 from __future__ import annotations
@@ -23,10 +29,14 @@ def main(argv=None) -> Path:
     parser.add_argument("--resolution", type=int, default=640, help="width = height (px)")
     parser.add_argument("--frames", type=int, default=48, help="last frame (first is 1)")
     parser.add_argument("--samples", type=int, default=128, help="Cycles samples per pixel")
+    parser.add_argument("--spawn-region", type=float, nargs=6, default=[-1, -1, 0, 1, 1, 1],
+                        metavar=("X0", "Y0", "Z0", "X1", "Y1", "Z1"),
+                        help="placement region in metres (default: the listing's)")
     args = parser.parse_args(argv)
     out = Path(args.output)
+    spawn_region = [args.spawn_region[:3], args.spawn_region[3:]]
 
-    # --- the listing, with the source path and the size knobs taken from the arguments
+    # --- the listing, with the source path, size knobs and region taken from the arguments
     asset_source = kb.AssetSource(ensure_kubasic().manifest_path.parent)
     scene = kb.Scene(resolution=(args.resolution, args.resolution), frame_end=args.frames)
     renderer = kb.renderer.Blender(scene, samples_per_pixel=args.samples)
@@ -44,7 +54,7 @@ def main(argv=None) -> Path:
         obj = asset_source.create(rng.choice(shapes), material=mat, velocity=rng.normal(size=3))
         scene += obj
         kb.move_until_no_overlap(obj, simulator, rng=rng,
-                                 spawn_region=[[-1, -1, 0], [1, 1, 1]])
+                                 spawn_region=spawn_region)
     # --- execute the simulation, render, and save data to files
     simulator.run()
     renderer.save_state(out / "scene.blend")
