@@ -100,7 +100,8 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--scale", type=float, default=1.0, help="uniform scale to metres")
     p.add_argument("--decomposition", choices=["auto", "vhacd", "coacd"], default="auto",
                    help="convex decomposition: auto = the mesh's own convex parts, else V-HACD "
-                        "(default); coacd = tighter but 10-100x slower (pip install coacd)")
+                        "(default); coacd = tighter hulls (median Σhull/mesh volume 1.02 vs "
+                        "1.23) but a median 6x (up to 90x) slower (pip install 'kubric[coacd]')")
     p.set_defaults(func=_convert)
 
     p = sub.add_parser("pybullet", help="convert pybullet_data's random_urdfs + textured models")

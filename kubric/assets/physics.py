@@ -23,7 +23,9 @@ import numpy as np
 #: benchmarks/bench_assets.py for the speed / tightness trade-off that chose them.
 VHACD_PARAMS = {"resolution": 200000, "depth": 16, "concavity": 0.001,
                 "maxNumVerticesPerCH": 64}
-#: CoACD concavity threshold (optional method; tighter hulls, 10-100x slower than V-HACD).
+#: CoACD concavity threshold (optional method). On the 12 non-convex test meshes `make bench`
+#: measured Σ hull / mesh volume 1.02 (median) vs V-HACD's 1.23, at 0.5x-90x V-HACD's time
+#: (median 6x; 127 s for pybullet_data's lego brick): V-HACD stays the default.
 COACD_THRESHOLD = 0.05
 DECOMPOSITION_METHODS = ("auto", "vhacd", "coacd")
 #: a component counts as convex when its volume is within this fraction of its hull's.
