@@ -328,3 +328,44 @@ def test_upstream_color_and_quaternion_spellings():
     np.testing.assert_allclose(q.axis, [1, 0, 0])
     with pytest.raises(TypeError, match="give the rotation angle once"):
         kb.Quaternion(axis="X", angle=1, degrees=2)
+
+
+def test_changes_inside_a_texture_reach_the_views_of_its_users():
+    scene = kb.Scene()
+    view = RecordingView(scene)
+    tex = kb.Texture(filename="a.png")
+    mat = kb.PrincipledBSDFMaterial(color=tex)
+    cube = kb.Cube(material=mat)
+    scene += cube
+    scene.background = tex
+    assert {(o.uid if hasattr(o, "uid") else "scene", n) for o, n in tex.owners} == {
+        (mat.uid, ("color",)), ("scene", ("background",))}
+    view.calls.clear()
+    tex.filename = "b.png"
+    assert ("change", mat, "color") in view.calls  # the material re-reads its colour
+    assert ("change", scene, "background") in view.calls
+    assert ("change", tex, "filename") in view.calls  # Texture is in no scene, views still hear
+    assert view.calls.count(("change", mat, "color")) == 1
+    # once replaced, the texture no longer drives the material
+    mat.color = "red"
+    scene.background = "black"
+    assert tex.owners == []
+    view.calls.clear()
+    tex.filename = "c.png"
+    assert view.calls == []
+
+
+def test_owner_notifications_cascade_once_and_stop_when_replaced():
+    scene = kb.Scene()
+    view = RecordingView(scene)
+    mat = kb.FlatMaterial(color="red")
+    cube = kb.Cube(material=mat)
+    scene += cube
+    view.calls.clear()
+    mat.color = "blue"
+    assert view.calls == [("change", mat, "color"), ("change", cube, "material")]
+    # a material that is nobody's value any more is not forwarded
+    cube.material = kb.FlatMaterial()
+    view.calls.clear()
+    mat.color = "green"
+    assert ("change", cube, "material") not in view.calls

@@ -196,10 +196,19 @@ def test_texture_on_uv_and_environment_dome(tmp_path):
     tex = kb.Texture(filename=str(path), mapping="uv")
     cube = kb.Cube(scale=1.5, material=kb.FlatMaterial(color=tex))
     scene += cube
-    rgba = _blender(scene).render(return_layers=("rgba",))["rgba"][0]
+    renderer = _blender(scene)
+    rgba = renderer.render(return_layers=("rgba",))["rgba"][0]
     reds = (rgba[..., 0] > 150) & (rgba[..., 1] < 50)
     greens = (rgba[..., 1] > 150) & (rgba[..., 0] < 50)
     assert reds.sum() > 10 and greens.sum() > 10
+    # changing the Texture after it was assigned re-renders with the new image
+    blue = np.zeros_like(img)
+    blue[..., 2] = 255
+    Image.fromarray(blue).save(tmp_path / "blue.png")
+    tex.filename = str(tmp_path / "blue.png")
+    rgba = renderer.render(return_layers=("rgba",))["rgba"][0]
+    blues = (rgba[..., 2] > 150) & (rgba[..., 0] < 50) & (rgba[..., 1] < 50)
+    assert blues.sum() >= (reds | greens).sum() and not (rgba[..., :2] > 150).any()
     kb.reset_uid_counters()
     scene = _scene()
     env = kb.Texture(filename=str(HDRI_DIR / "city.exr"), mapping="environment")

@@ -89,12 +89,25 @@ class Asset(kt.HasProperties):
     # ------------------------------------------------------------------ views
     @property
     def views(self) -> tuple:
-        """Every view of every scene this asset belongs to, each once."""
+        """Every view of every scene this asset belongs to, and of every scene or asset whose
+        property holds it (a material assigned after its object was added), each once."""
         seen: dict[int, Any] = {}
+        self._collect_views(seen, set())
+        return tuple(seen.values())
+
+    def _collect_views(self, seen: dict[int, Any], visited: set[int]) -> None:
+        if id(self) in visited:
+            return
+        visited.add(id(self))
         for scene in self.scenes:
             for view in scene.views:
                 seen.setdefault(id(view), view)
-        return tuple(seen.values())
+        for owner, _ in self.owners:
+            if isinstance(owner, Asset):
+                owner._collect_views(seen, visited)
+            else:  # the scene
+                for view in owner.views:
+                    seen.setdefault(id(view), view)
 
     def _on_property_set(self, name: str, value: Any) -> None:
         for view in self.views:

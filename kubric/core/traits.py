@@ -6,6 +6,11 @@ runs the property's converter, which either returns the canonical value or raise
 assignment calls ``owner._on_property_set(name, value)``, which assets and scenes use to notify the
 views linked to them.
 
+A property whose value is itself a :class:`HasProperties` (a material's colour :class:`Texture`,
+an object's material, the scene's background) records its *owner*: when the value changes, each
+owner is told that its property changed too (``owner._on_dependency_changed(name)``), so views that
+only know the owner (a renderer builds a Texture into the material that uses it) stay in sync.
+
 Canonical values: vectors are **read-only float32** numpy arrays (so ``obj.position[0] = 1`` fails
 instead of silently bypassing notifications), quaternions are read-only float32 WXYZ arrays, colours
 are :class:`kubric.core.color.Color`.
@@ -13,6 +18,7 @@ are :class:`kubric.core.color.Color`.
 
 from __future__ import annotations
 
+import weakref
 from collections.abc import Callable
 from typing import Any, ClassVar
 
@@ -105,6 +111,7 @@ class HasProperties:
                     if callable(value):  # a factory, for mutable defaults
                         value = value()
                 self._values[name] = prop.convert(value, self, name)
+                _track_owner(self, name, None, self._values[name])
         finally:
             self._silent = False
 
@@ -123,12 +130,50 @@ class HasProperties:
 
     def _set_property(self, name: str, value: Any, notify: bool = True) -> None:
         prop = self.get_property(name)
+        old = self._values.get(name)
         self._values[name] = prop.convert(value, self, name)
+        _track_owner(self, name, old, self._values[name])
         if notify and not self._silent:
             self._on_property_set(name, self._values[name])
+            self._notify_owners()
 
     def _on_property_set(self, name: str, value: Any) -> None:
         """Hook: called after every successful, non-silent assignment."""
+
+    @property
+    def owners(self) -> list[tuple[Any, tuple[str, ...]]]:
+        """``[(owner, property names)]``: the objects whose properties currently hold this one."""
+        table = self.__dict__.get("_owners")
+        return [(o, tuple(sorted(n))) for o, n in table.items() if n] if table else []
+
+    def _on_dependency_changed(self, name: str) -> None:
+        """The value of property ``name`` (a HasProperties) changed inside: notify as if set."""
+        self._on_property_set(name, self._values[name])
+        self._notify_owners()
+
+    def _notify_owners(self) -> None:
+        if self.__dict__.get("_notifying_owners"):
+            return  # an ownership cycle: each owner is told once
+        self._notifying_owners = True
+        try:
+            for owner, names in self.owners:
+                for name in names:
+                    owner._on_dependency_changed(name)
+        finally:
+            self._notifying_owners = False
+
+
+def _track_owner(owner: HasProperties, name: str, old: Any, new: Any) -> None:
+    """Record that ``owner.name`` now holds ``new`` instead of ``old`` (see the module doc)."""
+    if old is new:
+        return
+    if isinstance(old, HasProperties):
+        table = old.__dict__.get("_owners")
+        if table is not None and owner in table:
+            table[owner].discard(name)
+    if isinstance(new, HasProperties):
+        table = new.__dict__.setdefault("_owners", weakref.WeakKeyDictionary())
+        table.setdefault(owner, set()).add(name)
 
 
 # --------------------------------------------------------------------------- converters
