@@ -86,8 +86,17 @@ class FlatMaterial(Material):
       color: the colour seen by the camera (Color or Texture).
       holdout: cut the object out of the image (transparent alpha) while keeping it in annotations.
       indirect_visibility: whether the object shows in reflections and casts light / shadows.
+      catch_shadows: on the object's upward-facing flat parts (normal within 2.6° of +z, e.g. a
+        dome's floor), show ``color`` where the scene's ambient illumination reaches them
+        unoccluded and darker where objects block it (contact shadows, plus light bounced off the
+        objects): a diffuse surface whose albedo is ``color · π / E``, E being the irradiance the
+        ambient illumination gives an unoccluded upward-facing point. Lamps add light on top and
+        are not divided out. Needs a non-black ambient illumination; an ambient texture may be
+        rotated about z only. Other parts stay unlit. Ignored when ``holdout`` is set.
     """
 
     color = _color_property(get_color("white"), "colour seen by the camera")
     holdout = kt.Property(False, kt.as_bool(), "render as transparent holdout")
     indirect_visibility = kt.Property(True, kt.as_bool(), "visible to indirect rays")
+    catch_shadows = kt.Property(False, kt.as_bool(),
+                                "upward-facing parts receive shadows of the ambient light")

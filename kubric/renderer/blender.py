@@ -43,6 +43,7 @@ from kubric.core.views import TableView
 from kubric.renderer import blender_materials as bm
 from kubric.renderer import blender_objects as bo
 from kubric.renderer import blender_passes as bp
+from kubric.renderer import blender_shadows as bs
 from kubric.renderer import blender_world as bw
 
 
@@ -222,11 +223,12 @@ class Blender(TableView):
         key = self._keyframers_for(type(asset)).get(name)
         if obj is None or key is None:
             return
-        owner, data_path = key.blender_path(obj)
-        try:
-            owner.keyframe_delete(data_path, frame=frame)
-        except RuntimeError:  # Blender has no key there (e.g. a Texture colour was keyed)
-            pass
+        paths = key.blender_paths(obj) if hasattr(key, "blender_paths") else [key.blender_path(obj)]
+        for owner, data_path in paths:
+            try:
+                owner.keyframe_delete(data_path, frame=frame)
+            except RuntimeError:  # Blender has no key there (e.g. a Texture colour was keyed)
+                pass
 
     def destroy(self, asset, obj) -> None:
         if isinstance(obj, bpy.types.Object):
@@ -277,6 +279,7 @@ class Blender(TableView):
                              "OrthographicCamera before rendering")
         s.camera = obj
         linear_interpolation()
+        bs.update_shadow_catchers(self)
 
     def _configure_rgb(self, path_prefix):
         s = self.bpy_scene

@@ -8,7 +8,9 @@
 * :class:`~kubric.core.materials.FlatMaterial` → Emission (strength 1) seen by camera rays; other
   rays see a Transparent BSDF when ``indirect_visibility`` is False (no reflections, no shadows);
   ``holdout`` replaces the camera-ray shader by a Holdout (alpha 0 in RGBA; annotation layers still
-  show the object because they are rendered with an override material).
+  show the object because they are rendered with an override material). ``catch_shadows`` gives
+  camera rays that hit an upward-facing point a Diffuse BSDF of albedo ``colour · catch_scale``
+  (``catch_scale`` = π / E, set before each render by :mod:`kubric.renderer.blender_shadows`).
 * A colour that is a :class:`~kubric.core.materials.Texture`: ``"uv"`` mapping → Image Texture on
   the mesh UVs; ``"environment"`` mapping → equirectangular lookup by the direction from the
   projection centre ``origin + (0, 0, texture.projection_height)`` to the shaded point (world
@@ -154,6 +156,7 @@ def _color_keyframer(socket_of):
         if not isinstance(asset.color, Texture):
             socket.default_value = tuple(asset.color)
     key.blender_path = lambda mat: (socket_of(mat), "default_value")
+    key.blender_paths = lambda mat: [key.blender_path(mat)]
     return key
 
 
@@ -166,20 +169,49 @@ PRINCIPLED_KEYFRAMERS = {
 def build_flat(view, asset):
     mat, out = _new_material(asset)
     nodes, links = mat.node_tree.nodes, mat.node_tree.links
-    emission = nodes.new("ShaderNodeEmission")
-    emission.name = "emission"
+    emission = _named(nodes, "ShaderNodeEmission", "emission")
     emission.inputs["Strength"].default_value = 1.0
-    holdout = nodes.new("ShaderNodeHoldout")
-    holdout.name = "holdout"
-    transparent = nodes.new("ShaderNodeBsdfTransparent")
-    transparent.name = "transparent"
-    path = nodes.new("ShaderNodeLightPath")
-    path.name = "light_path"
-    mix = nodes.new("ShaderNodeMixShader")
-    mix.name = "mix"
+    _named(nodes, "ShaderNodeHoldout", "holdout")
+    _named(nodes, "ShaderNodeBsdfTransparent", "transparent")
+    path = _named(nodes, "ShaderNodeLightPath", "light_path")
+    mix = _named(nodes, "ShaderNodeMixShader", "mix")
     links.new(path.outputs["Is Camera Ray"], mix.inputs["Fac"])
     links.new(mix.outputs["Shader"], out.inputs["Surface"])
+    _build_catch_nodes(nodes, links, emission)
     return mat
+
+
+def _named(nodes, node_type: str, name: str):
+    node = nodes.new(node_type)
+    node.name = name
+    return node
+
+
+#: a point catches shadows when its normal's z component exceeds this (within 2.6° of +z).
+CATCH_MIN_NORMAL_Z = 0.999
+
+
+def _build_catch_nodes(nodes, links, emission):
+    """Diffuse BSDF (albedo = colour × catch_scale) on upward-facing points, emission elsewhere."""
+    scale = _named(nodes, "ShaderNodeMix", "catch_scale")
+    scale.data_type = "RGBA"
+    scale.blend_type = "MULTIPLY"
+    scale.inputs["Factor"].default_value = 1.0
+    scale.inputs[7].default_value = (1.0, 1.0, 1.0, 1.0)
+    diffuse = _named(nodes, "ShaderNodeBsdfDiffuse", "catch_diffuse")
+    diffuse.inputs["Roughness"].default_value = 0.0
+    links.new(scale.outputs[2], diffuse.inputs["Color"])
+    geometry = _named(nodes, "ShaderNodeNewGeometry", "catch_geometry")
+    split = _named(nodes, "ShaderNodeSeparateXYZ", "catch_normal")
+    upward = _named(nodes, "ShaderNodeMath", "catch_upward")
+    upward.operation = "GREATER_THAN"
+    upward.inputs[1].default_value = CATCH_MIN_NORMAL_Z
+    links.new(geometry.outputs["Normal"], split.inputs[0])
+    links.new(split.outputs["Z"], upward.inputs[0])
+    choose = _named(nodes, "ShaderNodeMixShader", "catch_mix")
+    links.new(upward.outputs[0], choose.inputs["Fac"])
+    links.new(emission.outputs[0], choose.inputs[1])
+    links.new(diffuse.outputs[0], choose.inputs[2])
 
 
 def _rewire_flat(asset, mat):
@@ -188,14 +220,26 @@ def _rewire_flat(asset, mat):
     for socket in (mix.inputs[1], mix.inputs[2]):
         for link in list(socket.links):
             links.remove(link)
-    camera_shader = nodes["holdout"] if asset.holdout else nodes["emission"]
+    if asset.holdout:
+        camera_shader = nodes["holdout"]
+    else:
+        camera_shader = nodes["catch_mix"] if asset.catch_shadows else nodes["emission"]
     other = nodes["emission"] if asset.indirect_visibility else nodes["transparent"]
     links.new(other.outputs[0], mix.inputs[1])
     links.new(camera_shader.outputs[0], mix.inputs[2])
 
 
 def _set_flat_color(view, asset, mat, value):
-    _connect_color(mat, mat.node_tree.nodes["emission"].inputs["Color"], value, "color")
+    nodes, links = mat.node_tree.nodes, mat.node_tree.links
+    emitted = nodes["emission"].inputs["Color"]
+    _connect_color(mat, emitted, value, "color")
+    caught = nodes["catch_scale"].inputs[6]  # the same colour feeds the shadow catcher
+    for link in list(caught.links):
+        links.remove(link)
+    if emitted.links:
+        links.new(emitted.links[0].from_socket, caught)
+    else:
+        caught.default_value = tuple(value)
 
 
 def _set_flat_switch(view, asset, mat, value):
@@ -206,10 +250,23 @@ FLAT_SETTERS = {
     "color": _set_flat_color,
     "holdout": _set_flat_switch,
     "indirect_visibility": _set_flat_switch,
+    "catch_shadows": _set_flat_switch,
 }
 
+def _flat_color_keyframer():
+    """Key the emitted colour and the shadow catcher's colour together."""
+    parts = [_color_keyframer(lambda m: m.node_tree.nodes["emission"].inputs["Color"]),
+             _color_keyframer(lambda m: m.node_tree.nodes["catch_scale"].inputs[6])]
+
+    def key(view, asset, mat, frame):
+        for part in parts:
+            part(view, asset, mat, frame)
+    key.blender_paths = lambda mat: [part.blender_path(mat) for part in parts]
+    return key
+
+
 FLAT_KEYFRAMERS = {
-    "color": _color_keyframer(lambda m: m.node_tree.nodes["emission"].inputs["Color"]),
+    "color": _flat_color_keyframer(),
 }
 
 

@@ -6,8 +6,9 @@
   dome of random hue; lamps as A; camera in the shell r ∈ [7, 9].
 * C: 3–10 objects of a mesh collection, size U(0.75, 3.0) relative to the largest bound, their own
   textures, μ 0.5, e 0.5, mass from the asset; HDRI dome (floor and backdrop) and HDRI light.
-  The dome is a FlatMaterial (unlit, invisible to non-camera rays) showing the HDRI ground-projected
-  from ``HDRI_PROJECTION_HEIGHT`` m above the floor centre, so objects cast no shadow on it.
+  The dome is a FlatMaterial (invisible to non-camera rays) showing the HDRI ground-projected from
+  ``HDRI_PROJECTION_HEIGHT`` m above the floor centre; its floor catches the objects' shadows
+  (``catch_shadows``; option ``floor_shadows=false`` gives the unlit floor).
 * D: 10–20 static + 1–3 dynamic objects; the static ones settle first (μ 1, e 0), then stop.
 * E: as D with a camera moving on a straight line (start in the shell [8, 12], length U(0, 4)).
 * F: as E with motion blur U(0, 2) frames and 512² images.
@@ -153,6 +154,8 @@ class MoviC(MoviBase, name="movi_c"):
                               "pybullet_data's random_urdfs (none = all 1000)", type=int, low=0)
     split = Option("train", "asset / background split (10% of the sorted ids are held out)",
                    choices=("train", "test"))
+    floor_shadows = Option(True, "the HDRI floor receives the objects' shadows "
+                           "(FlatMaterial.catch_shadows); false = unlit floor, faster")
 
     def open_sources(self):
         from kubric import assets
@@ -173,14 +176,17 @@ class MoviC(MoviBase, name="movi_c"):
     def build_background(self, scene, rng, sources):
         hdri_id = _choice(rng, sources["hdri_ids"])
         hdri = sources["hdri"].create(hdri_id, mapping="environment")
-        # The dome shows the HDRI ground-projected and unlit (its texel values exactly, so it
-        # matches the world background); it is invisible to every other ray, so the objects
-        # are lit (and reflect) the HDRI itself and the dome's wall does not block it.
+        # The dome shows the HDRI ground-projected (its texel values exactly where nothing
+        # shadows it, so it matches the world background); with floor_shadows its floor is a
+        # shadow catcher (albedo normalised by the HDRI's irradiance), so objects cast contact
+        # shadows on it. It is invisible to every other ray, so the objects are lit by (and
+        # reflect) the HDRI itself and the dome's wall does not block it.
         scene.background = hdri
         scene.ambient_illumination = hdri
         ground = sources["hdri"].create(hdri_id, mapping="environment",
                                         projection_height=HDRI_PROJECTION_HEIGHT)
-        self.add_dome(scene, sources, kb.FlatMaterial(color=ground, indirect_visibility=False))
+        self.add_dome(scene, sources, kb.FlatMaterial(color=ground, indirect_visibility=False,
+                                                      catch_shadows=self.floor_shadows))
         return hdri_id
 
     def new_object(self, scene, simulator, rng, sources, region, dynamic: bool):
