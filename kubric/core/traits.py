@@ -152,11 +152,12 @@ class HasProperties:
         self._notify_owners()
 
     def _notify_owners(self) -> None:
-        if self.__dict__.get("_notifying_owners"):
-            return  # an ownership cycle: each owner is told once
+        owners = self.owners
+        if not owners or self.__dict__.get("_notifying_owners"):
+            return  # nobody holds this one, or an ownership cycle: each owner is told once
         self._notifying_owners = True
         try:
-            for owner, names in self.owners:
+            for owner, names in owners:
                 for name in names:
                     owner._on_dependency_changed(name)
         finally:
