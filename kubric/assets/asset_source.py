@@ -40,26 +40,25 @@ def cache_dir() -> Path:
     return Path(env).expanduser() if env else Path.home() / ".cache" / "kubric"
 
 
+def _require_fields(value, fields, where: str, not_object: str) -> None:
+    if not isinstance(value, dict):
+        raise ManifestError(f"{where}: {not_object}, got {type(value).__name__}")
+    for field in fields:
+        if field not in value:
+            raise ManifestError(f"{where}: missing required field {field!r} "
+                                f"(required: {list(fields)})")
+
+
 def validate_manifest(manifest, where: str = "manifest") -> dict:
     """Check the structure of a loaded manifest; raise :class:`ManifestError` naming the problem."""
-    if not isinstance(manifest, dict):
-        raise ManifestError(f"{where}: must be a JSON object, got {type(manifest).__name__}")
-    for field in MANIFEST_FIELDS:
-        if field not in manifest:
-            raise ManifestError(f"{where}: missing required field {field!r} "
-                                f"(required: {list(MANIFEST_FIELDS)})")
+    _require_fields(manifest, MANIFEST_FIELDS, where, "must be a JSON object")
     assets = manifest["assets"]
     if not isinstance(assets, dict):
         raise ManifestError(f"{where}: 'assets' must be an object {{id: entry}}, "
                             f"got {type(assets).__name__}")
     for key, entry in assets.items():
         here = f"{where}: asset {key!r}"
-        if not isinstance(entry, dict):
-            raise ManifestError(f"{here}: entry must be an object, got {type(entry).__name__}")
-        for field in ENTRY_FIELDS:
-            if field not in entry:
-                raise ManifestError(f"{here}: missing required field {field!r} "
-                                    f"(required: {list(ENTRY_FIELDS)})")
+        _require_fields(entry, ENTRY_FIELDS, here, "entry must be an object")
         if entry["id"] != key:
             raise ManifestError(f"{here}: 'id' is {entry['id']!r}, must equal its key {key!r}")
         if entry["asset_type"] not in ASSET_TYPES:
