@@ -5,6 +5,7 @@ import os
 import pathlib
 import subprocess
 import sys
+import time
 
 import pytest
 
@@ -95,6 +96,22 @@ def test_run_scene_is_atomic_skips_and_redoes(tmp_path):
     assert is_complete(res.path) and not (res.path / "junk").exists() and not work.exists()
     with pytest.raises(ValueError, match="seed"):
         scene_name(-1)
+
+
+@pytest.mark.skipif(not pathlib.Path("/proc/self/stat").exists(), reason="needs procfs")
+def test_work_dir_of_an_unreaped_exited_worker_is_stale(tmp_path):
+    # a worker of a SIGKILLed runner can stay a zombie (exited, never reaped) in containers
+    child = subprocess.Popen([sys.executable, "-c", "pass"])
+    try:
+        deadline = time.time() + 30
+        while pathlib.Path(f"/proc/{child.pid}/stat").read_text().rsplit(")", 1)[-1].split()[0] != "Z":
+            assert time.time() < deadline, "child did not exit"
+            time.sleep(0.02)
+        work = tmp_path / f".scene_00000003.incomplete-{child.pid}"
+        work.mkdir()
+        assert stale_work_dirs(tmp_path) == [work]
+    finally:
+        child.wait()
 
 
 def test_worker_cli_determinism_errors_and_index(tmp_path):

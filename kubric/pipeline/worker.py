@@ -37,6 +37,8 @@ def is_complete(scene_dir: pathlib.Path) -> bool:
 
 
 def _pid_alive(pid: int) -> bool:
+    """Whether process ``pid`` still runs. A zombie (exited, not yet reaped — e.g. a worker of a
+    killed runner in a container whose init does not reap orphans) counts as gone."""
     if pid == os.getpid():
         return True
     try:
@@ -45,7 +47,13 @@ def _pid_alive(pid: int) -> bool:
         return False
     except PermissionError:
         return True
-    return True
+    if not pathlib.Path("/proc/self/stat").exists():
+        return True  # no procfs (macOS): the signal-0 answer is all we know
+    try:  # field 3 of /proc/PID/stat is the state; the name before it is in parentheses
+        stat = pathlib.Path(f"/proc/{pid}/stat").read_text()
+    except OSError:
+        return False  # gone meanwhile
+    return stat.rsplit(")", 1)[-1].split()[0] != "Z"
 
 
 def stale_work_dirs(out_root: pathlib.Path, seed: int | None = None) -> list[pathlib.Path]:
