@@ -71,7 +71,7 @@ def test_clevr_lights_rng_none_rule():
 
 
 def test_movi_workers_use_the_shared_light_table():
-    from kubric.workers import movi
+    from kubric.recipes import movi
     scene = kb.Scene()
     lights = movi.add_clevr_lights(scene, np.random.RandomState(5))
     ref = kb.assets.utils.get_clevr_lights(rng=np.random.RandomState(5))

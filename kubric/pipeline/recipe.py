@@ -38,7 +38,7 @@ from kubric.pipeline.options import Option, OptionError, convert_all, parse_assi
 REGISTRY: dict[str, type[Recipe]] = {}
 
 #: modules imported to register the built-in recipes.
-BUILTIN_MODULES = ("kubric.workers",)
+BUILTIN_MODULES = ("kubric.recipes",)
 
 
 class Recipe(abc.ABC):
@@ -167,7 +167,7 @@ def recipe_spec(cls: type[Recipe]) -> str:
     name for built-in recipes, ``path/file.py:Class`` for recipes loaded from a file or
     ``__main__``, ``module:Class`` otherwise."""
     module_name = cls.__module__
-    if module_name.startswith("kubric.workers") and REGISTRY.get(cls.name) is cls:
+    if module_name.startswith("kubric.recipes") and REGISTRY.get(cls.name) is cls:
         return cls.name
     if module_name == "__main__" or module_name.startswith("_kubric_recipe_"):
         origin = getattr(sys.modules.get(module_name), "__file__", None)

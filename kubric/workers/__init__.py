@@ -1,3 +1,8 @@
-"""Built-in recipes (importing this registers them; no engine is imported here)."""
+"""Former name of :mod:`kubric.recipes`, kept so that ``import kubric.workers.movi`` still works."""
 
-from kubric.workers import movi  # noqa: F401
+import sys
+
+from kubric.recipes import movi, movi_base
+
+sys.modules[__name__ + ".movi"] = movi
+sys.modules[__name__ + ".movi_base"] = movi_base

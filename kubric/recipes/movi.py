@@ -29,7 +29,7 @@ import kubric as kb
 from kubric.assets.utils import get_clevr_lights
 from kubric.pipeline import Option, OptionError, float_range
 from kubric.randomness import CLEVR_COLORS, CLEVR_SHAPES, CLEVR_SIZES
-from kubric.workers.movi_base import (
+from kubric.recipes.movi_base import (
     DYNAMIC_SPAWN_REGION,
     STATIC_SPAWN_REGION,
     MoviBase,
