@@ -3,8 +3,8 @@
 The scene is synthetic but image-like: a textured floor and moving shaded spheres give piecewise
 smooth depth / normals / coordinates, per-object flow and a little render noise in RGBA.
 Baseline in the same run: the hand-written codecs the package had before ``bench_codecs.py``
-(``handwritten_codecs.py``); times are the best of 3 (wall, and CPU seconds of all threads), the
-two codec sets alternating.
+(``handwritten_codecs.py``); times are the best of 12 (wall, and CPU seconds of all threads), the
+two codec sets alternating in 4 rounds of 3.
 Run: ``.venv/bin/python benchmarks/bench_file_io.py [--sweep]``; ``--sweep`` also compares PNG
 filters and zlib levels (sizes and times), the basis of the defaults in ``kubric/io/png_io.py``.
 """
@@ -110,7 +110,7 @@ def main() -> None:
     scene = synthetic_scene(np.random.default_rng(0))
     files = sum(v.shape[0] for v in scene.values())
     results: dict[str, dict[str, float]] = {}
-    for _ in range(2):  # alternate the two codec sets: slow drifts of a shared machine hit both
+    for _ in range(4):  # alternate the two codec sets: slow drifts of a shared machine hit both
         for name in ("handwritten", "kubric"):
             with handwritten_codecs() if name == "handwritten" else contextlib.nullcontext():
                 write, size, _ = time_write(scene)
