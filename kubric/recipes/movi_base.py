@@ -156,6 +156,15 @@ class MoviBase(Recipe):
         scene.metadata["dropped_objects"] = 0
         return scene
 
+    def populate(self, scene, simulator, rng, sources) -> tuple[str, float]:
+        """Steps 2–4 (background, camera, motion blur, objects placed): everything before the
+        simulation runs. Returns (background description, shutter length in frames)."""
+        background = self.build_background(scene, rng, sources)
+        self.build_camera(scene, rng)
+        blur = self.motion_blur(rng)
+        self.add_objects(scene, simulator, rng, sources)
+        return background, blur
+
     def generate(self, seed: int, out_dir: pathlib.Path) -> None:
         kb.reset_uid_counters()
         rng = np.random.RandomState(seed)
@@ -163,10 +172,7 @@ class MoviBase(Recipe):
         scene = self.make_scene()
         with tempfile.TemporaryDirectory(prefix="kubric_movi_") as scratch:
             simulator = kb.simulator.PyBullet(scene, scratch)
-            background = self.build_background(scene, rng, sources)
-            self.build_camera(scene, rng)
-            blur = self.motion_blur(rng)
-            self.add_objects(scene, simulator, rng, sources)
+            background, blur = self.populate(scene, simulator, rng, sources)
             if self.save_state:  # the initial state, before the simulation (as upstream)
                 simulator.save_state(out_dir / "scene.bullet")
             _, collisions = simulator.run(frame_start=0, frame_end=scene.frame_end + 1)
