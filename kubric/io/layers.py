@@ -1,4 +1,4 @@
-"""The renderer's layer dict ↔ a scene directory (docs: ``shared/spec/output-format.md``).
+"""The renderer's layer dict ↔ a scene directory (docs: ``docs/scene-format.md``).
 
 Input to :func:`write_image_dict`: ``{layer name: (T, H, W, C) array}`` as returned by
 ``Blender.render()``; every layer must share T, H and W. Frame ``i`` (0-based) of a layer goes to

@@ -1,4 +1,4 @@
-"""The MOVi recipes A–F (variant table in recipes.md; shared steps in movi_base).
+"""The MOVi recipes A–F (shared steps in :mod:`kubric.recipes.movi_base`; docs/recipes.md).
 
 * A: 3–10 CLEVR shapes (cube, cylinder, sphere), small 0.7 / large 1.4, 8 CLEVR colours, metal or
   rubber; grey dome, 4 jittered lamps, ambient 0.05; camera at (7.48, −6.51, 5.34) + U[0,1)³.

@@ -1,4 +1,4 @@
-"""The MOVi pipeline shared by the recipes ``movi_a`` … ``movi_f`` (see recipes.md).
+"""The MOVi pipeline shared by the recipes ``movi_a`` … ``movi_f`` (docs/recipes.md).
 
 One scene = one seed: every random number comes from ``numpy.random.RandomState(seed)`` in a fixed
 order. Steps (each a method the variants override):
@@ -14,7 +14,7 @@ order. Steps (each a method the variants override):
 7. annotations: visibility → instance list sorted by visible pixels → segmentation relabelled →
    2D boxes; write the layers, ``metadata.json`` and ``events.json``.
 
-Physics constants (recipes.md): dynamic objects spawn in (−5,−5,1)–(5,5,5) with velocity
+Physics constants (upstream MOVi's): dynamic objects spawn in (−5,−5,1)–(5,5,5) with velocity
 U([−4,−4,0],[4,4,0]) − [x, y, 0]; static objects in (−7,−7,0)–(7,7,10); floor μ 0.3, e 0.5.
 """
 
@@ -143,7 +143,7 @@ class MoviBase(Recipe):
 
     @staticmethod
     def initial_velocity(obj, rng) -> None:
-        """Random horizontal velocity, biased towards the centre (recipes.md)."""
+        """Random horizontal velocity, biased towards the centre (upstream MOVi's rule)."""
         low, high = (np.asarray(v) for v in VELOCITY_RANGE)
         x, y, _ = obj.position
         obj.velocity = rng.uniform(low, high) - np.array([x, y, 0.0])
