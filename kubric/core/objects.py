@@ -18,6 +18,14 @@ from kubric.core.quaternion import Quaternion, look_at_quaternion
 _AXIS_NAMES = ["X", "Y", "Z", "-X", "-Y", "-Z"]
 
 
+def look_at_quat(position, target, up="Y", front="-Z") -> tuple[float, float, float, float]:
+    """The WXYZ orientation that points the local ``front`` axis from ``position`` at ``target``,
+    local ``up`` as close to world +Z as possible, as a plain tuple (upstream Kubric's function of
+    this module). ``up`` / ``front`` are axis names ("X", "-Z", ...) or 3-vectors. See
+    :func:`kubric.core.quaternion.look_at_quaternion`."""
+    return tuple(float(c) for c in look_at_quaternion(position, target, up, front))
+
+
 class Object3D(Asset):
     """Anything with a position and an orientation.
 
