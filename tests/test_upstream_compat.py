@@ -251,3 +251,18 @@ def test_run_upstream_tests_counts_passes_failures_and_unimportable_modules(tmp_
             "(ModuleNotFoundError: No module named 'a_module_nobody_has')") in out
     assert out[-2] == "collected 3: 1 passed, 1 failed, 1 skipped"
     assert out[-1] == "upstream tests: 1 of 7 passed"
+
+
+def test_physical_object_defaults_are_upstreams_and_reach_pybullet():
+    """Upstream's PhysicalObject defaults: mass 1, friction 0, restitution 0.5, not static; the
+    simulator body gets the same friction and restitution."""
+    import pybullet as pb
+
+    scene = kb.Scene()
+    simulator = kb.simulator.PyBullet(scene)
+    cube = kb.Cube(position=(0, 0, 1))
+    assert (cube.mass, cube.friction, cube.restitution, cube.static) == (1.0, 0.0, 0.5, False)
+    scene += cube
+    info = pb.getDynamicsInfo(simulator._body_of(cube).uid, -1, physicsClientId=simulator.client)
+    assert (info[0], info[1], info[5]) == (1.0, 0.0, 0.5)  # mass, lateral friction, restitution
+    simulator.close()
