@@ -383,3 +383,42 @@ def trackable_groups(segmentation, depth, assets: Sequence, instances: Sequence)
     out = lut[labels]
     out[depth >= geo.BACKGROUND_DEPTH * 0.999] = -1
     return out
+
+
+def load_queries(path) -> np.ndarray:
+    """Queries from a file: ``.npy`` (N, 3) or text (``.json`` list of [t, y, x] rows, or
+    whitespace / comma separated rows). ValueError (one line) when unreadable."""
+    import json
+    import pathlib
+    path = pathlib.Path(path)
+    try:
+        if path.suffix == ".npy":
+            q = np.load(path, allow_pickle=False)
+        elif path.suffix == ".json":
+            q = np.asarray(json.loads(path.read_text()), dtype=np.float64)
+        else:
+            q = np.loadtxt(path, delimiter="," if "," in path.read_text() else None, ndmin=2)
+    except (OSError, ValueError) as err:
+        raise ValueError(f"cannot read queries from {str(path)!r}: {err}") from None
+    q = np.asarray(q, dtype=np.float64)
+    if q.ndim != 2 or q.shape[1] != 3 or not len(q):
+        raise ValueError(f"queries file {str(path)!r} must hold rows (t, y, x), got shape "
+                         f"{q.shape}")
+    return q
+
+
+def scene_tracks(scene, layers: dict, instances: Sequence, rng, *, num_tracks: int = 0,
+                 queries=None, stride: int = 4, max_fraction: float = 0.1,
+                 depth_tolerance: float = DEPTH_TOLERANCE) -> dict[str, np.ndarray]:
+    """Tracks of a rendered scene: ``queries`` if given, else ``num_tracks`` sampled with
+    ``rng``. ``layers`` are the renderer's (segmentation labels made for ``scene.assets``, i.e.
+    before relabelling); ``instances`` give the instance ids (the metadata's instance list)."""
+    frames = list(range(scene.frame_start, scene.frame_end + 1))
+    if queries is None:
+        groups = trackable_groups(layers["segmentation"], layers["depth"], scene.assets,
+                                  instances)
+        queries = sample_queries(groups, num_tracks, rng, stride=stride,
+                                 max_fraction=max_fraction)
+    return compute_tracks(scene.camera, frames, layers["depth"], layers["segmentation"],
+                          scene.assets, queries, instances=instances,
+                          depth_tolerance=depth_tolerance)
