@@ -386,8 +386,9 @@ def trackable_groups(segmentation, depth, assets: Sequence, instances: Sequence)
 
 
 def load_queries(path) -> np.ndarray:
-    """Queries from a file: ``.npy`` (N, 3) or text (``.json`` list of [t, y, x] rows, or
-    whitespace / comma separated rows). ValueError (one line) when unreadable."""
+    """Queries from a file: ``.npy`` (N, 3), ``.json`` (a list of [t, y, x] rows) or text (one
+    row per line, numbers separated by spaces and / or commas). ValueError (one line) when unreadable."""
+    import io
     import json
     import pathlib
     path = pathlib.Path(path)
@@ -397,7 +398,7 @@ def load_queries(path) -> np.ndarray:
         elif path.suffix == ".json":
             q = np.asarray(json.loads(path.read_text()), dtype=np.float64)
         else:
-            q = np.loadtxt(path, delimiter="," if "," in path.read_text() else None, ndmin=2)
+            q = np.loadtxt(io.StringIO(path.read_text().replace(",", " ")), ndmin=2)
     except (OSError, ValueError) as err:
         raise ValueError(f"cannot read queries from {str(path)!r}: {err}") from None
     q = np.asarray(q, dtype=np.float64)
