@@ -1,4 +1,4 @@
-"""Point tracks on a real MOVi-E scene (tiny settings), read back from the scene directory:
+"""Point tracks on a real (panning) MOVi-E scene (tiny settings), read back from the scene directory:
 tracks vs the forward-flow and depth layers, our occlusion vs TAP-Vid's published rule computed
 from the written layers, and the TAP-Vid export."""
 
@@ -19,7 +19,7 @@ ROOT = pathlib.Path(__file__).resolve().parents[1]
 W, H, T = 96, 96, 6
 OPTIONS = [f"resolution={W}x{H}", f"frame_end={T}", "samples=2", "denoise=false",
            "min_num_objects=4", "max_num_objects=5", "settle_frames=20", "collection_limit=8",
-           "tracks=512", "track_stride=2"]
+           "tracks=512", "track_stride=2", "camera=panning"]
 
 
 @pytest.fixture(scope="module")
@@ -191,3 +191,23 @@ def test_tapvid_export(scene, tmp_path):
                          text=True, timeout=60)
     assert bad.returncode == 2 and len(bad.stderr.strip().splitlines()) == 1
     assert "no complete scene" in bad.stderr
+
+
+def test_panning_camera_moves_its_look_at_point_on_a_line(scene):
+    scene_dir, _, _ = scene
+    meta = file_io.read_json(scene_dir / "metadata.json")
+    look = meta["metadata"]["camera_look_at"]
+    start, end = np.asarray(look["start"]), np.asarray(look["end"])
+    assert np.linalg.norm(end - start) > 1e-3  # the look-at point really moves
+    mats = np.asarray(meta["camera"]["matrices_world"])
+    pos = np.asarray(meta["camera"]["positions"])
+    first, last = 0, T + 1  # keyed from frame_start - 1 to frame_end + 1
+    for i, frame in enumerate(range(1, T + 1)):
+        s = (frame - first) / (last - first)
+        target = (1 - s) * start + s * end
+        forward = -mats[i, :3, 2]  # the camera looks down its −z axis
+        to_target = (target - pos[i]) / np.linalg.norm(target - pos[i])
+        np.testing.assert_allclose(forward, to_target, atol=1e-5)
+    # the camera centre moves on a straight line
+    steps = np.diff(pos, axis=0)
+    np.testing.assert_allclose(steps, np.broadcast_to(steps[0], steps.shape), atol=1e-5)
