@@ -211,3 +211,42 @@ def test_panning_camera_moves_its_look_at_point_on_a_line(scene):
     # the camera centre moves on a straight line
     steps = np.diff(pos, axis=0)
     np.testing.assert_allclose(steps, np.broadcast_to(steps[0], steps.shape), atol=1e-5)
+
+
+def test_inspect_draws_tracks(scene, tmp_path):
+    from PIL import Image
+
+    from kubric.pipeline.inspect import drawn_tracks, inspect_scene, marker_radius, track_colours
+    scene_dir, tr, layers = scene
+    report = inspect_scene(scene_dir, tmp_path / "sheet.png")
+    assert "tracks: 512" in report
+    sheet = np.asarray(Image.open(tmp_path / "sheet.png").convert("RGB"))
+    assert sheet.shape[0] == T * H  # one row per frame (T ≤ 6 rows)
+    picks = drawn_tracks(512)
+    colours = track_colours(len(picks)).astype(int)
+    r = marker_radius(W)
+    filled = hollow = 0
+    for t in range(T):
+        rgb = sheet[t * H:(t + 1) * H, :W].astype(int)
+        xy = tr["target_points"][picks, t]
+        for i, n in enumerate(picks):
+            x, y = xy[i]
+            others = np.delete(xy, i, axis=0)
+            if (tr["occlusion_reason"][n, t] & 3) or \
+                    np.min(np.hypot(*(others - xy[i]).T)) < 2 * r + 3 or \
+                    not (r + 2 < x < W - r - 2 and r + 2 < y < H - r - 2):
+                continue
+            centre = rgb[int(y), int(x)]
+            ring = rgb[int(round(y)), int(round(x + r))]
+            if tr["occluded"][n, t]:   # hollow: the ring has the colour, the centre not
+                assert np.abs(ring - colours[i]).max() <= 1 or \
+                    np.abs(rgb[int(round(y)), int(round(x - r))] - colours[i]).max() <= 1
+                assert np.abs(centre - colours[i]).max() > 1
+                hollow += 1
+            else:                       # filled disc
+                assert np.abs(centre - colours[i]).max() <= 1
+                filled += 1
+    assert filled > 20  # (hollow markers: see test_tracks_sampling.py::test_draw_tracks)
+    # the GIF variant has one image per frame
+    inspect_scene(scene_dir, tmp_path / "anim.gif")
+    assert Image.open(tmp_path / "anim.gif").n_frames == T

@@ -123,3 +123,25 @@ def test_track_option_limit_is_the_grid():
     assert tr.grid_points_available(4, 32, 32, 4) == 64
     assert tr.grid_points_available(5, 30, 32, 4) == 1 * 7 * 8  # offsets 1..3 of 5 frames → 1
     get_recipe("movi_a").from_assignments(BASE + ["tracks=64"])
+
+
+def test_draw_tracks_filled_visible_hollow_occluded_trails():
+    from kubric.pipeline.inspect import draw_tracks, marker_radius, track_colours
+    frames = np.zeros((3, 40, 60, 3), np.uint8)
+    tracks = {"target_points": np.array([[[10.5, 10.5], [14.5, 10.5], [18.5, 10.5]],
+                                         [[40.5, 30.5], [40.5, 30.5], [40.5, 30.5]],
+                                         [[-5.0, 5.0], [-5.0, 5.0], [-5.0, 5.0]]], np.float32),
+              "occluded": np.array([[False, False, False], [True, True, True],
+                                    [True, True, True]]),
+              "occlusion_reason": np.array([[0, 0, 0], [4, 4, 4], [2, 2, 2]], np.uint8)}
+    out = draw_tracks(frames, tracks)
+    c = track_colours(3).astype(int)
+    r = marker_radius(60)
+    assert np.array_equal(out[2, 10, 18], c[0])                  # filled disc, visible
+    assert np.array_equal(out[2, 10, 13], c[0])                  # its trail from frame 0
+    assert not np.array_equal(out[0, 10, 13], c[0])              # no trail at frame 0
+    assert np.array_equal(out[1, 30, 40], [0, 0, 0])             # hollow ring, occluded
+    ring = out[1, 30 - int(r) - 1:30 + int(r) + 2, 40 - int(r) - 1:40 + int(r) + 2]
+    assert (np.abs(ring - c[1]).max(axis=-1) == 0).sum() >= 4
+    assert not (np.abs(out - c[2]).max(axis=-1) == 0).any()     # outside: not drawn
+    assert not np.shares_memory(out, frames) and frames.max() == 0
