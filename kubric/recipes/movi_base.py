@@ -12,7 +12,8 @@ order. Steps (each a method the variants override):
 6. render ``frame_start .. frame_end`` with Blender (linked after the simulation, so it sees the
    final trajectories only);
 7. annotations: visibility → instance list sorted by visible pixels → segmentation relabelled →
-   2D boxes; write the layers, ``metadata.json`` and ``events.json``.
+   2D boxes; write the layers, ``metadata.json`` and ``events.json``; with ``tracks=N`` or
+   ``track_queries`` also ``tracks.npz`` (:mod:`kubric.annotations.tracks`, docs/tracks.md).
 
 Physics constants (recipes.md): dynamic objects spawn in (−5,−5,1)–(5,5,5) with velocity
 U([−4,−4,0],[4,4,0]) − [x, y, 0]; static objects in (−7,−7,0)–(7,7,10); floor μ 0.3, e 0.5.
