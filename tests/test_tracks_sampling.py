@@ -145,3 +145,34 @@ def test_draw_tracks_filled_visible_hollow_occluded_trails():
     assert (np.abs(ring - c[1]).max(axis=-1) == 0).sum() >= 4
     assert not (np.abs(out - c[2]).max(axis=-1) == 0).any()     # outside: not drawn
     assert not np.shares_memory(out, frames) and frames.max() == 0
+
+
+def test_point_leaving_the_image_and_going_behind_the_camera():
+    """Synthetic layers (no render): a static background point seen at frame 0 while the camera
+    turns away: inside → outside the image → behind the camera."""
+    import kubric as kb
+    w, h = 16, 12
+    scene = kb.Scene(resolution=(w, h), frame_start=0, frame_end=2)
+    cam = kb.PerspectiveCamera(position=(0, 0, 0))
+    scene.camera = cam
+    for f, target in enumerate([(0, 5, 0), (5, 1, 0), (0, -5, 0)]):
+        cam.look_at(target)
+        cam.keyframe_insert("quaternion", f)
+    wall = kb.Cube(name="wall", background=True)
+    scene += wall
+    label = int(tr.instance_labels(scene.assets)[scene.assets.index(wall)])
+    seg = np.full((3, h, w), label)
+    depth = np.full((3, h, w), 5.0, np.float32)
+    out = tr.compute_tracks(cam, [0, 1, 2], depth, seg, scene.assets, [[0, 6.5, 8.5]])
+    np.testing.assert_allclose(out["target_points"][0, 0], [8.5, 6.5], atol=1e-5)
+    # (behind the camera, the projection is mirrored: it may or may not land in the image)
+    np.testing.assert_array_equal(out["occlusion_reason"][0, :2], [0, tr.OUTSIDE_IMAGE])
+    assert out["occlusion_reason"][0, 2] & tr.BEHIND_CAMERA
+    assert not out["occlusion_reason"][0, 2] & (tr.OTHER_INSTANCE | tr.DEPTH_CLOSER)
+    assert out["points_camera"][0, 2, 2] > 0
+    np.testing.assert_array_equal(out["occluded"][0], [False, True, True])
+    np.testing.assert_array_equal(out["visible"][0], [1.0, 0.0, 0.0])
+    assert out["instance_id"][0] == 0 and not out["is_foreground"][0]
+    np.testing.assert_allclose(out["points_object"][0], out["points_world"][0, 0], atol=1e-6)
+    with pytest.raises(ValueError, match="hits no surface"):
+        tr.compute_tracks(cam, [0, 1, 2], depth, np.zeros_like(seg), scene.assets, [[0, 1, 1]])

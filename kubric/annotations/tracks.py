@@ -216,7 +216,8 @@ def depth_slope(depth: np.ndarray, labels: np.ndarray) -> np.ndarray:
 def _query_depth(depth, labels, t, y, x, label) -> float:
     """Depth along the ray through (x, y) (module doc, step 1)."""
     h, w = depth.shape[1:]
-    fy, fx = y - PIXEL_OFFSET, x - PIXEL_OFFSET
+    fy = np.clip(np.nan_to_num(y, nan=-2.0), -2.0, h + 2.0) - PIXEL_OFFSET
+    fx = np.clip(np.nan_to_num(x, nan=-2.0), -2.0, w + 2.0) - PIXEL_OFFSET
     r0, c0 = int(np.floor(fy)), int(np.floor(fx))
     if fy == r0 and fx == c0:
         return float(depth[t, r0, c0])
@@ -233,8 +234,9 @@ def _query_depth(depth, labels, t, y, x, label) -> float:
 
 
 def _visible_at(rows, cols, labels, depth, slope, want_label, point_depth, reach, tol, h, w):
-    """Boolean: pixel (row, col) shows ``want_label`` no closer than the point − tolerance.
-    Pixels outside the image are False. All arrays (N, T); ``labels`` etc. (T, H, W)."""
+    """(inside, same, not_closer) boolean (N, T) arrays for pixel (row, col): inside the image,
+    shows ``want_label``, rendered depth no closer than the point − tolerance (module doc).
+    ``rows`` / ``cols`` / ``point_depth`` are (N, T); ``labels`` / ``depth`` / ``slope`` (T, H, W)."""
     inside = (rows >= 0) & (rows < h) & (cols >= 0) & (cols < w)
     rr, cc = np.clip(rows, 0, h - 1), np.clip(cols, 0, w - 1)
     tt = np.broadcast_to(np.arange(rows.shape[1]), rows.shape)
@@ -330,16 +332,18 @@ def compute_tracks(camera, frames: Sequence[int], depth, segmentation, assets: S
     with np.errstate(invalid="ignore"):
         outside = ~((x >= 0) & (x < w) & (y >= 0) & (y < h))
     reason[outside] |= OUTSIDE_IMAGE
-    rows = np.floor(np.nan_to_num(y, nan=-1.0)).astype(np.int64)
-    cols = np.floor(np.nan_to_num(x, nan=-1.0)).astype(np.int64)
+    rows = np.floor(np.clip(np.nan_to_num(y, nan=-1.0), -1.0, h + 1.0)).astype(np.int64)
+    cols = np.floor(np.clip(np.nan_to_num(x, nan=-1.0), -1.0, w + 1.0)).astype(np.int64)
     inside, same, not_closer = _visible_at(rows, cols, labels, depth, slope, qlabel, dist, 1.0,
                                            depth_tolerance, h, w)
+    inside &= (reason & BEHIND_CAMERA) == 0  # the pixel tests mean nothing behind the camera
     reason[inside & ~same] |= OTHER_INSTANCE
     reason[inside & same & ~not_closer] |= DEPTH_CLOSER
     occluded = reason != 0
 
     visible = np.zeros((n, num_frames))
-    fy, fx = y - PIXEL_OFFSET, x - PIXEL_OFFSET
+    fy = np.clip(np.nan_to_num(y, nan=-2.0), -2.0, h + 2.0) - PIXEL_OFFSET
+    fx = np.clip(np.nan_to_num(x, nan=-2.0), -2.0, w + 2.0) - PIXEL_OFFSET
     r0, c0 = np.floor(fy), np.floor(fx)
     for dr in (0, 1):
         for dc in (0, 1):
