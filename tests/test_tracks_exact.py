@@ -37,9 +37,9 @@ class Box:
     def pose(self, f):
         return _rot(self.axis, self.omega * f), self.p0 + self.v * f
 
-    def add_to(self, scene, texture_rng):
-        colour = kb.random_hue_color(rng=texture_rng)
-        obj = kb.Cube(scale=self.half, material=kb.PrincipledBSDFMaterial(color=colour))
+    def add_to(self, scene, texture):
+        obj = kb.Cube(scale=self.half, material=kb.PrincipledBSDFMaterial(
+            color=kb.Texture(filename=str(texture), mapping="uv")))
         scene += obj
         for f in FRAMES:
             _, pos = self.pose(f)
@@ -91,7 +91,16 @@ def _ray(f, xy):
     return centre, d / np.linalg.norm(d)
 
 
-def _scene(boxes):
+def _checker(path):
+    """A 64² checkerboard PNG (the cubes' UV texture)."""
+    from PIL import Image
+    ij = np.indices((64, 64)) // 8
+    rgb = np.where(((ij[0] + ij[1]) % 2)[..., None] == 1, [230, 40, 40], [40, 40, 230])
+    Image.fromarray(rgb.astype(np.uint8)).save(path)
+    return path
+
+
+def _scene(boxes, tmp_path):
     scene = kb.Scene(resolution=(W, H), frame_start=FRAMES[0], frame_end=FRAMES[-1])
     camera = kb.PerspectiveCamera(focal_length=FOCAL, sensor_width=SENSOR)
     scene.camera = camera
@@ -104,8 +113,8 @@ def _scene(boxes):
     floor = kb.Cube(name="floor", scale=(40, 40, 1), position=(0, 0, -1), static=True,
                     background=True)
     scene += floor
-    texture_rng = np.random.RandomState(3)
-    objects = [b.add_to(scene, texture_rng) for b in boxes]
+    texture = _checker(tmp_path / "checker.png")
+    objects = [b.add_to(scene, texture) for b in boxes]
     return scene, objects
 
 
@@ -195,9 +204,9 @@ def _interior(boxes, which, f, p):
     return True
 
 
-def test_tracks_match_closed_form_projection():
+def test_tracks_match_closed_form_projection(tmp_path):
     boxes = [Box((0.0, 0.0, 1.2), (0.12, 0.05, 0.02), (0.3, 0.5, 1.0), 0.25, 0.8)]
-    scene, objects = _scene(boxes)
+    scene, objects = _scene(boxes, tmp_path)
     layers = _render(scene)
     rng = np.random.RandomState(0)
     groups = tr.trackable_groups(layers["segmentation"], layers["depth"], scene.assets, objects)
@@ -226,11 +235,11 @@ def test_tracks_match_closed_form_projection():
     np.testing.assert_allclose(at_query, queries[:, [2, 1]], atol=1e-3)
 
 
-def test_occlusion_flags_where_one_cube_passes_in_front_of_another():
+def test_occlusion_flags_where_one_cube_passes_in_front_of_another(tmp_path):
     back = Box((0.0, 1.5, 1.0), (0.0, 0.0, 0.0), (0.0, 0.0, 1.0), 0.15, 0.9)
     front = Box((-3.2, -3.0, 2.2), (0.75, 0.0, 0.0), (1.0, 0.2, 0.0), 0.3, 0.5)
     boxes = [back, front]
-    scene, objects = _scene(boxes)
+    scene, objects = _scene(boxes, tmp_path)
     layers = _render(scene)
     # queries on the back cube at the first frame (before the front cube covers it)
     seg = layers["segmentation"][0, ..., 0]

@@ -99,7 +99,8 @@ def draw_tracks(frames: np.ndarray, tracks: dict) -> np.ndarray:
     r = marker_radius(w)
     out = []
     for t in range(t_count):
-        im = Image.fromarray(np.ascontiguousarray(frames[t]))
+        original = Image.fromarray(np.ascontiguousarray(frames[t]))
+        im = original.copy()
         draw = ImageDraw.Draw(im)
         for colour, n in zip(colours, picks, strict=True):
             first = max(0, t - TRAIL_FRAMES)
@@ -111,7 +112,10 @@ def draw_tracks(frames: np.ndarray, tracks: dict) -> np.ndarray:
                 continue
             x, y = xy[n, t]
             box = [x - r, y - r, x + r, y + r]
-            if occluded[n, t]:
+            if occluded[n, t]:  # hollow: the picture (not trails) shows inside the ring
+                mask = Image.new("L", im.size, 0)
+                ImageDraw.Draw(mask).ellipse(box, fill=255)
+                im.paste(original, (0, 0), mask)
                 draw.ellipse(box, outline=colour, width=1)
             else:
                 draw.ellipse(box, fill=colour)
