@@ -20,7 +20,7 @@ ROOT = pathlib.Path(__file__).resolve().parents[1]
 W, H, T = 96, 96, 6
 OPTIONS = [f"resolution={W}x{H}", f"frame_end={T}", "samples=2", "denoise=false",
            "min_num_objects=4", "max_num_objects=5", "settle_frames=20", "collection_limit=8",
-           "tracks=512", "track_stride=2"]
+           "tracks=512", "track_stride=2", "track_max_fraction=0.5"]
 
 
 @pytest.fixture(scope="module", params=["panning", "linear"])
@@ -100,7 +100,8 @@ def test_tracks_agree_with_flow_and_depth_layers(scene):
     _, tr, layers = scene
     flow, depth = layers["forward_flow"], layers["depth"]
     interior = _interior(layers["segmentation"][..., 0])
-    flow_err, flow_err_nearest, depth_err = [], [], []
+    flow_err, flow_err_nearest, depth_err, fg_flow, fg_depth = [], [], [], [], []
+    fg = tr["is_foreground"]
     for t in range(T):
         xy = tr["target_points"][:, t]
         vis = ~tr["occluded"][:, t]
@@ -110,19 +111,26 @@ def test_tracks_agree_with_flow_and_depth_layers(scene):
         x, y = xy[ok, 0], xy[ok, 1]
         d = _bilinear(depth[t], x, y)[:, 0]
         depth_err.append(np.abs(d - tr["depth"][ok, t]) / tr["depth"][ok, t])
+        fg_depth.append(depth_err[-1][fg[ok]])
         if t + 1 < T:
             ok2 = ok & ~tr["occluded"][:, t + 1]
             moved = tr["target_points"][ok2, t + 1] - tr["target_points"][ok2, t]  # (dx, dy)
             f = _bilinear(flow[t], xy[ok2, 0], xy[ok2, 1])                          # (dy, dx)
             flow_err.append(np.hypot(*(moved[:, ::-1] - f).T))
+            fg_flow.append(flow_err[-1][fg[ok2]])
             fn = flow[t][r[ok2], c[ok2]]
             flow_err_nearest.append(np.hypot(*(moved[:, ::-1] - fn).T))
     flow_err, depth_err = np.concatenate(flow_err), np.concatenate(depth_err)
     flow_err_nearest = np.concatenate(flow_err_nearest)
+    fg_flow, fg_depth = np.concatenate(fg_flow), np.concatenate(fg_depth)
     print(f"flow: {len(flow_err)} point-frames, median {np.median(flow_err):.4f} px "
           f"(nearest pixel {np.median(flow_err_nearest):.4f}); depth: {len(depth_err)}, median "
           f"relative {np.median(depth_err):.2e}")
+    print(f"  on objects: flow {len(fg_flow)} point-frames, median {np.median(fg_flow):.4f} px; "
+          f"depth {len(fg_depth)}, median relative {np.median(fg_depth):.2e}")
     assert len(flow_err) > 500 and len(depth_err) > 500
+    assert len(fg_flow) > 100 and np.median(fg_flow) < 0.05
+    assert np.median(fg_depth) < 1e-3
     assert np.median(flow_err) < 0.05
     assert np.median(depth_err) < 1e-3
 

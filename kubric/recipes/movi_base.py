@@ -84,6 +84,8 @@ class MoviBase(Recipe):
                            ".json or text); instead of sampling", type=pathlib.Path,
                            must_exist=True)
     track_stride = Option(4, "grid stride (frames and pixels) of the track query sampling", low=1)
+    track_max_fraction = Option(0.1, "most tracks per object or background, as a fraction of "
+                                "its grid points (TAP-Vid: 0.1)", low=0.0, high=1.0)
 
     # ------------------------------------------------------------------ checks
     def check(self) -> None:
@@ -218,7 +220,8 @@ class MoviBase(Recipe):
         from kubric.annotations.tracks import scene_tracks
         rng = np.random.RandomState([int(seed), 0x7472616B])
         tracks = scene_tracks(scene, layers, visible, rng, num_tracks=self.tracks,
-                              queries=getattr(self, "_queries", None), stride=self.track_stride)
+                              queries=getattr(self, "_queries", None), stride=self.track_stride,
+                              max_fraction=self.track_max_fraction)
         write_tracks(tracks, out_dir / TRACKS_FILE)
 
     def write_outputs(self, scene, layers, collisions, seed, out_dir, background,
