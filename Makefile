@@ -5,7 +5,7 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: install test demo bench lint clean
+.PHONY: install test demo bench lint docs clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -27,8 +27,13 @@ bench: $(STAMP)
 	$(BIN)/python -m pip install --quiet -e '.[dev,coacd,bench]'  # V-HACD vs CoACD, codecs vs libraries
 	$(BIN)/python -m benchmarks
 
+docs: $(STAMP)  # regenerate the generated pages, then build the HTML site into site/
+	$(BIN)/python -m kubric.docgen
+	$(BIN)/python -m pip install --quiet 'mkdocs>=1.6'
+	$(BIN)/mkdocs build --strict --quiet
+
 lint: $(STAMP)
 	$(BIN)/ruff check kubric tests
 
 clean:
-	rm -rf $(VENV) build *.egg-info
+	rm -rf $(VENV) build site *.egg-info

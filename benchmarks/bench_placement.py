@@ -1,14 +1,15 @@
 """How KuBasic's shape size decides whether upstream-style placements can succeed (not a test).
 
 Two placements from the paper and upstream's recipes, each with KuBasic shapes at their built size
-(±1 m, as ``shared/spec/assets.md`` fixes) and at half that size (±0.5 m, the size of the KuBasic
-manifest in upstream's early repository) as the baseline measured in the same run:
+(unit-sized, ±0.5 m, as upstream's) and at twice that size (±1 m, our KuBasic 1.x) as the baseline
+measured in the same run:
 
 * MOVi-A: 10 CLEVR shapes (cube / cylinder / sphere at scale 0.7 or 1.4) placed without overlap
   in (−5, −5, 1)–(5, 5, 5) above a floor, 100 trials each (upstream's worker aborts the scene
   when one placement fails). Counted: scenes in which all 10 were placed.
 * Figure 3: the paper's listing, 8 random KuBasic shapes in [[−1, −1, 0], [1, 1, 1]] above a floor
-  whose top is z = 0. Counted: objects placed before the first failure.
+  whose top is z = 0, and in ``examples/figure3.py``'s default region [[−2.5, −2.5, 0], [2.5, 2.5, 2.5]].
+  Counted: objects placed before the first failure.
 
 Each is run with our placement rule (the rotated bounding box must lie inside the region) and with
 upstream's (the position is drawn between region − box bounds, so a box larger than the region
@@ -28,6 +29,7 @@ from kubric import randomness
 
 MOVI_REGION = [(-5, -5, 1), (5, 5, 5)]
 FIGURE3_REGION = [[-1, -1, 0], [1, 1, 1]]
+FIGURE3_DEFAULT_REGION = [[-2.5, -2.5, 0], [2.5, 2.5, 2.5]]
 
 
 def upstream_position_sampler(region):
@@ -86,17 +88,20 @@ def measure(scenes: int) -> list[dict]:
     for rule in ("ours", "upstream"):
         randomness.position_sampler = ours if rule == "ours" else upstream_position_sampler
         try:
-            for factor in (1.0, 0.5):
+            for factor in (1.0, 2.0):
                 t0 = time.perf_counter()
                 movi = [_place_all(source, movi_a_picks(factor), MOVI_REGION,
                                    np.random.RandomState(seed)) for seed in range(scenes)]
                 fig3 = [_place_all(source, figure3_picks(factor, shapes), FIGURE3_REGION,
                                    np.random.RandomState(seed)) for seed in range(scenes)]
-                rows.append({"rule": rule, "shape_half_size_m": factor,
+                wide = [_place_all(source, figure3_picks(factor, shapes), FIGURE3_DEFAULT_REGION,
+                                   np.random.RandomState(seed)) for seed in range(scenes)]
+                rows.append({"rule": rule, "shape_half_size_m": 0.5 * factor,
                              "movi_a_scenes_with_all_10": f"{sum(n == 10 for n in movi)}/{scenes}",
                              "movi_a_mean_placed": round(float(np.mean(movi)), 2),
                              "figure3_scenes_with_all_8": f"{sum(n == 8 for n in fig3)}/{scenes}",
                              "figure3_mean_placed": round(float(np.mean(fig3)), 2),
+                             "figure3_default_region_all_8": f"{sum(n == 8 for n in wide)}/{scenes}",
                              "seconds": round(time.perf_counter() - t0, 1)})
                 print(json.dumps(rows[-1]), flush=True)
         finally:

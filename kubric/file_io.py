@@ -1,7 +1,7 @@
 """Reading and writing Kubric's output files: every layer encoding and its inverse.
 
 This is the public facade (``kb.write_png``, ``kb.write_image_dict``, ...); the code lives in
-:mod:`kubric.io` (one module per format). Formats follow ``shared/spec/output-format.md``:
+:mod:`kubric.io` (one module per format). Formats follow ``docs/scene-format.md``:
 
 * PNG 8/16-bit with 1–4 channels (2 channels padded to 3) — :func:`write_png` / :func:`read_png`;
 * label PNG: 8-bit palette, 16-bit grey beyond 255 labels, never wrapping —

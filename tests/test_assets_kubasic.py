@@ -41,10 +41,10 @@ def test_kubasic_builds_all_shapes_quickly(kubasic):
 def test_kubasic_physical_properties(kubasic):
     source, _ = kubasic
     cube = source.db["cube"]
-    assert cube["kwargs"]["mass"] == pytest.approx(8.0, rel=1e-9)
-    np.testing.assert_allclose(cube["kwargs"]["bounds"], [[-1, -1, -1], [1, 1, 1]], atol=1e-9)
+    assert cube["kwargs"]["mass"] == pytest.approx(1.0, rel=1e-9)  # unit cube, density 1
+    np.testing.assert_allclose(cube["kwargs"]["bounds"], [[-.5, -.5, -.5], [.5, .5, .5]], atol=1e-9)
     sponge = source.db["sponge"]["metadata"]
-    assert sponge["volume"] == pytest.approx(8 * (20 / 27) ** 2, rel=1e-9)
+    assert sponge["volume"] == pytest.approx((20 / 27) ** 2, rel=1e-9)
     assert sponge["surface_area"] > source.db["cube"]["metadata"]["surface_area"]
     for asset_id, entry in source.db.items():
         meta, kw = entry["metadata"], entry["kwargs"]
@@ -54,10 +54,10 @@ def test_kubasic_physical_properties(kubasic):
         if asset_id == "dome":
             assert kw["static"] is True and kw["mass"] == 0.0
             continue
-        assert kw["mass"] == pytest.approx(meta["volume"]) and kw["mass"] > 0.1
+        assert kw["mass"] == pytest.approx(meta["volume"]) and kw["mass"] > 0.01
         lo, hi = np.asarray(kw["bounds"])
         assert np.all(lo < 0) and np.all(hi > 0), asset_id  # the centre of mass is inside
-        assert 1.0 <= (hi - lo).max() <= 2.5, asset_id  # unit-ish like upstream
+        assert (hi - lo).max() == pytest.approx(1.0, abs=0.1), asset_id  # fits a 1 m cube
         inertia = np.asarray(meta["inertia"])
         assert np.all(np.linalg.eigvalsh(inertia) > 0), asset_id
 

@@ -39,11 +39,11 @@ def test_kubasic_object_renders_in_blender_view(kubasic):
     scene = kb.Scene(resolution=(32, 32))
     renderer = kb.renderer.Blender(scene, samples_per_pixel=4, use_denoising=False)
     scene += kb.DirectionalLight(position=(0, -3, 3), look_at=(0, 0, 0), intensity=3)
-    scene += kb.OrthographicCamera(position=(0, -10, 0), look_at=(0, 0, 0), orthographic_scale=4)
+    scene += kb.OrthographicCamera(position=(0, -10, 0), look_at=(0, 0, 0), orthographic_scale=2)
     obj = kubasic.create("cube", material=kb.PrincipledBSDFMaterial(color="red"))
     scene += obj
     frame = renderer.render_still()
     seg = frame["segmentation"][..., 0]
-    # the cube (edge 2) covers half of the 4 m wide view: 16 × 16 of 32 × 32 pixels
+    # the unit cube (edge 1 m) covers half of the 2 m wide view: 16 × 16 of 32 × 32 pixels
     area = int((seg == scene.assets.index(obj) + 1).sum())
     assert abs(area - 256) <= 2 * 16 + 2 * 16 + 4, area

@@ -188,3 +188,9 @@ def test_inspect_real_scene(scenes):
     from PIL import Image
     sheet = Image.open(scenes / "sheet.gif")
     assert sheet.n_frames == T and sheet.size == (5 * W, H)
+
+
+def test_every_written_file_and_field_is_documented(scenes):
+    from kubric import docgen
+    for scene in (scenes / "a" / "scene_00000001", scenes / "e" / "scene_00000001"):
+        assert docgen.undocumented_scene_fields(scene) == [], scene

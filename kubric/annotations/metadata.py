@@ -1,5 +1,5 @@
 """Scene, camera and instance metadata and collision events for ``metadata.json`` /
-``events.json`` (see the output-format spec). Pure numpy over the scene model; every projection
+``events.json`` (fields in ``docs/scene-format.md``). Pure numpy over the scene model; every projection
 goes through :mod:`kubric.core.camera_geometry`.
 
 Frames: functions take ``frames`` (scene frame numbers, default ``scene.frame_start ..

@@ -1,7 +1,7 @@
 """Asset sources: manifests + archives, safe extraction, and the builders of our own sources.
 
 ``import kubric.assets`` is light (numpy only); trimesh, PyBullet and bpy are imported inside the
-functions that need them. See ``shared/spec/assets.md`` for the format.
+functions that need them. The source format is described in ``docs/assets.md``.
 
 - :class:`AssetSource` — open a source (``manifest.json``), ``create(asset_id, **overrides)``.
 - :func:`cache_dir` — ``$KUBRIC_CACHE_DIR`` or ``~/.cache/kubric``.

@@ -10,6 +10,13 @@ Blender's importer gives it a material whose node ``"Image Texture"`` scripts ca
 image (upstream's MOVi-C–F workers put the HDRI there). Building twice gives byte-identical
 manifests and archives.
 
+Size: every shape is **unit-sized** like upstream's KuBasic: it fits a 1 m cube (the cube itself
+spans ±0.5 m). :mod:`kubric.assets.shapes` designs the shapes at twice that size (cube ±1, the
+natural size of their formulas) and :func:`build_shape` scales them by :data:`SHAPE_SCALE`.
+Evidence for unit size: upstream's MOVi-A gives an object of scale ``s`` the mass ``2.7 · s³``,
+the mass of a unit-volume shape at that scale, and MOVi's scales 0.7 / 1.4 then give CLEVR's
+object sizes. The dome keeps its own size (metres, not scaled).
+
 The cache (``<cache>/KuBasic``) is rebuilt when its manifest's ``version`` is not
 :data:`VERSION`; bump it whenever the generated content changes.
 """
@@ -22,7 +29,9 @@ from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 NAME = "KuBasic"
-VERSION = "1.1"  # 1.1: the dome got a textured material
+VERSION = "2.0"  # 1.1: the dome got a textured material; 2.0: shapes unit-sized (were ±1 m)
+#: factor from the shapes' design size (cube ±1) to KuBasic's unit size (cube ±0.5)
+SHAPE_SCALE = 0.5
 #: the dome's placeholder texture: DOME_TEXTURE_SIZE² pixels of this sRGB grey (0–255)
 DOME_TEXTURE_SIZE = 4
 DOME_TEXTURE_GREY = 200
@@ -30,18 +39,18 @@ GENERATED_LICENSE = "CC0-1.0 (generated procedurally by kubric)"
 
 #: shape → (collision kind, licence, description)
 SHAPES = {
-    "cone": ("hull", GENERATED_LICENSE, "cone, base radius 1, height 2"),
-    "cube": ("box", GENERATED_LICENSE, "cube, edge 2"),
-    "cylinder": ("cylinder", GENERATED_LICENSE, "cylinder, radius 1, height 2"),
-    "gear": ("vhacd", GENERATED_LICENSE, "spur gear with 12 teeth and a hole"),
-    "sphere": ("sphere", GENERATED_LICENSE, "sphere, radius 1"),
-    "sponge": ("vhacd", GENERATED_LICENSE, "Menger sponge, level 2"),
+    "cone": ("hull", GENERATED_LICENSE, "cone, base radius 0.5 m, height 1 m"),
+    "cube": ("box", GENERATED_LICENSE, "cube, edge 1 m"),
+    "cylinder": ("cylinder", GENERATED_LICENSE, "cylinder, radius 0.5 m, height 1 m"),
+    "gear": ("vhacd", GENERATED_LICENSE, "spur gear with 12 teeth and a hole, tip radius 0.5 m"),
+    "sphere": ("sphere", GENERATED_LICENSE, "sphere, radius 0.5 m"),
+    "sponge": ("vhacd", GENERATED_LICENSE, "Menger sponge, level 2, edge 1 m"),
     "spot": ("vhacd", None, "animal figure (Stanford bunny standing in for upstream's cow)"),
     "suzanne": ("vhacd", "Blender built-in primitive 'Suzanne' (Blender Foundation); Blender's "
                 "output is not covered by its GPL licence", "Blender's monkey head"),
     "teapot": ("vhacd", "Utah teapot: Martin Newell's public Bezier patch data (1975)",
                "Utah teapot"),
-    "torus": ("vhacd", GENERATED_LICENSE, "torus, ring radius 0.7, tube radius 0.3"),
+    "torus": ("vhacd", GENERATED_LICENSE, "torus, ring radius 0.35 m, tube radius 0.15 m"),
     "torus_knot": ("vhacd", GENERATED_LICENSE, "(2, 3) torus knot tube"),
     "dome": ("concave", GENERATED_LICENSE,
              "static floor and backdrop: disc of radius 25 m bending up into a 40 m wall"),
@@ -71,6 +80,8 @@ def build_shape(name: str, out_dir: str | os.PathLike) -> dict:
     kind, license_, description = SHAPES[name]
     license_ = license_ or shapes.SPOT_LICENSE
     mesh = getattr(shapes, name)()
+    if kind != "concave":  # every shape but the dome: to unit size
+        mesh.apply_scale(SHAPE_SCALE)
     physics_parts = None
     if kind == "box":
         col = Collision("box", tuple(mesh.extents), method="exact box")

@@ -1,4 +1,7 @@
-"""Procedural meshes of the KuBasic shapes (trimesh, z up, unit-ish size: cube bounds ±1).
+"""Procedural meshes of the KuBasic shapes at their design size (trimesh, z up, cube bounds ±1).
+
+The KuBasic source is unit-sized: :func:`kubric.assets.kubasic.build_shape` scales these meshes by
+``SHAPE_SCALE`` = 0.5, so every built shape fits a 1 m cube. The dome is built at its own size.
 
 Every function returns a ``trimesh.Trimesh`` built by our own code from formulas (or, for
 ``suzanne``, Blender's built-in monkey; for ``teapot``, Newell's Bezier patches; for ``spot``, the
