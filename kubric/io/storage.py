@@ -50,7 +50,14 @@ def join(location, *parts: str) -> str:
 
 
 def _fs(location):
-    """(filesystem, path) for ``location``; a local filesystem for plain paths."""
+    """(filesystem, path) for ``location``; a local filesystem for plain paths. The filesystem's
+    cached listings are dropped first: other processes write the same store."""
+    fs, path = _filesystem(location)
+    fs.invalidate_cache()
+    return fs, path
+
+
+def _filesystem(location):
     try:
         import fsspec
     except ModuleNotFoundError as err:  # pragma: no cover - fsspec ships with the cluster extra
@@ -60,6 +67,8 @@ def _fs(location):
         return fsspec.filesystem("file"), str(location)
     scheme = _URL_RE.match(location).group(1).lower()
     try:
+        if scheme in ("file", "local"):  # as local paths: parent directories made on write
+            return fsspec.filesystem("file", auto_mkdir=True), _URL_RE.match(location).group(2)
         return fsspec.core.url_to_fs(location)
     except ValueError as err:
         raise StorageError(f"{location!r}: unknown storage protocol {scheme!r} ({err})") from err
@@ -91,7 +100,7 @@ def listdir(location) -> list[str]:
             return []
     fs, path = _fs(location)
     try:
-        entries = fs.ls(path, detail=False, refresh=True)
+        entries = fs.ls(path, detail=False)
     except FileNotFoundError:
         return []
     return sorted({e.rstrip("/").rsplit("/", 1)[-1] for e in entries} - {""})
