@@ -21,6 +21,7 @@ not start, running subprocesses are terminated (they delete their work directori
 
 from __future__ import annotations
 
+import contextlib
 import os
 import re
 import shutil
@@ -235,7 +236,7 @@ class DaskRunner(Runner):
         return None
 
     def _execute(self, todo: list[int], summary: RunSummary, bar) -> None:
-        from distributed import Event
+        from distributed import Event, wait
         event = Event(f"kubric-stop-{self.run_id}", client=self.client)
         pending = {}
         for seed in todo:
@@ -251,7 +252,8 @@ class DaskRunner(Runner):
                 break
             finished = [f for f in pending if f.done()]
             if not finished:
-                time.sleep(0.1)
+                with contextlib.suppress(TimeoutError):
+                    wait(list(pending), timeout=0.5, return_when="FIRST_COMPLETED")
                 continue
             for future in finished:
                 seed, attempt = pending.pop(future)
