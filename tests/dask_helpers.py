@@ -113,3 +113,77 @@ def kubric_workers(out) -> list[int]:
             if "kubric" in cmd and "worker" in cmd and str(out) in cmd:
                 found.append(int(entry.name))
     return found
+
+
+SLURM_TOOLS = ("munged", "slurmctld", "slurmd", "sbatch", "sinfo")
+
+
+def slurm_missing() -> list[str]:
+    import shutil
+    return [t for t in SLURM_TOOLS if shutil.which(t, path=os.environ.get("PATH", "") +
+                                                    ":/usr/sbin:/sbin") is None]
+
+
+def start_slurm(procs: list, tmp: pathlib.Path, timeout: float = 60) -> dict:
+    """A single-node Slurm (Debian's slurmctld + slurmd, authenticated by a private munged) with
+    all state under ``tmp``; returns the environment (SLURM_CONF) for its client commands."""
+    import shutil
+    path = os.environ.get("PATH", "") + ":/usr/sbin:/sbin"
+    tool = {t: shutil.which(t, path=path) for t in SLURM_TOOLS}
+    for sub in ("state", "spool", "log"):
+        (tmp / sub).mkdir(parents=True, exist_ok=True)
+    key = tmp / "munge.key"
+    key.write_bytes(os.urandom(1024))
+    key.chmod(0o600)
+    sock = tmp / "munge.sock"
+    procs.append(spawn([tool["munged"], "--foreground", "--force", f"--key-file={key}",
+                        f"--socket={sock}", f"--pid-file={tmp / 'munged.pid'}",
+                        f"--log-file={tmp / 'log' / 'munged.log'}",
+                        f"--seed-file={tmp / 'munged.seed'}"], tmp / "munged.out"))
+    host = socket.gethostname()
+    cpus = os.cpu_count() or 1
+    conf = tmp / "slurm.conf"
+    conf.write_text(f"""ClusterName=kubrictest
+SlurmctldHost={host}(127.0.0.1)
+SlurmUser=root
+SlurmdUser=root
+AuthType=auth/munge
+CredType=cred/munge
+AuthInfo=socket={sock}
+StateSaveLocation={tmp / 'state'}
+SlurmdSpoolDir={tmp / 'spool'}
+SlurmctldPidFile={tmp / 'slurmctld.pid'}
+SlurmdPidFile={tmp / 'slurmd.pid'}
+SlurmctldLogFile={tmp / 'log' / 'slurmctld.log'}
+SlurmdLogFile={tmp / 'log' / 'slurmd.log'}
+SlurmctldPort={free_port()}
+SlurmdPort={free_port()}
+ProctrackType=proctrack/linuxproc
+TaskPlugin=task/none
+JobAcctGatherType=jobacct_gather/none
+AccountingStorageType=accounting_storage/none
+SchedulerType=sched/backfill
+SelectType=select/cons_tres
+SelectTypeParameters=CR_Core
+ReturnToService=2
+MpiDefault=none
+NodeName={host} NodeAddr=127.0.0.1 CPUs={cpus} RealMemory=4000 State=UNKNOWN
+PartitionName=kubric Nodes={host} Default=YES MaxTime=INFINITE State=UP
+""")
+    env = dict(os.environ, SLURM_CONF=str(conf))
+    end = time.time() + timeout
+    while not sock.exists():
+        if time.time() > end or procs[-1].poll() is not None:
+            raise AssertionError(f"munged did not start: {(tmp / 'munged.out').read_text()}")
+        time.sleep(0.1)
+    procs.append(spawn([tool["slurmctld"], "-D", "-f", str(conf)], tmp / "slurmctld.out", env))
+    procs.append(spawn([tool["slurmd"], "-D", "-f", str(conf)], tmp / "slurmd.out", env))
+    while True:
+        state = subprocess.run([tool["sinfo"], "-h", "-o", "%T"], env=env, capture_output=True,
+                               text=True, timeout=30).stdout.strip()
+        if state == "idle":
+            return env
+        if time.time() > end:
+            raise AssertionError(f"slurm did not come up (sinfo: {state!r}): "
+                                 f"{(tmp / 'log' / 'slurmctld.log').read_text()[-2000:]}")
+        time.sleep(0.5)

@@ -11,7 +11,7 @@ import sys
 
 import pytest
 import yaml
-from dask_helpers import free_port
+from dask_helpers import free_port, processes, slurm_missing, start_slurm
 
 from kubric.pipeline.worker import is_complete
 
@@ -131,3 +131,34 @@ def test_kubernetes_indexed_job_runs_worker_index(tmp_path):
     proc = subprocess.run(run, cwd=ROOT, capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert is_complete(tmp_path / "ds" / "scene_00000004")
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(bool(slurm_missing()), reason=f"no single-node Slurm here (missing "
+                    f"{slurm_missing()}; Debian: apt-get install slurmctld slurmd slurm-client "
+                    f"munge)")
+def test_cluster_slurm_and_job_array_on_a_single_node_slurm(tmp_path):
+    with processes() as procs:
+        env = start_slurm(procs, tmp_path / "slurm")
+        # --cluster slurm: dask-jobqueue submits a worker job, the scenes run in it
+        out = tmp_path / "ds"
+        proc = subprocess.run(
+            [sys.executable, "-m", "kubric", "generate", FAKE, "--out", str(out), "--scenes", "4",
+             "--cluster", "slurm", "--jobs", "1", "--cores-per-job", "1", "--memory", "1GB",
+             "--walltime", "00:10:00", "--queue", "kubric", "--dashboard-address", ":0",
+             "--no-progress"], cwd=tmp_path, env=env, capture_output=True, text=True, timeout=300)
+        assert proc.returncode == 0, proc.stdout + proc.stderr
+        assert "4 generated, 0 already complete, 0 failed of 4 scenes" in proc.stdout
+        assert all(is_complete(out / f"scene_{s:08d}") for s in range(4))
+        # the job array script, submitted with sbatch: one scene per array index
+        array_out = tmp_path / "array"
+        sbatch = subprocess.run(
+            ["sbatch", "--parsable", "--wait", "--array=0-2", "--cpus-per-task=1", "--mem=500M",
+             f"--output={tmp_path}/array-%A_%a.log", str(ROOT / "deploy" / "slurm_array.sbatch"),
+             "--set", "frames=2"], cwd=ROOT, capture_output=True, text=True, timeout=300,
+            env=dict(env, KUBRIC_RECIPE=FAKE, KUBRIC_OUT=str(array_out), KUBRIC_FIRST_SEED="5",
+                     KUBRIC_PYTHON=sys.executable))
+        assert sbatch.returncode == 0, sbatch.stdout + sbatch.stderr
+        assert sorted(p.name for p in array_out.iterdir()) == \
+            [f"scene_{s:08d}" for s in (5, 6, 7)]
+        assert all(is_complete(p) for p in array_out.iterdir())
