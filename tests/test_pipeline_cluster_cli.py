@@ -44,6 +44,12 @@ def test_bad_cluster_and_output_are_one_line_and_start_nothing(tmp_path):
     assert_one_line(kubric(*gen, "--cluster", "tcp://host"), "tcp://HOST:PORT")
     assert_one_line(kubric(*gen, "--cluster", "local", "--threads-per-scene", "0"),
                     "--threads-per-scene must be ≥ 1, got 0")
+    # flags where they mean nothing are refused, not ignored
+    assert_one_line(kubric(*gen, "--threads-per-scene", "2"), "--threads-per-scene needs --cluster")
+    assert_one_line(kubric(*gen, "--cluster", "local", "--queue", "gpu"),
+                    "--queue applies to --cluster slurm only")
+    assert_one_line(kubric(*gen, "--cluster", f"tcp://127.0.0.1:{port}", "--workers", "2"),
+                    "--workers does not apply to a running scheduler")
     # --cluster slurm without sbatch on the PATH
     env = dict(os.environ, PATH=str(tmp_path / "empty-bin"))
     proc = kubric(*gen, "--cluster", "slurm", env=env)

@@ -57,15 +57,45 @@ def cmd_worker(args) -> int:
     return 0
 
 
+#: cluster flags → their defaults; the slurm ones apply to --cluster slurm only
+CLUSTER_FLAGS = {"threads_per_scene": 1, "connect_timeout": 20.0, "dashboard_address": ":8787"}
+SLURM_FLAGS = {"jobs": 1, "cores_per_job": 1, "memory": "4GB", "walltime": "01:00:00",
+               "queue": None, "job_directive": [], "print_job_script": False}
+
+
+def _flag(name: str) -> str:
+    return "--" + name.replace("_", "-")
+
+
+def _misplaced_flag(args) -> str | None:
+    """A one-line complaint about a flag given where it means nothing, or None."""
+    given = [n for n in (*CLUSTER_FLAGS, *SLURM_FLAGS) if getattr(args, n) not in (None, False)]
+    if args.cluster is None:
+        return f"{_flag(given[0])} needs --cluster" if given else None
+    slurm_only = [n for n in given if n in SLURM_FLAGS]
+    if args.cluster != "slurm" and slurm_only:
+        return f"{_flag(slurm_only[0])} applies to --cluster slurm only"
+    if args.cluster not in ("local", "slurm"):
+        for name in ("workers", "dashboard_address"):
+            if getattr(args, name) is not None:
+                return (f"{_flag(name)} does not apply to a running scheduler ({args.cluster}): "
+                        f"its workers and dashboard are started with it")
+    if args.cluster == "slurm" and args.workers is not None:
+        return "--workers does not apply to --cluster slurm (use --jobs and --cores-per-job)"
+    return None
+
+
 def _cluster_options(args):
     from kubric.pipeline.dask_runner import ClusterOptions
+    value = {n: d if getattr(args, n) is None else getattr(args, n)
+             for n, d in {**CLUSTER_FLAGS, **SLURM_FLAGS}.items()}
     return ClusterOptions(spec=args.cluster, workers=args.workers,
-                          threads_per_scene=args.threads_per_scene,
-                          connect_timeout=args.connect_timeout,
-                          dashboard_address=args.dashboard_address, jobs=args.jobs,
-                          cores_per_job=args.cores_per_job, memory=args.memory,
-                          walltime=args.walltime, queue=args.queue,
-                          job_directives=args.job_directive)
+                          threads_per_scene=value["threads_per_scene"],
+                          connect_timeout=value["connect_timeout"],
+                          dashboard_address=value["dashboard_address"], jobs=value["jobs"],
+                          cores_per_job=value["cores_per_job"], memory=value["memory"],
+                          walltime=value["walltime"], queue=value["queue"],
+                          job_directives=value["job_directive"])
 
 
 def cmd_generate(args) -> int:
@@ -82,8 +112,9 @@ def cmd_generate(args) -> int:
         return _error("generate", f"--retries must be ≥ 0, got {args.retries}")
     if args.timeout is not None and args.timeout <= 0:
         return _error("generate", f"--timeout must be > 0, got {args.timeout}")
-    if args.cluster is None and args.print_job_script:
-        return _error("generate", "--print-job-script needs --cluster slurm")
+    misplaced = _misplaced_flag(args)
+    if misplaced:
+        return _error("generate", misplaced)
     cluster_options = None
     if args.cluster is not None:
         from kubric.pipeline.dask_runner import ClusterError, slurm_job_script
@@ -93,8 +124,6 @@ def cmd_generate(args) -> int:
         except ClusterError as err:
             return _error("generate", err)
         if args.print_job_script:
-            if cluster_options.kind != "slurm":
-                return _error("generate", "--print-job-script needs --cluster slurm")
             print(slurm_job_script(cluster_options))
             return 0
     try:
@@ -125,7 +154,7 @@ def cmd_generate(args) -> int:
             return _error("generate", err)
         print(f"Dask dashboard: {client.dashboard_link}", flush=True)
         runner = DaskRunner(recipe_spec(cls), out, seeds, client,
-                            threads_per_scene=args.threads_per_scene, **common)
+                            threads_per_scene=cluster_options.threads_per_scene, **common)
     try:
         summary = runner.run()
     finally:
@@ -209,18 +238,18 @@ def add_parser(subparsers) -> None:
     g = p.add_argument_group("Dask cluster (kubric.pipeline.dask_runner)")
     g.add_argument("--cluster", default=None, metavar="local|tcp://HOST:PORT|slurm",
                    help="run on Dask: a LocalCluster, a running scheduler, or Slurm jobs")
-    g.add_argument("--threads-per-scene", type=int, default=1,
+    g.add_argument("--threads-per-scene", type=int, default=None,
                    help="render threads of each scene (one scene per worker slot; default 1)")
-    g.add_argument("--connect-timeout", type=float, default=20.0,
+    g.add_argument("--connect-timeout", type=float, default=None,
                    help="seconds to wait for the scheduler (default 20)")
-    g.add_argument("--dashboard-address", default=":8787",
+    g.add_argument("--dashboard-address", default=None,
                    help="dashboard address of a cluster started here (default :8787)")
-    g.add_argument("--jobs", type=int, default=1, help="slurm: worker jobs to submit")
-    g.add_argument("--cores-per-job", type=int, default=1, help="slurm: cores of each job")
-    g.add_argument("--memory", default="4GB", help="slurm: memory of each job (default 4GB)")
-    g.add_argument("--walltime", default="01:00:00", help="slurm: time limit of each job")
+    g.add_argument("--jobs", type=int, default=None, help="slurm: worker jobs to submit")
+    g.add_argument("--cores-per-job", type=int, default=None, help="slurm: cores of each job")
+    g.add_argument("--memory", default=None, help="slurm: memory of each job (default 4GB)")
+    g.add_argument("--walltime", default=None, help="slurm: time limit of each job")
     g.add_argument("--queue", default=None, help="slurm: partition")
-    g.add_argument("--job-directive", action="append", default=[], metavar="DIRECTIVE",
+    g.add_argument("--job-directive", action="append", default=None, metavar="DIRECTIVE",
                    help="slurm: extra #SBATCH line, e.g. --job-directive=--gres=gpu:1 "
                    "(repeatable)")
     g.add_argument("--print-job-script", action="store_true",
