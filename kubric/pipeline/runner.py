@@ -1,5 +1,9 @@
 """Runners: many scenes, one fresh ``python -m kubric worker`` process per scene.
 
+:class:`Runner` holds what every runner shares (output root as a path or fsspec URL, per-scene
+logs, resume, progress bar, summary, signals); :class:`LocalRunner` is the process pool below,
+:class:`kubric.pipeline.dask_runner.DaskRunner` the same on a Dask cluster. The local runner:
+
 * a pool of ``workers`` concurrent processes (default: the usable cores);
 * a tqdm progress bar with ETA and the failure count;
 * up to ``retries`` extra attempts per failed scene;
