@@ -1,0 +1,272 @@
+"""The multi-view recipes end to end at tiny settings (must-show of the multi-view issue).
+
+Each recipe runs once as a `kubric worker` process. Every geometric check reads only the written
+files and re-derives the geometry itself (rays from ``transforms_*.json`` as a NeRF loader builds
+them, object poses from ``metadata.json``), independent of kubric's camera code.
+"""
+
+import concurrent.futures
+import json
+import pathlib
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from kubric import file_io
+
+pytestmark = pytest.mark.blender
+
+ROOT = pathlib.Path(__file__).resolve().parents[1]
+TINY = ["resolution=48x36", "samples=2", "denoise=false"]
+RUNS = {
+    "klevr": TINY + ["num_views=10", "min_num_objects=5", "max_num_objects=6"],
+    "toybox": TINY + ["num_views=4", "split_ratio=2,1,1", "num_categories=2"],
+}
+TOY_CATEGORIES = {"cube": "boxy", "sponge": "boxy", "sphere": "round", "cylinder": "round",
+                  "torus": "round", "teapot": "kitchen"}
+
+
+def run_worker(recipe, out, seed, options, timeout=300):
+    cmd = [sys.executable, "-m", "kubric", "worker", recipe, "--seed", str(seed), "--out",
+           str(out)]
+    for o in options:
+        cmd += ["--set", o]
+    return subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=timeout)
+
+
+def kubasic_with_categories(out, categories):
+    """A copy of the KuBasic source whose assets have ``metadata.category`` =
+    ``categories[asset_id]`` (none for ids not in the dict; the dome is left out)."""
+    from kubric import assets
+    root = assets.ensure_kubasic().manifest_path.parent
+    manifest = json.loads((root / "manifest.json").read_text())
+    manifest["assets"].pop("dome")
+    for asset_id, entry in manifest["assets"].items():
+        entry["metadata"].pop("category", None)
+        if asset_id in categories:
+            entry["metadata"]["category"] = categories[asset_id]
+    out.mkdir(parents=True)
+    for archive in root.glob("*.tar.gz"):
+        (out / archive.name).symlink_to(archive)
+    (out / "manifest.json").write_text(json.dumps(manifest))
+    return out
+
+
+@pytest.fixture(scope="module")
+def scenes(tmp_path_factory):
+    root = tmp_path_factory.mktemp("multiview")
+    from kubric.pipeline import get_recipe
+    get_recipe("klevr").from_assignments(RUNS["klevr"]).prepare()  # build assets once
+    toys = kubasic_with_categories(root / "toys", TOY_CATEGORIES)
+    runs = dict(RUNS, toybox=RUNS["toybox"] + [f"objects={toys}"])
+    get_recipe("toybox").from_assignments(runs["toybox"]).prepare()
+
+    def run(item):
+        recipe, options = item
+        return recipe, run_worker(recipe, root / recipe, 1, options)
+
+    out = {}
+    with concurrent.futures.ThreadPoolExecutor(2) as pool:
+        for recipe, proc in pool.map(run, runs.items()):
+            assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
+            out[recipe] = root / recipe / "scene_00000001"
+    return out
+
+
+def read_labels(scene, name):
+    """(T, H, W) labels of the ``{name}_{i:05d}.png`` files."""
+    frames = [np.asarray(file_io.read_palette_png(p)) for p in sorted(scene.glob(f"{name}_*.png"))]
+    return np.stack([f.reshape(f.shape[:2]) for f in frames])
+
+
+# ---------------------------------------------------------------------- independent geometry
+def quat_matrix(q):
+    w, x, y, z = np.asarray(q, np.float64) / np.linalg.norm(q)
+    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+                     [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+                     [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
+
+
+def load_transforms(scene):
+    """{view: (transforms file dict, frame entry)} over the three split files."""
+    views = {}
+    for split in ("train", "val", "test"):
+        data = json.loads((scene / f"transforms_{split}.json").read_text())
+        for entry in data["frames"]:
+            assert entry["split"] == split
+            views[entry["view"]] = (data, entry)
+    return views
+
+
+def nerf_rays(data, entry, rows, cols):
+    """Rays of pixels (rows, cols) as a NeRF loader builds them from the JSON alone."""
+    m = np.asarray(entry["transform_matrix"], np.float64)
+    d = np.stack([(cols + 0.5 - data["cx"]) / data["fl_x"],
+                  -(rows + 0.5 - data["cy"]) / data["fl_y"], -np.ones(len(rows))], axis=-1)
+    d /= np.linalg.norm(d, axis=-1, keepdims=True)
+    return np.broadcast_to(m[:3, 3], d.shape), d @ m[:3, :3].T
+
+
+def surface_errors(scene):
+    """Distances between (ray walked by depth) and (object coordinates placed by the instance
+    pose of that view) for every pixel that sees an instance, over all views."""
+    meta = file_io.read_json(scene / "metadata.json")
+    layers = file_io.read_image_dict(scene)
+    errors = []
+    for view, (data, entry) in load_transforms(scene).items():
+        assert entry["file_path"] == f"./rgba_{view:05d}"
+        assert (scene / (entry["file_path"] + ".png")).is_file()
+        seg = layers["segmentation"][view, ..., 0].astype(int)
+        rows, cols = np.nonzero(seg)
+        if not len(rows):
+            continue
+        origin, d = nerf_rays(data, entry, rows, cols)
+        p_ray = origin + d * layers["depth"][view, rows, cols, 0][:, None]
+        oc = layers["object_coordinates"][view, rows, cols].astype(np.float64)
+        p_model = np.zeros_like(p_ray)
+        for k in np.unique(seg[rows, cols]):
+            inst = meta["instances"][k - 1]
+            rot = quat_matrix(inst["quaternions"][view])
+            pos = np.asarray(inst["positions"][view], np.float64)
+            corners = (np.asarray(inst["bboxes_3d"][view], np.float64) - pos) @ rot
+            lo, hi = corners[0], corners[7]
+            sel = seg[rows, cols] == k
+            p_model[sel] = (lo + oc[sel] * (hi - lo)) @ rot.T + pos
+        errors.append(np.linalg.norm(p_ray - p_model, axis=-1))
+    return np.concatenate(errors)
+
+
+@pytest.mark.parametrize("recipe", sorted(RUNS))
+def test_transforms_rays_land_on_the_model_surface(scenes, recipe):
+    scene = scenes[recipe]
+    assert (scene / "_SUCCESS").is_file()
+    meta = file_io.read_json(scene / "metadata.json")
+    views = load_transforms(scene)
+    n = meta["metadata"]["num_views"]
+    assert sorted(views) == list(range(n))
+    a, b, c = meta["metadata"]["split_ratio"]
+    for view, (data, entry) in views.items():
+        p = view % (a + b + c)
+        assert entry["split"] == ("train" if p < a else "val" if p < a + b else "test")
+        w, h = meta["metadata"]["resolution"]
+        assert (data["w"], data["h"]) == (w, h)
+        assert data["camera_angle_x"] == pytest.approx(2 * np.arctan(0.5 * w / data["fl_x"]))
+        np.testing.assert_allclose(entry["transform_matrix"],
+                                   meta["camera"]["matrices_world"][view], atol=1e-6)
+    errors = surface_errors(scene)
+    assert len(errors) > 100
+    assert np.median(errors) < 1e-3, (np.median(errors), np.percentile(errors, 95))
+
+
+def test_undocumented_fields(scenes):
+    from kubric.docgen import undocumented_scene_fields
+    for recipe, scene in scenes.items():
+        assert undocumented_scene_fields(scene) == [], recipe
+
+
+# ---------------------------------------------------------------------- klevr
+def test_klevr_semantics_match_the_instance_class_table(scenes):
+    scene = scenes["klevr"]
+    meta = file_io.read_json(scene / "metadata.json")
+    classes = meta["metadata"]["semantic_classes"]
+    assert classes[0] == "background"
+    layers = file_io.read_image_dict(scene)
+    seg = layers["segmentation"][..., 0]
+    sem = read_labels(scene, "semantic")
+    assert sem.shape == seg.shape
+    table = np.array([0] + [inst["semantic_id"] for inst in meta["instances"]])
+    np.testing.assert_array_equal(sem, table[seg])
+    for inst in meta["instances"]:
+        assert classes[inst["semantic_id"]] == inst["category"] == inst["asset_id"]
+    assert len(set(table[1:])) >= 2
+
+
+def test_toybox_uses_the_most_common_categories(scenes):
+    scene = scenes["toybox"]
+    meta = file_io.read_json(scene / "metadata.json")
+    classes = meta["metadata"]["semantic_classes"]
+    assert classes == ["background", "round", "boxy"]  # 3 round, 2 boxy, 1 kitchen
+    sem, seg = read_labels(scene, "semantic"), read_labels(scene, "segmentation")
+    table = np.array([0] + [inst["semantic_id"] for inst in meta["instances"]])
+    np.testing.assert_array_equal(sem, table[seg])
+    for inst in meta["instances"]:
+        assert TOY_CATEGORIES[inst["asset_id"]] == inst["category"] == classes[inst["semantic_id"]]
+    assert meta["metadata"]["background"] in {"city", "courtyard", "forest", "interior", "night",
+                                              "studio", "sunrise", "sunset"}
+
+
+def _interp_points(layers, data, entry, view, xy):
+    """Surface points of ``view`` at sub-pixel positions ``xy`` (N,2), interpolating 1/z
+    bilinearly (exact on planes), with the 4 neighbouring pixel indices."""
+    x, y = xy[:, 0] - 0.5, xy[:, 1] - 0.5
+    c0, r0 = np.floor(x).astype(int), np.floor(y).astype(int)
+    fx, fy = x - c0, y - r0
+    rows = np.stack([r0, r0, r0 + 1, r0 + 1], 1)
+    cols = np.stack([c0, c0 + 1, c0, c0 + 1], 1)
+    wts = np.stack([(1 - fx) * (1 - fy), fx * (1 - fy), (1 - fx) * fy, fx * fy], 1)
+    # depth -> z with each neighbour's own ray
+    _, d = nerf_rays(data, entry, rows.ravel(), cols.ravel())
+    axis = -np.asarray(entry["transform_matrix"])[:3, 2]
+    z = layers["depth"][view, rows.ravel(), cols.ravel(), 0] * (d @ axis)
+    inv_z = (wts.ravel() / z).reshape(-1, 4).sum(1)
+    origin, d_xy = nerf_rays(data, entry, y, x)  # rays through xy
+    depth = 1.0 / inv_z / (d_xy @ axis)
+    return origin + d_xy * depth[:, None], rows, cols
+
+
+def test_klevr_point_clouds_of_two_views_agree(scenes):
+    scene = scenes["klevr"]
+    pts = dict(np.load(scene / "points.npz"))
+    assert set(pts) >= {"xyz", "rgb", "class", "instance", "view"}
+    layers = file_io.read_image_dict(scene)
+    views = load_transforms(scene)
+    h, w = layers["depth"].shape[1:3]
+    checked = 0
+    for a, b in [(0, 1), (2, 5), (3, 7)]:
+        sel = pts["view"] == a
+        xyz, cls, inst = pts["xyz"][sel].astype(np.float64), pts["class"][sel], pts["instance"][sel]
+        data_b, entry_b = views[b]
+        m = np.asarray(entry_b["transform_matrix"])
+        cam = (xyz - m[:3, 3]) @ m[:3, :3]
+        front = cam[:, 2] < -0.1
+        xy = np.stack([data_b["cx"] + data_b["fl_x"] * cam[:, 0] / -cam[:, 2],
+                       data_b["cy"] - data_b["fl_y"] * cam[:, 1] / -cam[:, 2]], 1)
+        inside = front & (xy[:, 0] > 1) & (xy[:, 0] < w - 1) & (xy[:, 1] > 1) & (xy[:, 1] < h - 1)
+        idx = np.nonzero(inside)[0]
+        p_b, rows, cols = _interp_points(layers, data_b, entry_b, b, xy[idx])
+        seg_b = layers["segmentation"][b, rows, cols, 0]
+        nrm_b = layers["normal"][b, rows, cols]
+        row_a, col_a = pts["pixel"][sel][idx].T
+        nrm_a = layers["normal"][a, row_a, col_a]
+        # overlap: b sees the same instance with the same (planar) face normal at all 4 pixels
+        same = np.all(seg_b == inst[idx][:, None], axis=1) & \
+            np.all(np.linalg.norm(nrm_b - nrm_a[:, None], axis=-1) < 2e-3, axis=1)
+        assert same.sum() > 20, (a, b, same.sum())
+        err = np.linalg.norm(p_b[same] - xyz[idx][same], axis=-1)
+        assert np.median(err) < 1e-3, (a, b, np.median(err))
+        sem_b = read_labels(scene, "semantic")[b]
+        np.testing.assert_array_equal(sem_b[rows[same, 0], cols[same, 0]], cls[idx][same])
+        checked += int(same.sum())
+    assert checked > 100
+
+
+# ---------------------------------------------------------------------- bad input
+
+
+def test_bad_input_fails_in_one_line_before_rendering(tmp_path):
+    from kubric.pipeline import OptionError, get_recipe
+    with pytest.raises(OptionError) as err:
+        get_recipe("klevr").from_assignments(["num_views=9", "split_ratio=8,1,1"])
+    assert "num_views=9" in str(err.value) and "10" in str(err.value)
+    assert "\n" not in str(err.value)
+    get_recipe("klevr").from_assignments(["num_views=9", "split_ratio=8,1,0"])  # fits
+    nocat = kubasic_with_categories(tmp_path / "nocat", {})
+    with pytest.raises(OptionError) as err:
+        get_recipe("toybox").from_assignments([f"objects={nocat}"])
+    assert "without categories" in str(err.value) and "\n" not in str(err.value)
+    proc = run_worker("klevr", tmp_path / "out", 0, ["num_views=3"], timeout=60)
+    assert proc.returncode != 0
+    assert "num_views=3" in proc.stderr and len(proc.stderr.strip().splitlines()) == 1
+    assert not (tmp_path / "out").exists() or not list((tmp_path / "out").iterdir())
