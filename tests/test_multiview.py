@@ -23,6 +23,8 @@ TINY = ["resolution=48x36", "samples=2", "denoise=false"]
 RUNS = {
     "klevr": TINY + ["num_views=10", "min_num_objects=5", "max_num_objects=6"],
     "toybox": TINY + ["num_views=4", "split_ratio=2,1,1", "num_categories=2"],
+    "texture_nerf": TINY + ["num_views=4", "split_ratio=2,1,1", "num_objects=12",
+                            "texture_size=128", "band_range=-1,1.8"],
 }
 TOY_CATEGORIES = {"cube": "boxy", "sponge": "boxy", "sphere": "round", "cylinder": "round",
                   "torus": "round", "teapot": "kitchen"}
@@ -266,7 +268,81 @@ def test_bad_input_fails_in_one_line_before_rendering(tmp_path):
     with pytest.raises(OptionError) as err:
         get_recipe("toybox").from_assignments([f"objects={nocat}"])
     assert "without categories" in str(err.value) and "\n" not in str(err.value)
+    with pytest.raises(OptionError) as err:
+        get_recipe("texture_nerf").from_assignments(["band_range=-1,2.5", "texture_size=256"])
+    assert "band_range=-1.0,2.5" in str(err.value) and "128" in str(err.value)
+    assert "\n" not in str(err.value)
+    get_recipe("texture_nerf").from_assignments(["band_range=-1,2.5", "texture_size=1024"])
     proc = run_worker("klevr", tmp_path / "out", 0, ["num_views=3"], timeout=60)
     assert proc.returncode != 0
     assert "num_views=3" in proc.stderr and len(proc.stderr.strip().splitlines()) == 1
     assert not (tmp_path / "out").exists() or not list((tmp_path / "out").iterdir())
+
+
+# ---------------------------------------------------------------------- texture_nerf
+def test_texture_nerf_band_label_is_the_cube_cutoff(scenes):
+    scene = scenes["texture_nerf"]
+    meta = file_io.read_json(scene / "metadata.json")
+    seg = read_labels(scene, "segmentation")
+    band = read_labels(scene, "band")
+    cutoff = np.stack([file_io.read_tiff(p)[..., 0]
+                       for p in sorted(scene.glob("cutoff_*.tiff"))])
+    table = np.array([0.0] + [inst["cutoff_frequency"] for inst in meta["instances"]])
+    np.testing.assert_allclose(cutoff, table[seg], rtol=1e-6)
+    low, width = -1.0, 0.5  # band_range low and band_width
+    expect = np.zeros(len(table), int)
+    expect[1:] = 1 + np.floor((np.log10(table[1:]) - low) / width).astype(int)
+    np.testing.assert_array_equal(band, expect[seg])
+    assert all(10 ** -1 <= c <= 10 ** 1.8 for c in table[1:])
+    edges = np.asarray(meta["metadata"]["bands"])
+    for inst in meta["instances"]:
+        lo, hi = edges[inst["band"] - 1]
+        assert lo <= inst["cutoff_frequency"] < hi
+    assert len(set(band[seg > 0])) >= 3  # several bands seen
+
+
+def _radial_power_f95(image, pixels_per_face):
+    """Frequency (cycles per face) below which 95% of the non-DC power of ``image`` lies."""
+    grey = image.mean(-1)
+    grey = grey - grey.mean()
+    n = grey.shape[0]
+    window = np.hanning(n)[:, None] * np.hanning(n)[None, :]
+    power = np.abs(np.fft.fft2(grey * window)) ** 2
+    k = np.fft.fftfreq(n) * n
+    radius = np.hypot(k[:, None], k[None, :]) * pixels_per_face / n  # cycles per face
+    order = np.argsort(radius.ravel())
+    cumulative = np.cumsum(power.ravel()[order])
+    return float(radius.ravel()[order][np.searchsorted(cumulative, 0.95 * cumulative[-1])])
+
+
+def test_texture_spectrum_falls_off_at_the_cutoff(tmp_path):
+    """One flat, front-facing cube per cut-off, seen by an orthographic camera under uniform
+    white light: the rendered texture's power spectrum ends at the stated cut-off."""
+    import kubric as kb
+    from kubric.recipes.texture_nerf import band_limited_texture, textured_cube
+
+    size, visible = 128, 0.8  # image pixels; the camera sees 0.8 of the face width
+    cutoffs = (10.0, 30.0)
+    scene = kb.Scene(resolution=(size, size), frame_start=0, frame_end=len(cutoffs) - 1)
+    scene.ambient_illumination = kb.Color(1.0, 1.0, 1.0)
+    scene.background = kb.Color(1.0, 1.0, 1.0)
+    rng = np.random.RandomState(0)
+    camera = kb.OrthographicCamera(orthographic_scale=visible)
+    scene.camera = camera
+    for frame, cutoff in enumerate(cutoffs):
+        texture = band_limited_texture(rng, 256, cutoff, (0.5, 0.5, 0.5))
+        path = tmp_path / f"t{frame}.png"
+        file_io.write_png(np.rint(texture * 255).astype(np.uint8), path)
+        cube = textured_cube(tmp_path, 1.0, path)
+        cube.position = (4.0 * frame, 0.0, 0.0)
+        scene.add(cube)
+        camera.position = (4.0 * frame, -5.0, 0.0)  # faces the cube's -y face (u = x, v = z)
+        camera.look_at((4.0 * frame, 0.0, 0.0))
+        camera.keyframe_insert("position", frame)
+        camera.keyframe_insert("quaternion", frame)
+    renderer = kb.renderer.Blender(scene, tmp_path / "render", samples_per_pixel=16,
+                                   use_denoising=False)
+    rgba = renderer.render(return_layers=("rgba",))["rgba"][..., :3].astype(np.float64) / 255
+    f95 = [_radial_power_f95(img, size / visible) for img in rgba]
+    for cutoff, f in zip(cutoffs, f95, strict=True):
+        assert 0.8 * cutoff <= f <= 1.2 * cutoff, (cutoff, f95)

@@ -230,12 +230,14 @@ class MultiviewBase(Recipe):
                          frame_end=self.num_views - 1)
         scene.metadata["dropped_objects"] = 0
         splits = nerf_export.view_splits(self.num_views, self.split_ratio)
-        background = self.build_background(scene, rng, sources)
-        self.add_objects(scene, rng, sources)
-        self.key_camera(scene, self.camera_positions(rng))
-        self.animate(scene, rng, splits, sources)
         with tempfile.TemporaryDirectory(prefix=f"kubric_{self.name}_") as scratch:
-            renderer = kb.renderer.Blender(scene, scratch, samples_per_pixel=self.samples,
+            self.scratch = pathlib.Path(scratch)  # for generated files (meshes, textures)
+            background = self.build_background(scene, rng, sources)
+            self.add_objects(scene, rng, sources)
+            self.key_camera(scene, self.camera_positions(rng))
+            self.animate(scene, rng, splits, sources)
+            renderer = kb.renderer.Blender(scene, self.scratch / "render",
+                                           samples_per_pixel=self.samples,
                                            use_denoising=self.denoise)
             layers = renderer.render(return_layers=RENDERED_LAYERS)
         render_settings = {"samples_per_pixel": self.samples, "engine": "CYCLES",
