@@ -25,6 +25,10 @@ RUNS = {
     "toybox": TINY + ["num_views=4", "split_ratio=2,1,1", "num_categories=2"],
     "texture_nerf": TINY + ["num_views=4", "split_ratio=2,1,1", "num_objects=12",
                             "texture_size=128", "band_range=-1,1.8"],
+    "robust_nerf": TINY + ["num_views=5", "split_ratio=3,1,1", "num_impostors=2",
+                           "max_num_objects=5"],
+    "robust_nerf:jitter": TINY + ["num_views=5", "split_ratio=3,1,1", "impostor_motion=jitter",
+                                  "jitter=0.4"],
 }
 TOY_CATEGORIES = {"cube": "boxy", "sponge": "boxy", "sphere": "round", "cylinder": "round",
                   "torus": "round", "teapot": "kitchen"}
@@ -63,17 +67,17 @@ def scenes(tmp_path_factory):
     get_recipe("klevr").from_assignments(RUNS["klevr"]).prepare()  # build assets once
     toys = kubasic_with_categories(root / "toys", TOY_CATEGORIES)
     runs = dict(RUNS, toybox=RUNS["toybox"] + [f"objects={toys}"])
-    get_recipe("toybox").from_assignments(runs["toybox"]).prepare()
+    get_recipe("toybox").from_assignments(runs["toybox"]).prepare()  # build the HDRIs once
 
     def run(item):
-        recipe, options = item
-        return recipe, run_worker(recipe, root / recipe, 1, options)
+        key, options = item
+        return key, run_worker(key.split(":")[0], root / key.replace(":", "_"), 1, options)
 
     out = {}
     with concurrent.futures.ThreadPoolExecutor(2) as pool:
-        for recipe, proc in pool.map(run, runs.items()):
+        for key, proc in pool.map(run, runs.items()):
             assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
-            out[recipe] = root / recipe / "scene_00000001"
+            out[key] = root / key.replace(":", "_") / "scene_00000001"
     return out
 
 
@@ -346,3 +350,49 @@ def test_texture_spectrum_falls_off_at_the_cutoff(tmp_path):
     f95 = [_radial_power_f95(img, size / visible) for img in rgba]
     for cutoff, f in zip(cutoffs, f95, strict=True):
         assert 0.8 * cutoff <= f <= 1.2 * cutoff, (cutoff, f95)
+
+
+# ---------------------------------------------------------------------- robust_nerf
+def _footprints(inst, view):
+    """(centre xy, radius) of an instance's footprint circle from its written 3D box."""
+    pos = np.asarray(inst["positions"][view], np.float64)
+    corners = np.asarray(inst["bboxes_3d"][view], np.float64)
+    return pos[:2], float(np.max(np.linalg.norm(corners[:, :2] - pos[:2], axis=1)))
+
+
+@pytest.mark.parametrize("key", ["robust_nerf", "robust_nerf:jitter"])
+def test_robust_nerf_impostors_only_in_train_views_never_overlapping(scenes, key):
+    scene = scenes[key]
+    meta = file_io.read_json(scene / "metadata.json")
+    splits = [v["split"] for v in meta["metadata"]["views"]]
+    seg = read_labels(scene, "segmentation")
+    mask = read_labels(scene, "impostor_mask")
+    impostor = np.array([False] + [inst["is_impostor"] for inst in meta["instances"]])
+    np.testing.assert_array_equal(mask, impostor[seg].astype(mask.dtype))
+    for view, split in enumerate(splits):
+        if split == "train":
+            assert mask[view].any(), view  # the impostors are seen in every train view
+        else:
+            assert not mask[view].any(), view
+    imps = [i for i in meta["instances"] if i["is_impostor"]]
+    static = [i for i in meta["instances"] if not i["is_impostor"]]
+    assert imps and static
+    for inst in static:
+        np.testing.assert_allclose(inst["positions"], [inst["positions"][0]] * len(splits))
+    for view, split in enumerate(splits):
+        for k, imp in enumerate(imps):
+            assert imp["present"][view] == (split == "train")
+            if split != "train":
+                assert imp["positions"][view][2] < -100  # parked below the floor
+                continue
+            c, r = _footprints(imp, view)
+            for other in static + imps[k + 1:]:
+                c2, r2 = _footprints(other, view)
+                assert np.linalg.norm(c - c2) >= r + r2, (view, imp["asset_id"])
+    train = [v for v, s in enumerate(splits) if s == "train"]
+    moves = [np.linalg.norm(np.subtract(imps[0]["positions"][a], imps[0]["positions"][b])[:2])
+             for a, b in zip(train[:-1], train[1:], strict=True)]
+    if key.endswith("jitter"):
+        assert 0 < max(moves) <= 2 * 0.4 * np.sqrt(2)
+    else:
+        assert min(moves) > 0

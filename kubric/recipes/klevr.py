@@ -26,10 +26,10 @@ import kubric as kb
 from kubric.core import camera_geometry as geo
 from kubric.io.paths import atomic_write_bytes
 from kubric.pipeline import Option, OptionError, float_range
-from kubric.recipes.movi import add_clevr_lights
 from kubric.recipes.movi_base import _existing_source as open_source
 from kubric.recipes.multiview_base import (
     MultiviewBase,
+    kubasic_object,
     place_upright,
     write_label_layer,
 )
@@ -128,19 +128,10 @@ class Klevr(_SemanticScenes, name="klevr"):
         return names
 
     def build_background(self, scene, rng, sources):
-        grey = kb.get_color("gray")
-        self.add_floor(scene, sources, kb.PrincipledBSDFMaterial(color=grey, roughness=1.0,
-                                                                 specular=0.0))
-        add_clevr_lights(scene, rng)
-        return grey.hexstr
+        return self.grey_background(scene, rng, sources)
 
     def new_object(self, rng, sources, category):
-        size = float(rng.uniform(*self.size_range))
-        color = kb.random_hue_color(rng=rng)
-        obj = sources["kubasic"].create(category, scale=size)
-        obj.material = kb.PrincipledBSDFMaterial(color=color, roughness=0.6)
-        obj.metadata = {**obj.metadata, "size": size, "color": np.asarray(color.rgb, np.float32)}
-        return obj
+        return kubasic_object(sources, category, float(rng.uniform(*self.size_range)), rng)
 
 
 class ToyBox(_SemanticScenes, name="toybox"):

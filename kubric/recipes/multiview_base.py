@@ -66,20 +66,38 @@ def stand_upright(obj, xy, yaw: float) -> None:
     obj.position = (float(xy[0]), float(xy[1]), -low_z)
 
 
-def place_upright(obj, rng, occupied: list, half_extent: float, margin: float = 0.05,
-                  max_trials: int = 1000) -> bool:
-    """Rejection-sample a free floor position in the square ``±half_extent`` for ``obj``: its
-    footprint circle (plus ``margin``) must not touch any ``(xy, radius)`` of ``occupied``.
-    On success the object stands there (random yaw) and is appended to ``occupied``."""
-    radius = footprint_radius(obj)
+def free_place(rng, occupied: list, radius: float, half_extent: float, margin: float = 0.05,
+               max_trials: int = 1000):
+    """Rejection-sample a floor position in the square ``±half_extent`` whose circle of
+    ``radius`` (plus ``margin``) touches no ``(xy, radius)`` of ``occupied``; returns (xy, random
+    yaw) and appends the circle to ``occupied``, or None after ``max_trials``."""
     for _ in range(max_trials):
         xy = rng.uniform(-half_extent, half_extent, 2)
-        yaw = rng.uniform(0.0, 2.0 * math.pi)
+        yaw = float(rng.uniform(0.0, 2.0 * math.pi))
         if all(np.linalg.norm(xy - c) >= radius + r + margin for c, r in occupied):
-            stand_upright(obj, xy, yaw)
             occupied.append((xy, radius))
-            return True
-    return False
+            return xy, yaw
+    return None
+
+
+def place_upright(obj, rng, occupied: list, half_extent: float) -> bool:
+    """Stand ``obj`` at a :func:`free_place` for its footprint; False when there is none."""
+    place = free_place(rng, occupied, footprint_radius(obj), half_extent)
+    if place is None:
+        return False
+    stand_upright(obj, *place)
+    return True
+
+
+def kubasic_object(sources, shape: str, size: float, rng):
+    """A KuBasic shape at scale ``size`` with a random-hue diffuse material (metadata: ``size``,
+    ``color``)."""
+    color = kb.random_hue_color(rng=rng)
+    obj = sources["kubasic"].create(shape, scale=size)
+    obj.material = kb.PrincipledBSDFMaterial(color=color, roughness=0.6)
+    obj.metadata = {**obj.metadata, "size": float(size),
+                    "color": np.asarray(color.rgb, np.float32)}
+    return obj
 
 
 def sphere_cap_positions(rng, count: int, distance, elevation_deg, target) -> np.ndarray:
@@ -190,6 +208,15 @@ class MultiviewBase(Recipe):
         dome.material = material
         scene.add(dome)
         return dome
+
+    def grey_background(self, scene, rng, sources, color="gray") -> str:
+        """A diffuse dome of ``color`` lit by the CLEVR lamps (as MOVi-A); returns the hex."""
+        from kubric.recipes.movi import add_clevr_lights
+        floor = kb.get_color(color)
+        self.add_floor(scene, sources, kb.PrincipledBSDFMaterial(color=floor, roughness=1.0,
+                                                                 specular=0.0))
+        add_clevr_lights(scene, rng)
+        return floor.hexstr
 
     def hdri_background(self, scene, rng, sources) -> str:
         """A random HDRI of ``sources["hdri"]`` lights the scene and shows behind it; the dome

@@ -29,7 +29,6 @@ import kubric as kb
 from kubric.io import png_io, tiff_io
 from kubric.io.paths import atomic_write_bytes
 from kubric.pipeline import Option, OptionError, float_range
-from kubric.recipes.movi import add_clevr_lights
 from kubric.recipes.multiview_base import MultiviewBase, place_upright, write_label_layer
 
 TEXTURE_AMPLITUDE = 0.12
@@ -126,12 +125,8 @@ class TextureNerf(MultiviewBase, name="texture_nerf"):
                 f"lower band_range to ≤ {math.log10(nyquist):.3f} or raise texture_size")
 
     def build_background(self, scene, rng, sources):
-        grey = kb.get_color("gray")
-        self.add_floor(scene, sources, kb.PrincipledBSDFMaterial(color=grey, roughness=1.0,
-                                                                 specular=0.0))
-        add_clevr_lights(scene, rng)
         scene.metadata["bands"] = band_edges(self.band_range, self.band_width)
-        return grey.hexstr
+        return self.grey_background(scene, rng, sources)
 
     def add_objects(self, scene, rng, sources):
         occupied = []
