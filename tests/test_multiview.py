@@ -27,9 +27,13 @@ RUNS = {
                             "texture_size=128", "band_range=-1,1.8"],
     "robust_nerf": TINY + ["num_views=5", "split_ratio=3,1,1", "num_impostors=2",
                            "max_num_objects=5"],
+    "multiview_matting": TINY + ["num_views=4", "split_ratio=2,1,1", "difficulty=hard",
+                                 "min_num_clutter=3", "max_num_clutter=3"],
+    "nvs": TINY + ["num_views=4", "split_ratio=2,1,1"],
     "robust_nerf:jitter": TINY + ["num_views=5", "split_ratio=3,1,1", "impostor_motion=jitter",
                                   "jitter=0.4"],
 }
+HDRIS = {"city", "courtyard", "forest", "interior", "night", "studio", "sunrise", "sunset"}
 TOY_CATEGORIES = {"cube": "boxy", "sponge": "boxy", "sphere": "round", "cylinder": "round",
                   "torus": "round", "teapot": "kitchen"}
 
@@ -199,8 +203,7 @@ def test_toybox_uses_the_most_common_categories(scenes):
     np.testing.assert_array_equal(sem, table[seg])
     for inst in meta["instances"]:
         assert TOY_CATEGORIES[inst["asset_id"]] == inst["category"] == classes[inst["semantic_id"]]
-    assert meta["metadata"]["background"] in {"city", "courtyard", "forest", "interior", "night",
-                                              "studio", "sunrise", "sunset"}
+    assert meta["metadata"]["background"] in HDRIS
 
 
 def _interp_points(layers, data, entry, view, xy):
@@ -396,3 +399,26 @@ def test_robust_nerf_impostors_only_in_train_views_never_overlapping(scenes, key
         assert 0 < max(moves) <= 2 * 0.4 * np.sqrt(2)
     else:
         assert min(moves) > 0
+
+
+# ---------------------------------------------------------------------- matting, nvs
+def test_matting_mask_is_the_salient_object(scenes):
+    scene = scenes["multiview_matting"]
+    meta = file_io.read_json(scene / "metadata.json")
+    salient = np.array([False] + [inst["is_salient"] for inst in meta["instances"]])
+    assert salient.sum() == 1 and len(meta["instances"]) >= 3  # hard: clutter too
+    seg, mask = read_labels(scene, "segmentation"), read_labels(scene, "mask")
+    np.testing.assert_array_equal(mask, salient[seg].astype(mask.dtype))
+    assert all(m.any() for m in mask)  # the salient object is in every view
+    k = int(np.nonzero(salient)[0][0]) - 1
+    np.testing.assert_allclose(meta["instances"][k]["positions"][0][:2], [0, 0], atol=1e-9)
+    assert meta["metadata"]["background"] in HDRIS
+
+
+def test_nvs_views_see_the_group(scenes):
+    scene = scenes["nvs"]
+    meta = file_io.read_json(scene / "metadata.json")
+    assert meta["metadata"]["resolution"] == [48, 36] and meta["metadata"]["num_views"] == 4
+    assert 3 <= len(meta["instances"]) <= 6 and meta["metadata"]["background"] in HDRIS
+    seg = read_labels(scene, "segmentation")
+    assert all(len(np.unique(s)) >= 3 for s in seg)

@@ -30,7 +30,9 @@ from kubric.recipes.movi_base import _existing_source as open_source
 from kubric.recipes.multiview_base import (
     MultiviewBase,
     kubasic_object,
+    open_hdri_source,
     place_upright,
+    sized_object,
     write_label_layer,
 )
 
@@ -171,11 +173,9 @@ class ToyBox(_SemanticScenes, name="toybox"):
         return ranked[:self.num_categories]
 
     def open_sources(self):
-        from kubric import assets
         sources = super().open_sources()
         sources["objects"] = open_source(self.objects, "objects")
-        sources["hdri"] = open_source(self.hdri_source, "hdri_source") \
-            if self.hdri_source is not None else assets.ensure_hdri_source()
+        sources["hdri"] = open_hdri_source(self.hdri_source)
         return sources
 
     def class_names(self, sources):
@@ -186,9 +186,5 @@ class ToyBox(_SemanticScenes, name="toybox"):
 
     def new_object(self, rng, sources, category):
         ids = sources["objects"].asset_ids_in(category)
-        obj = sources["objects"].create(ids[rng.randint(len(ids))])
-        size = float(rng.uniform(*self.size_range))
-        extent = float(np.max(np.asarray(obj.bounds)[1] - np.asarray(obj.bounds)[0]))
-        obj.scale = size / max(extent, 1e-9)
-        obj.metadata = {**obj.metadata, "size": size}
-        return obj
+        asset_id = ids[rng.randint(len(ids))]
+        return sized_object(sources["objects"], asset_id, float(rng.uniform(*self.size_range)))

@@ -100,6 +100,22 @@ def kubasic_object(sources, shape: str, size: float, rng):
     return obj
 
 
+def sized_object(source, asset_id: str, size: float):
+    """An asset of ``source`` scaled so that its largest bounding-box extent is ``size`` m
+    (metadata ``size``)."""
+    obj = source.create(asset_id)
+    bounds = np.asarray(obj.bounds, np.float64)
+    obj.scale = size / max(float(np.max(bounds[1] - bounds[0])), 1e-9)
+    obj.metadata = {**obj.metadata, "size": float(size)}
+    return obj
+
+
+def open_hdri_source(path):
+    """The HDRI source at ``path``, or the HDRIs shipped with bpy when None."""
+    from kubric import assets
+    return assets.ensure_hdri_source() if path is None else open_source(path, "hdri_source")
+
+
 def sphere_cap_positions(rng, count: int, distance, elevation_deg, target) -> np.ndarray:
     """(count, 3) points uniform (by area) on the sphere cap around ``target``: radius
     U(distance), elevation between ``elevation_deg`` (degrees above the horizon)."""
