@@ -18,6 +18,7 @@ surface with the depth layer (``xyz`` (N,3) float32 world metres, ``rgb`` (N,3) 
 from __future__ import annotations
 
 import io
+import json
 import pathlib
 
 import numpy as np
@@ -31,12 +32,32 @@ from kubric.recipes.multiview_base import (
     MultiviewBase,
     kubasic_object,
     open_hdri_source,
-    place_upright,
     sized_object,
     write_label_layer,
 )
 
 KLEVR_SHAPES = "cube,cylinder,sphere,cone,torus"
+
+
+def with_categories(source, categories: dict, out) -> pathlib.Path:
+    """Write into ``out`` an asset source that is ``source`` (an AssetSource whose archives sit
+    beside its manifest, as KuBasic's) with ``metadata.category = categories[asset_id]`` (none for
+    ids not in the dict) and without the dome: e.g. a categorised KuBasic for ``toybox``. The
+    archives are linked, not copied. Returns ``out``."""
+    root = source.manifest_path.parent
+    manifest = json.loads((root / "manifest.json").read_text())
+    manifest["assets"].pop("dome", None)
+    for asset_id, entry in manifest["assets"].items():
+        entry["metadata"].pop("category", None)
+        if asset_id in categories:
+            entry["metadata"]["category"] = categories[asset_id]
+    out = pathlib.Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    for archive in root.glob("*.tar.gz"):
+        if not (out / archive.name).exists():
+            (out / archive.name).symlink_to(archive)
+    atomic_write_bytes(json.dumps(manifest, indent=1).encode(), out / "manifest.json")
+    return out
 
 
 def semantic_layer(segmentation, instances) -> np.ndarray:
@@ -91,10 +112,7 @@ class _SemanticScenes(MultiviewBase):
             obj = self.new_object(rng, sources, category)
             obj.metadata = {**obj.metadata, "category": category,
                             "semantic_id": names.index(category) + 1}
-            if place_upright(obj, rng, occupied, self.region):
-                scene.add(obj)
-            else:
-                scene.metadata["dropped_objects"] += 1
+            self.add_upright(scene, obj, rng, occupied, self.region)
 
     def extra_outputs(self, scene, layers, instances, out_dir, meta):
         semantic = semantic_layer(layers["segmentation"], instances)

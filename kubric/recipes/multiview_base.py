@@ -207,6 +207,15 @@ class MultiviewBase(Recipe):
     def add_objects(self, scene, rng, sources) -> None:
         """Add the static objects."""
 
+    def add_upright(self, scene, obj, rng, occupied: list, half_extent: float) -> bool:
+        """Add ``obj`` standing at a free place (:func:`place_upright`), or count it in
+        ``metadata.dropped_objects`` when there is none."""
+        if place_upright(obj, rng, occupied, half_extent):
+            scene.add(obj)
+            return True
+        scene.metadata["dropped_objects"] += 1
+        return False
+
     def look_at(self) -> tuple[float, float, float]:
         return (0.0, 0.0, 0.0)
 

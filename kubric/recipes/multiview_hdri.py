@@ -27,7 +27,6 @@ from kubric.recipes.multiview_base import (
     MultiviewBase,
     footprint_radius,
     open_hdri_source,
-    place_upright,
     sized_object,
     stand_upright,
     write_label_layer,
@@ -100,10 +99,7 @@ class MultiviewMatting(_HdriObjects, name="multiview_matting"):
         for _ in range(rng.randint(self.min_num_clutter, self.max_num_clutter + 1)):
             obj = self.random_object(rng, sources, self.clutter_size)
             obj.metadata = {**obj.metadata, "is_salient": False}
-            if place_upright(obj, rng, occupied, self.region):
-                scene.add(obj)
-            else:
-                scene.metadata["dropped_objects"] += 1
+            self.add_upright(scene, obj, rng, occupied, self.region)
 
     def extra_outputs(self, scene, layers, instances, out_dir, meta):
         lut = np.zeros(len(instances) + 1, np.uint8)
@@ -128,7 +124,4 @@ class Nvs(_HdriObjects, name="nvs"):
         occupied = []
         for _ in range(rng.randint(self.min_num_objects, self.max_num_objects + 1)):
             obj = self.random_object(rng, sources, self.size_range)
-            if place_upright(obj, rng, occupied, self.region):
-                scene.add(obj)
-            else:
-                scene.metadata["dropped_objects"] += 1
+            self.add_upright(scene, obj, rng, occupied, self.region)

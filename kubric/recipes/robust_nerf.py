@@ -31,7 +31,6 @@ from kubric.recipes.multiview_base import (
     free_place,
     kubasic_object,
     orbit_positions,
-    place_upright,
     stand_upright,
     write_label_layer,
 )
@@ -42,7 +41,7 @@ PARKED_POSITION = (0.0, 0.0, -1000.0)
 class RobustNerf(MultiviewBase, name="robust_nerf"):
     """Robust NeRF: static KuBasic scene + impostors that teleport or jitter in train views."""
 
-    num_views = Option(64, "number of views on the orbit (the paper: 300)", low=1, high=10000)
+    num_views = Option(32, "number of views on the orbit (the paper: ~300)", low=1, high=10000)
     min_num_objects = Option(4, "fewest static objects", low=1, high=100)
     max_num_objects = Option(8, "most static objects", low=1, high=100)
     size_range = Option((0.8, 1.4), "static object scale range low,high (shapes fit a 1 m cube)",
@@ -70,10 +69,7 @@ class RobustNerf(MultiviewBase, name="robust_nerf"):
             obj = kubasic_object(sources, shape, float(rng.uniform(*self.size_range)), rng)
             obj.metadata = {**obj.metadata, "shape": shape, "is_impostor": False,
                             "present": [True] * self.num_views}
-            if place_upright(obj, rng, self.occupied, self.region):
-                scene.add(obj)
-            else:
-                scene.metadata["dropped_objects"] += 1
+            self.add_upright(scene, obj, rng, self.occupied, self.region)
 
     def camera_positions(self, rng):
         phase = rng.uniform(0.0, 2.0 * math.pi)

@@ -29,7 +29,7 @@ import kubric as kb
 from kubric.io import png_io, tiff_io
 from kubric.io.paths import atomic_write_bytes
 from kubric.pipeline import Option, OptionError, float_range
-from kubric.recipes.multiview_base import MultiviewBase, place_upright, write_label_layer
+from kubric.recipes.multiview_base import MultiviewBase, write_label_layer
 
 TEXTURE_AMPLITUDE = 0.12
 CUBE_ID = "textured_cube"
@@ -140,10 +140,7 @@ class TextureNerf(MultiviewBase, name="texture_nerf"):
             obj = textured_cube(self.scratch, size, path)
             obj.metadata = {"size": size, "cutoff_frequency": cutoff,
                             "band": band_of(cutoff, self.band_range, self.band_width)}
-            if place_upright(obj, rng, occupied, self.region):
-                scene.add(obj)
-            else:
-                scene.metadata["dropped_objects"] += 1
+            self.add_upright(scene, obj, rng, occupied, self.region)
 
     def extra_outputs(self, scene, layers, instances, out_dir, meta):
         seg = layers["segmentation"]
