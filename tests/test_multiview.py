@@ -154,6 +154,10 @@ def test_transforms_rays_land_on_the_model_surface(scenes, recipe):
         assert data["camera_angle_x"] == pytest.approx(2 * np.arctan(0.5 * w / data["fl_x"]))
         np.testing.assert_allclose(entry["transform_matrix"],
                                    meta["camera"]["matrices_world"][view], atol=1e-6)
+    depth = file_io.read_image_dict(scene, ["depth"])["depth"]
+    hits = depth[depth < meta["metadata"]["background_depth"]]
+    for data, _ in views.values():
+        assert (data["near"], data["far"]) == pytest.approx((hits.min(), hits.max()), rel=1e-6)
     errors = surface_errors(scene)
     assert len(errors) > 100
     assert np.median(errors) < 1e-3, (np.median(errors), np.percentile(errors, 95))

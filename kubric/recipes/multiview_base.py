@@ -37,6 +37,7 @@ import numpy as np
 
 import kubric as kb
 from kubric.annotations import nerf_export
+from kubric.core import camera_geometry as geo
 from kubric.pipeline import Option, OptionError, Recipe, float_range, resolution
 from kubric.recipes.movi_base import _existing_source as open_source
 
@@ -320,9 +321,11 @@ class MultiviewBase(Recipe):
                             "instances": instances},
                       filename=out_dir / "metadata.json")
         kb.write_json(data={"collisions": []}, filename=out_dir / "events.json")
+        depth = layers["depth"][layers["depth"] < geo.BACKGROUND_DEPTH]
+        near, far = (float(depth.min()), float(depth.max())) if depth.size else (0.0, 0.0)
         files = nerf_export.nerf_transforms(
             scene.camera, list(scene.frames), scene.resolution, splits, view_files,
-            extra={"recipe": self.name, "seed": int(seed),
+            extra={"recipe": self.name, "seed": int(seed), "near": near, "far": far,
                    "split_ratio": list(self.split_ratio)})
         for split, data in files.items():
             kb.write_json(data=data, filename=out_dir / f"transforms_{split}.json")
