@@ -318,8 +318,8 @@ def test_upstream_color_and_quaternion_spellings():
     assert kb.get_color(0xFF8000) == kb.Color(1, 128 / 255, 0)
     assert kb.Color.from_hexint(0x0000FF, alpha=0.5).a == 0.5
     assert kb.Color.from_hsv(0, 1, 1, alpha=0.25) == (1, 0, 0, 0.25)
-    assert kb.Color(1, 0, 0).hexstr_short == "#ff0000"
-    assert kb.PointLight(color=0xFFEDD0).color.hexstr_short == "#ffedd0"
+    assert kb.Color(1, 0, 0).hexstr_short == "#f00f"
+    assert kb.PointLight(color=0xFFEDD0).color.hexstr == "#ffedd0ff"
     with pytest.raises(ValueError, match=r"hex integer colour must be in \[0, 0xFFFFFF\]"):
         kb.get_color(0x1000000)
     q = kb.Quaternion(axis=[1, 0, 0], degrees=90)

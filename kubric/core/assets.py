@@ -209,7 +209,19 @@ class Asset(kt.HasProperties):
         return self._uid == other._uid
 
     def __repr__(self) -> str:
-        return f"<{type(self).__name__} {self._uid}>"
+        """Upstream Kubric's form, on one line: ``<uid name=... prop=value ...>`` with the name
+        and every property sorted by name (arrays shown as lists)."""
+        fields = [("name", self._name), *self._values.items()]
+        shown = sorted(f"{key}={_short_repr(value)}" for key, value in fields)
+        return f"<{self._uid} {' '.join(shown)}>"
+
+
+def _short_repr(value) -> str:
+    if isinstance(value, np.ndarray):
+        return repr(value.tolist())
+    if isinstance(value, Asset):
+        return f"<{value.uid}>"  # a held asset by uid only, so a repr never nests or cycles
+    return repr(value)
 
 
 class UndefinedAsset(Asset):

@@ -87,8 +87,11 @@ class Color(tuple):
 
     @property
     def hexstr_short(self) -> str:
-        """``"#rrggbb"`` (alpha dropped)."""
-        return self.hexstr[:7]
+        """``"#rgba"``: one hex digit per channel, alpha included (upstream Kubric's short form).
+
+        Each channel is rounded to the nearest of the 16 levels 0, 1/15, ..., 1, so a colour read
+        from a short string (``from_hexstr("#f0c")``) gives that string back (``"#f0cf"``)."""
+        return "#" + "".join(f"{int(round(v * 15)):x}" for v in self)
 
     def __repr__(self) -> str:
         return "Color(r={:.4g}, g={:.4g}, b={:.4g}, a={:.4g})".format(*self)

@@ -18,6 +18,14 @@ from kubric.core.quaternion import Quaternion, look_at_quaternion
 _AXIS_NAMES = ["X", "Y", "Z", "-X", "-Y", "-Z"]
 
 
+def look_at_quat(position, target, up="Y", front="-Z") -> tuple[float, float, float, float]:
+    """The WXYZ orientation that points the local ``front`` axis from ``position`` at ``target``,
+    local ``up`` as close to world +Z as possible, as a plain tuple (upstream Kubric's function of
+    this module). ``up`` / ``front`` are axis names ("X", "-Z", ...) or 3-vectors. See
+    :func:`kubric.core.quaternion.look_at_quaternion`."""
+    return tuple(float(c) for c in look_at_quaternion(position, target, up, front))
+
+
 class Object3D(Asset):
     """Anything with a position and an orientation.
 
@@ -83,7 +91,7 @@ class PhysicalObject(Object3D):
     angular_velocity = kt.Vector3D((0.0, 0.0, 0.0), "angular velocity (rad/s), world frame")
     static = kt.Property(False, kt.as_bool(), "fixed during simulation")
     mass = kt.Float(1.0, low=0.0, doc="mass in kg")
-    friction = kt.Float(0.5, 0.0, 1.0, "friction coefficient")
+    friction = kt.Float(0.0, 0.0, 1.0, "friction coefficient (default 0, as upstream)")
     restitution = kt.Float(0.5, 0.0, 1.0, "restitution (bounciness)")
     bounds = kt.Property(((0.0, 0.0, 0.0), (0.0, 0.0, 0.0)), kt.as_bounds(),
                          "local axis-aligned bounds ((x0, y0, z0), (x1, y1, z1)), unscaled")

@@ -181,7 +181,7 @@ class Scene(kt.HasProperties):
 
     def remove(self, asset: Asset) -> None:
         if asset not in self._assets:
-            raise ValueError(f"{asset!r} is not part of this scene")
+            raise ValueError(f"{getattr(asset, 'uid', asset)!r} is not part of this scene")
         self._assets.remove(asset)
         asset.scenes.remove(self)
         for view in self._views:
@@ -199,11 +199,12 @@ class Scene(kt.HasProperties):
         return tuple(self._views)
 
     def link_view(self, view) -> None:
-        """Link a view: it is given the scene itself, then every asset already in it."""
+        """Link a view: ``view.add_scene(self)``, then ``view.add(asset)`` for every asset
+        already in the scene."""
         if any(v is view for v in self._views):
             raise ValueError(f"{view!r} is already linked to this scene")
         self._views.append(view)
-        view.add(self)
+        view.add_scene(self)
         for asset in self._assets:
             view.add(asset)
 

@@ -38,6 +38,18 @@ def _where(owner, name: str) -> str:
     return f"{cls.__name__}.{name}"
 
 
+class UnknownPropertyError(TypeError, KeyError):
+    """A keyword or property name the class does not declare.
+
+    It is a ``TypeError`` (an unexpected keyword argument, as Python reports one) and a ``KeyError``
+    (what upstream Kubric raised for an unknown trait), so code catching either keeps working.
+    The message is shown as it is, not quoted as a plain ``KeyError``'s would be.
+    """
+
+    def __str__(self) -> str:
+        return str(self.args[0]) if self.args else ""
+
+
 class Property:
     """A declared, validated property.
 
@@ -76,7 +88,8 @@ class HasProperties:
     """Base for everything with declared properties (assets and the scene).
 
     Construction is keyword-only; an unknown keyword raises ``TypeError`` naming it and the allowed
-    names. Subclasses may override inherited defaults in ``property_defaults``.
+    names (an :class:`UnknownPropertyError`, which is also a ``KeyError``). Subclasses may
+    override inherited defaults in ``property_defaults``.
     """
 
     _properties: ClassVar[dict[str, Property]] = {}
@@ -97,7 +110,7 @@ class HasProperties:
     def _init_properties(self, kwargs: dict[str, Any]) -> None:
         unknown = sorted(set(kwargs) - set(self._properties))
         if unknown:
-            raise TypeError(
+            raise UnknownPropertyError(
                 f"{type(self).__name__} got unknown argument(s) {unknown}; "
                 f"allowed: {sorted(self._properties)}")
         self._values: dict[str, Any] = {}
@@ -125,7 +138,7 @@ class HasProperties:
         try:
             return cls._properties[name]
         except KeyError:
-            raise KeyError(f"{cls.__name__} has no property {name!r}; "
+            raise UnknownPropertyError(f"{cls.__name__} has no property {name!r}; "
                            f"allowed: {sorted(cls._properties)}") from None
 
     def _set_property(self, name: str, value: Any, notify: bool = True) -> None:
@@ -351,7 +364,7 @@ def Float(default: float = 0.0, low=None, high=None, doc: str = "") -> Property:
 
 
 __all__ = [
-    "Property", "HasProperties", "Converter", "as_vector", "as_scale", "as_quaternion",
-    "as_float", "as_int", "as_bool", "as_str", "as_choice", "as_color", "as_dict", "as_bounds",
-    "as_instance", "Vector3D", "Scale", "QuaternionProperty", "RGBA", "Float",
+    "UnknownPropertyError", "Property", "HasProperties", "Converter", "as_vector", "as_scale",
+    "as_quaternion", "as_float", "as_int", "as_bool", "as_str", "as_choice", "as_color", "as_dict",
+    "as_bounds", "as_instance", "Vector3D", "Scale", "QuaternionProperty", "RGBA", "Float",
 ]

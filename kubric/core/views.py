@@ -4,8 +4,11 @@ The model never imports a backend. A backend subclasses :class:`View` (or the ta
 :class:`TableView`) and links itself to a :class:`~kubric.core.scene.Scene`; from then on the scene
 and its assets call, on every linked view:
 
-* ``add(item)``      — when the view is linked (first the scene itself, then every asset already in
-  it) and whenever an asset is added to the scene;
+* ``add_scene(scene)`` — once, when the view is linked (the scene's own settings; by default this
+  hands the scene to ``add``);
+* ``add(asset)``     — when the view is linked, for every asset already in the scene, and whenever
+  an asset is added to the scene (so ``add`` sees assets only, as in upstream Kubric, unless a view
+  keeps the default ``add_scene``);
 * ``remove(asset)``  — when an asset leaves the scene or the view is unlinked;
 * ``on_change(item, name, value)`` — after a property of the scene or of an asset changed;
 * ``on_keyframe(asset, name, frame)`` — after ``asset.keyframe_insert(name, frame)``;
@@ -42,8 +45,12 @@ class View:
         self.scene = scene
         scene.link_view(self)
 
+    def add_scene(self, scene) -> None:
+        """Set up the backend for the scene's own settings; by default ``self.add(scene)``."""
+        self.add(scene)
+
     def add(self, item) -> None:
-        """Create the backend counterpart of ``item`` (the scene or an asset)."""
+        """Create the backend counterpart of ``item`` (an asset, or the scene via add_scene)."""
 
     def remove(self, asset) -> None:
         """Delete the backend counterpart of ``asset``."""
@@ -107,7 +114,7 @@ class TableView(View):
         if not found:
             supported = sorted(c.__name__ for c in self.builders)
             raise TypeError(f"{type(self).__name__} cannot represent a {type(item).__name__} "
-                            f"({item!r}); it supports: {supported}")
+                            f"({getattr(item, 'uid', item)!r}); it supports: {supported}")
         if builder is None or self in item.linked_objects:
             return
         obj = builder(self, item)

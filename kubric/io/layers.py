@@ -23,6 +23,9 @@ object_coordinates,    ``uv_{:05d}.png`` ...         3    float in [0, 1] → ``
 uv                                                        16-bit RGB
 =====================  ============================  ===  ======================================
 
+normal / object_coordinates / uv may also be given already quantised, as uint8 or uint16 samples
+of their interval (as upstream Kubric accepted): they are stored as they are, 8- or 16-bit, and
+read back as floats (a uint8 sample k of uv means k / 255; of normal, k / 255 · 2 − 1).
 Floats for normal / object_coordinates / uv may exceed their interval by float noise up to
 :data:`RANGE_TOLERANCE` (clipped); larger excursions, NaN and inf raise. ``data_ranges.json``
 gets ``{"min", "max"}`` for every scaled layer and also for ``depth`` and ``z`` (an addition for
@@ -109,7 +112,8 @@ def _templates(file_templates: Mapping[str, str] | None) -> dict[str, str]:
 # -------------------------------------------------------------------------------- encoding
 def _unit_interval_to_uint16(arr: np.ndarray, lo: float, hi: float, what: str) -> np.ndarray:
     if arr.dtype.kind != "f":
-        raise TypeError(f"{what}: expected float values in [{lo}, {hi}], got dtype {arr.dtype}")
+        raise TypeError(f"{what}: expected float values in [{lo}, {hi}] or quantised uint8 / "
+                        f"uint16 samples, got dtype {arr.dtype}")
     if not np.all(np.isfinite(arr)):
         raise ValueError(f"{what}: values must be finite, found NaN or inf")
     vmin, vmax = float(arr.min()), float(arr.max())
@@ -146,6 +150,8 @@ def _prepare_layer(name: str, data, ranges: dict) -> tuple[np.ndarray, Callable]
         value_range = png_io.float_range(arr, what)
         ranges[name] = value_range
         q = png_io.scale_to_uint16(arr, value_range["min"], value_range["max"])
+    elif arr.dtype in (np.uint8, np.uint16):  # normal / uv / object coordinates, quantised
+        return arr, png_io.encode_png        # already: stored as they are (see module doc)
     elif fmt.kind == "signed_unit":
         q = _unit_interval_to_uint16(arr, -1.0, 1.0, what)
     else:
@@ -227,10 +233,13 @@ def _decode_frame(name: str, path, value_range) -> np.ndarray:
         if fmt.kind == "labels":
             arr = arr.astype(np.uint32)
         elif fmt.kind != "image8":
-            if arr.dtype != np.uint16:
-                raise ValueError(f"{str(path)!r}: layer {name!r} must be a 16-bit PNG")
             lo, hi = {"scaled": value_range, "signed_unit": (-1.0, 1.0)}.get(fmt.kind, (0, 1))
-            arr = png_io.unscale_from_uint16(arr, lo, hi)
+            if arr.dtype == np.uint8 and fmt.kind != "scaled":  # written from uint8 samples
+                arr = (lo + arr.astype(np.float64) * ((hi - lo) / 255.0)).astype(np.float32)
+            elif arr.dtype != np.uint16:
+                raise ValueError(f"{str(path)!r}: layer {name!r} must be a 16-bit PNG")
+            else:
+                arr = png_io.unscale_from_uint16(arr, lo, hi)
     if arr.shape[-1] < fmt.channels:
         raise ValueError(f"{str(path)!r}: layer {name!r} needs {fmt.channels} channels, the "
                          f"file has {arr.shape[-1]}")

@@ -4,6 +4,10 @@ The contact sheet shows, for up to ``max_rows`` evenly spaced frames (rows), the
 segmentation (one colour per label), depth (near = bright, background black), forward flow
 (hue = direction, saturation = magnitude relative to the largest) and normals ((n + 1) / 2) side
 by side. A ``.gif`` path writes an animation instead: one image per frame with the same columns.
+When the scene has ``tracks.npz``, the RGB column shows up to ``MAX_DRAWN_TRACKS`` point tracks
+(:func:`draw_tracks`): a coloured trail over the last ``TRAIL_FRAMES`` frames (segments between
+visible positions), a filled disc where
+the point is visible and a hollow ring where it is occluded (nothing outside the image).
 """
 
 from __future__ import annotations
@@ -14,6 +18,8 @@ import pathlib
 import numpy as np
 
 COLUMNS = ("rgba", "segmentation", "depth", "forward_flow", "normal")
+MAX_DRAWN_TRACKS = 64
+TRAIL_FRAMES = 8
 
 
 def _palette(n: int) -> np.ndarray:
@@ -64,6 +70,59 @@ def colourise(name: str, layer: np.ndarray, background_depth: float | None = Non
     raise ValueError(f"no picture for layer {name!r}; allowed: {COLUMNS}")
 
 
+def track_colours(n: int) -> np.ndarray:
+    """(n, 3) uint8 colour of each drawn track (distinct hues)."""
+    return _palette(n + 1)[1:]
+
+
+def marker_radius(width: int) -> float:
+    return max(2.0, width / 96.0)
+
+
+def drawn_tracks(num_tracks: int) -> np.ndarray:
+    """Indices of the tracks that are drawn (evenly spread, at most MAX_DRAWN_TRACKS)."""
+    count = min(num_tracks, MAX_DRAWN_TRACKS)
+    return np.unique(np.linspace(0, num_tracks - 1, count).round().astype(int)) if count else \
+        np.zeros(0, dtype=int)
+
+
+def draw_tracks(frames: np.ndarray, tracks: dict) -> np.ndarray:
+    """Draw tracks (module doc) on (T, H, W, 3) uint8 frames; returns a copy."""
+    from PIL import Image, ImageDraw
+    t_count, h, w = frames.shape[:3]
+    xy = np.asarray(tracks["target_points"], dtype=np.float64) - 0.5  # PIL: centres at integers
+    occluded = np.asarray(tracks["occluded"], dtype=bool)
+    reason = np.asarray(tracks.get("occlusion_reason", np.zeros(occluded.shape, np.uint8)))
+    shown = (reason & 3) == 0  # not behind the camera, not outside the image
+    picks = drawn_tracks(len(xy))
+    colours = [tuple(int(v) for v in c) for c in track_colours(len(picks))]
+    r = marker_radius(w)
+    out = []
+    for t in range(t_count):
+        original = Image.fromarray(np.ascontiguousarray(frames[t]))
+        im = original.copy()
+        draw = ImageDraw.Draw(im)
+        for colour, n in zip(colours, picks, strict=True):
+            first = max(0, t - TRAIL_FRAMES)
+            for a in range(first, t):
+                if not (occluded[n, a] or occluded[n, a + 1]):
+                    draw.line([tuple(xy[n, a]), tuple(xy[n, a + 1])], fill=colour, width=1)
+        for colour, n in zip(colours, picks, strict=True):
+            if not shown[n, t]:
+                continue
+            x, y = xy[n, t]
+            box = [x - r, y - r, x + r, y + r]
+            if occluded[n, t]:  # hollow: the picture (not trails) shows inside the ring
+                mask = Image.new("L", im.size, 0)
+                ImageDraw.Draw(mask).ellipse(box, fill=255)
+                im.paste(original, (0, 0), mask)
+                draw.ellipse(box, outline=colour, width=1)
+            else:
+                draw.ellipse(box, fill=colour)
+        out.append(np.asarray(im))
+    return np.stack(out)
+
+
 def summarise(scene_dir: pathlib.Path, layers: dict, metadata: dict, events: dict) -> str:
     meta = metadata.get("metadata", {})
     lines = [f"scene {scene_dir}",
@@ -90,14 +149,17 @@ def summarise(scene_dir: pathlib.Path, layers: dict, metadata: dict, events: dic
 
 
 def contact_sheet(layers: dict, background_depth: float | None, path: pathlib.Path,
-                  max_rows: int = 6) -> pathlib.Path:
-    """Write the contact sheet (PNG) or animation (GIF) of the available COLUMNS."""
+                  max_rows: int = 6, tracks: dict | None = None) -> pathlib.Path:
+    """Write the contact sheet (PNG) or animation (GIF) of the available COLUMNS (with
+    ``tracks`` drawn on the RGB column)."""
     from PIL import Image
 
     names = [n for n in COLUMNS if n in layers]
     if not names:
         raise ValueError(f"no layer to show; expected some of {COLUMNS}")
     pictures = [colourise(n, layers[n], background_depth) for n in names]
+    if tracks is not None and names[0] == "rgba":
+        pictures[0] = draw_tracks(pictures[0], tracks)
     t = pictures[0].shape[0]
     rows = [np.concatenate([p[i] for p in pictures], axis=1) for i in range(t)]
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -114,6 +176,7 @@ def inspect_scene(scene_dir, sheet=None) -> str:
     """Summary text of ``scene_dir``; also writes the contact sheet (default
     ``SCENE_DIR/contact_sheet.png``) and names it in the text."""
     from kubric import file_io
+    from kubric.annotations.track_files import TRACKS_FILE, read_tracks
     from kubric.core.camera_geometry import BACKGROUND_DEPTH
 
     scene_dir = pathlib.Path(scene_dir)
@@ -128,5 +191,12 @@ def inspect_scene(scene_dir, sheet=None) -> str:
         raise ValueError(f"{str(scene_dir)!r} holds no image layers")
     sheet = pathlib.Path(sheet) if sheet else scene_dir / "contact_sheet.png"
     background = metadata.get("metadata", {}).get("background_depth", BACKGROUND_DEPTH)
-    contact_sheet(layers, background, sheet)
-    return summarise(scene_dir, layers, metadata, events) + f"\n  contact sheet: {sheet}"
+    tracks, extra = None, ""
+    if (scene_dir / TRACKS_FILE).exists():
+        tracks = read_tracks(scene_dir / TRACKS_FILE)
+        extra = (f"\n  tracks: {len(tracks['target_points'])} ({int(tracks['is_foreground'].sum())}"
+                 f" on objects), occluded {float(tracks['occluded'].mean()):.1%} of "
+                 f"point-frames; {len(drawn_tracks(len(tracks['target_points'])))} drawn")
+    contact_sheet(layers, background, sheet, tracks=tracks)
+    return summarise(scene_dir, layers, metadata, events) + extra + \
+        f"\n  contact sheet: {sheet}"

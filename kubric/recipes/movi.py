@@ -11,6 +11,7 @@
   (``catch_shadows``; option ``floor_shadows=false`` gives the unlit floor).
 * D: 10–20 static + 1–3 dynamic objects; the static ones settle first (μ 1, e 0), then stop.
 * E: as D with a camera moving on a straight line (start in the shell [8, 12], length U(0, 4)).
+  ``camera=panning``: its look-at point moves on a line too (:func:`panning_look_at_path`).
 * F: as E with motion blur U(0, 2) frames and 512² images.
 
 Materials (A, B): metal = metallic 1, roughness 0.2, IOR 2.5, μ 0.4, e 0.3, density 2.7;
@@ -249,20 +250,43 @@ def linear_camera_path(rng, inner: float, outer: float, max_length: float):
             return start, end
 
 
+def panning_look_at_path(rng, inner: float = 1.0, outer: float = 4.0):
+    """(start, end) of a moving look-at point (TAP-Vid's panning MOVi-E, upstream's
+    ``linear_movement_linear_lookat``): the path passes through a point ``through`` in the
+    half-sphere of radius ``inner``; one end is in the half-sphere of radius ``outer`` below
+    height ``inner``, the other continues past ``through`` by U(0, 0.5) of that distance; the
+    direction is reversed with probability 1/2."""
+    through = kb.sample_point_in_half_sphere_shell(0.0, inner, 0.0, rng=rng)
+    while True:
+        start = kb.sample_point_in_half_sphere_shell(0.0, outer, 0.0, rng=rng)
+        if start[2] < inner:
+            break
+    end = through + float(rng.uniform(0.0, 0.5)) * (through - start)
+    return (end, start) if rng.rand() < 0.5 else (start, end)
+
+
 class MoviE(MoviD, name="movi_e"):
-    """MOVi-E: as D with the camera moving on a straight line, looking at the origin."""
+    """MOVi-E: as D with the camera moving on a straight line, looking at the origin (or, with
+    camera=panning, at a point that moves on a line too)."""
 
     max_camera_movement = Option(4.0, "largest camera path length (m)", low=0.0)
+    camera = Option("linear", "linear: look at the origin; panning: the look-at point moves on "
+                    "a line through the centre region too", choices=("linear", "panning"))
 
     def build_camera(self, scene, rng):
         camera = kb.PerspectiveCamera(name="camera", focal_length=35.0, sensor_width=32.0)
         scene.camera = camera
         start, end = linear_camera_path(rng, 8.0, 12.0, self.max_camera_movement)
+        look_start = look_end = np.zeros(3)
+        if self.camera == "panning":
+            look_start, look_end = panning_look_at_path(rng)
+        scene.metadata["camera_look_at"] = {"start": np.asarray(look_start, float).tolist(),
+                                            "end": np.asarray(look_end, float).tolist()}
         first, last = scene.frame_start - 1, scene.frame_end + 1
         for frame in range(min(first, 0), last + 1):
             t = (frame - first) / (last - first)
             camera.position = (1.0 - t) * start + t * end
-            camera.look_at((0.0, 0.0, 0.0))
+            camera.look_at((1.0 - t) * look_start + t * look_end)
             camera.keyframe_insert("position", frame)
             camera.keyframe_insert("quaternion", frame)
 

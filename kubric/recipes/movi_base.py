@@ -12,7 +12,8 @@ order. Steps (each a method the variants override):
 6. render ``frame_start .. frame_end`` with Blender (linked after the simulation, so it sees the
    final trajectories only);
 7. annotations: visibility → instance list sorted by visible pixels → segmentation relabelled →
-   2D boxes; write the layers, ``metadata.json`` and ``events.json``.
+   2D boxes; write the layers, ``metadata.json`` and ``events.json``; with ``tracks=N`` or
+   ``track_queries`` also ``tracks.npz`` (:mod:`kubric.annotations.tracks`, docs/tracks.md).
 
 Physics constants (upstream MOVi's): dynamic objects spawn in (−5,−5,1)–(5,5,5) with velocity
 U([−4,−4,0],[4,4,0]) − [x, y, 0]; static objects in (−7,−7,0)–(7,7,10); floor μ 0.3, e 0.5.
@@ -77,6 +78,14 @@ class MoviBase(Recipe):
                             type=pathlib.Path, must_exist=True)
     save_state = Option(False, "also write scene.blend (animated) and scene.bullet (initial "
                         "physics state)")
+    tracks = Option(0, "point tracks to sample and write to tracks.npz (0 = none; docs/tracks.md)",
+                    low=0)
+    track_queries = Option(None, "file of given track queries, rows (t, y, x) in pixels (.npy, "
+                           ".json or text); instead of sampling", type=pathlib.Path,
+                           must_exist=True)
+    track_stride = Option(4, "grid stride (frames and pixels) of the track query sampling", low=1)
+    track_max_fraction = Option(0.1, "most tracks per object or background, as a fraction of "
+                                "its grid points (TAP-Vid: 0.1)", low=0.0, high=1.0)
 
     # ------------------------------------------------------------------ checks
     def check(self) -> None:
@@ -92,10 +101,32 @@ class MoviBase(Recipe):
                 if not manifest.is_file() or manifest.name != "manifest.json":
                     raise OptionError(f"{self.name}: option {name}={str(value)!r} is not an asset "
                                       "source (a folder with manifest.json)")
+        self.check_tracks()
         for low, high in self.count_ranges():
             if self.values[low] > self.values[high]:
                 raise OptionError(f"{self.name}: option {low}={self.values[low]} must be ≤ "
                                   f"{high}={self.values[high]}")
+
+    def check_tracks(self) -> None:
+        """Bad track options fail here, before anything renders (one line)."""
+        from kubric.annotations import tracks as tr
+        w, h = self.resolution
+        num_frames = self.frame_end - self.frame_start + 1
+        if self.track_queries is not None:
+            if self.tracks:
+                raise OptionError(f"{self.name}: give either tracks={self.tracks} or "
+                                  "track_queries, not both")
+            try:
+                self._queries = tr.check_queries(tr.load_queries(self.track_queries),
+                                                 num_frames, w, h)
+            except ValueError as err:
+                raise OptionError(f"{self.name}: option track_queries: {err}") from None
+            return
+        available = tr.grid_points_available(num_frames, h, w, self.track_stride)
+        if self.tracks > available:
+            raise OptionError(f"{self.name}: option tracks={self.tracks} is more than the "
+                              f"{available} query points available ({num_frames} frames × "
+                              f"{h}×{w} px on a grid of stride {self.track_stride})")
 
     def count_ranges(self) -> list[tuple[str, str]]:
         """(min option, max option) pairs that must be ordered."""
@@ -188,6 +219,17 @@ class MoviBase(Recipe):
                                render_settings)
             simulator.close()
 
+    def write_tracks(self, scene, layers, visible, seed, out_dir) -> None:
+        """tracks.npz (before the segmentation is relabelled); queries sampled with an rng
+        derived from the seed, so adding tracks changes nothing else in the scene."""
+        from kubric.annotations.track_files import TRACKS_FILE, write_tracks
+        from kubric.annotations.tracks import scene_tracks
+        rng = np.random.RandomState([int(seed), 0x7472616B])
+        tracks = scene_tracks(scene, layers, visible, rng, num_tracks=self.tracks,
+                              queries=getattr(self, "_queries", None), stride=self.track_stride,
+                              max_fraction=self.track_max_fraction)
+        write_tracks(tracks, out_dir / TRACKS_FILE)
+
     def write_outputs(self, scene, layers, collisions, seed, out_dir, background,
                       render_settings) -> list:
         """Annotations + files; returns the instance list (sorted by visible pixels)."""
@@ -196,6 +238,8 @@ class MoviBase(Recipe):
             render_settings = {**render_settings, "uv": "wrapped modulo 1 (textures repeat)"}
         kb.compute_visibility(layers["segmentation"], scene.assets)
         visible = kb.post_processing.visible_sorted(candidates)
+        if self.tracks or self.track_queries is not None:
+            self.write_tracks(scene, layers, visible, seed, out_dir)
         layers["segmentation"] = kb.adjust_segmentation_idxs(layers["segmentation"],
                                                              scene.assets, visible)
         kb.compute_bboxes(layers["segmentation"], visible)

@@ -98,8 +98,34 @@ def _device(value):
     return value
 
 
+def _live_option(name, convert, apply):
+    """A renderer option: validated by ``convert(name, value)``, applied to the Blender scene at
+    once by ``apply(bpy_scene, value)`` (upstream scripts set these after construction)."""
+    def fget(self):
+        return self._options[name]
+
+    def fset(self, value):
+        self._options[name] = convert(name, value)
+        if getattr(self, "bpy_scene", None) is not None:
+            apply(self.bpy_scene, self._options[name])
+    return property(fget, fset, doc=f"Renderer option {name} (applied to Blender when set).")
+
+
+def _set_cycles(attr):
+    return lambda bscene, value: setattr(bscene.cycles, attr, value)
+
+
 class Blender(TableView):
     """Cycles renderer view (see module doc for options and output)."""
+
+    samples_per_pixel = _live_option("samples_per_pixel", lambda n, v: _as_int(n, v, 1),
+                                     _set_cycles("samples"))
+    adaptive_sampling = _live_option("adaptive_sampling", _as_bool,
+                                     _set_cycles("use_adaptive_sampling"))
+    use_denoising = _live_option("use_denoising", _as_bool, _set_cycles("use_denoising"))
+    background_transparency = _live_option(
+        "background_transparency", _as_bool,
+        lambda bscene, value: setattr(bscene.render, "film_transparent", value))
 
     builders = {
         Scene: bw.build_scene,
@@ -149,11 +175,12 @@ class Blender(TableView):
     def __init__(self, scene, scratch_dir=None, adaptive_sampling=False, use_denoising=True,
                  samples_per_pixel=128, background_transparency=False, *, motion_blur=False,
                  device=None, max_bounces=None, light_tree=False, verbose=False):
-        self.samples_per_pixel = _as_int("samples_per_pixel", samples_per_pixel, 1)
-        self.adaptive_sampling = _as_bool("adaptive_sampling", adaptive_sampling)
-        self.use_denoising = _as_bool("use_denoising", use_denoising)
-        self.background_transparency = _as_bool("background_transparency",
-                                                background_transparency)
+        self.bpy_scene = None
+        self._options: dict = {}
+        self.samples_per_pixel = samples_per_pixel
+        self.adaptive_sampling = adaptive_sampling
+        self.use_denoising = use_denoising
+        self.background_transparency = background_transparency
         self.motion_blur = _motion_blur(motion_blur)
         self.device = _device(device)
         self.max_bounces = None if max_bounces is None else _as_int("max_bounces",
@@ -170,7 +197,14 @@ class Blender(TableView):
             bpy.context.preferences.edit.keyframe_new_interpolation_type = "LINEAR"
             self.bpy_scene = bpy.context.scene
             self._setup_render_engine()
+            for name, value in self._options.items():
+                setattr(self, name, value)  # apply to the fresh Blender scene
         super().__init__(scene)
+
+    @property
+    def blender_scene(self):
+        """The ``bpy.types.Scene`` this renderer drives (upstream's name for ``bpy_scene``)."""
+        return self.bpy_scene
 
     # ------------------------------------------------------------------ setup
     def quiet(self):

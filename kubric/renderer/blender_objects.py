@@ -32,15 +32,14 @@ import bmesh
 import bpy
 import numpy as np
 
+from kubric.renderer.blender_utils import name_and_link
+
 _SPHERE_SEGMENTS, _SPHERE_RINGS = 128, 64
 
 
 # ---------------------------------------------------------------------------------- meshes
 def _mesh_object(view, asset, mesh):
-    obj = bpy.data.objects.new(asset.uid, mesh)
-    view.bpy_scene.collection.objects.link(obj)
-    obj.rotation_mode = "QUATERNION"
-    return obj
+    return name_and_link(bpy.data.objects.new(asset.uid, mesh), asset, view.bpy_scene.collection)
 
 
 def build_cube(view, asset):
@@ -149,8 +148,7 @@ def build_file_object(view, asset):
                                        selected_objects=meshes,
                                        selected_editable_objects=meshes):
             bpy.ops.object.join()
-    target.name = asset.uid
-    target.rotation_mode = "QUATERNION"
+    name_and_link(target, asset, view.bpy_scene.collection)
     view.imported_materials[asset.uid] = list(target.data.materials)
     return target
 
@@ -161,9 +159,7 @@ def build_perspective_camera(view, asset):
     cam.type = "PERSP"
     cam.sensor_fit = "HORIZONTAL"
     cam.clip_start, cam.clip_end = 0.01, 1e5
-    obj = bpy.data.objects.new(asset.uid, cam)
-    view.bpy_scene.collection.objects.link(obj)
-    obj.rotation_mode = "QUATERNION"
+    obj = name_and_link(bpy.data.objects.new(asset.uid, cam), asset, view.bpy_scene.collection)
     if view.scene.camera is asset:
         view.bpy_scene.camera = obj
     return obj
@@ -199,10 +195,8 @@ def _light_builder(kind):
         light = bpy.data.lights.new(asset.uid, kind)
         if kind == "AREA":
             light.shape = "RECTANGLE"
-        obj = bpy.data.objects.new(asset.uid, light)
-        view.bpy_scene.collection.objects.link(obj)
-        obj.rotation_mode = "QUATERNION"
-        return obj
+        return name_and_link(bpy.data.objects.new(asset.uid, light), asset,
+                             view.bpy_scene.collection)
     return build
 
 

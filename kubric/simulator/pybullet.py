@@ -201,8 +201,8 @@ class PyBullet(TableView):
     def _body_of(self, obj) -> Body:
         body = obj.linked_objects.get(self) if isinstance(obj, Asset) else None
         if not isinstance(body, Body) or body.uid is None:
-            raise ValueError(f"{obj!r} has no body in this simulator (is it a simulated "
-                             "PhysicalObject added to the simulated scene?)")
+            raise ValueError(f"{getattr(obj, 'uid', obj)!r} has no body in this simulator "
+                             "(is it a simulated PhysicalObject added to the simulated scene?)")
         return body
 
     def _read_state(self, obj, body: Body):
