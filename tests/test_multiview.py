@@ -163,6 +163,37 @@ def test_transforms_rays_land_on_the_model_surface(scenes, recipe):
     assert np.median(errors) < 1e-3, (np.median(errors), np.percentile(errors, 95))
 
 
+def test_iter_views_rays_match_the_camera_metadata(scenes):
+    """The library's loader: its rays equal those from metadata.json's OpenCV intrinsics and
+    camera matrices (an independent path), and walking them by depth reaches the point cloud."""
+    from kubric.annotations.nerf_export import iter_views
+    scene = scenes["klevr"]
+    meta = file_io.read_json(scene / "metadata.json")
+    k = np.asarray(meta["camera"]["intrinsics_pixels"])
+    pts = np.load(scene / "points.npz")
+    seen = []
+    for split in ("train", "val", "test"):
+        for v in iter_views(scene, split):
+            seen.append(v["view"])
+            h, w = v["depth"].shape
+            cols, rows = np.meshgrid(np.arange(w) + 0.5, np.arange(h) + 0.5)
+            cv = np.stack([(cols - k[0, 2]) / k[0, 0], (rows - k[1, 2]) / k[1, 1],
+                           np.ones_like(cols)], -1)  # OpenCV axes: y down, looking down +z
+            m = np.asarray(meta["camera"]["matrices_world"][v["view"]])
+            d = (cv * [1, -1, -1]) @ m[:3, :3].T
+            d /= np.linalg.norm(d, axis=-1, keepdims=True)
+            np.testing.assert_allclose(v["directions"], d, atol=1e-9)
+            np.testing.assert_allclose(v["origins"][0, 0], m[:3, 3])
+            hit = v["depth"] < meta["metadata"]["background_depth"]
+            xyz = (v["origins"] + v["directions"] * v["depth"][..., None])[hit]
+            np.testing.assert_allclose(xyz, pts["xyz"][pts["view"] == v["view"]], atol=1e-4)
+            assert v["rgb"].shape == (h, w, 3) and v["rgb"].dtype == np.uint8
+            np.testing.assert_array_equal(v["rgb"][hit], pts["rgb"][pts["view"] == v["view"]])
+    assert sorted(seen) == list(range(meta["metadata"]["num_views"]))
+    with pytest.raises(ValueError, match="unknown split"):
+        next(iter_views(scene, "training"))
+
+
 def test_same_seed_same_scene(scenes):
     a, b = scenes["klevr"], scenes["klevr:again"]
     for name in ("transforms_train.json", "transforms_test.json", "events.json"):

@@ -22,12 +22,15 @@ Reading a pixel's ray from the JSON alone (what the tests do): for pixel (row i,
 ``d_cam = ((j + 0.5 − cx) / fl_x, −(i + 0.5 − cy) / fl_y, −1)``, ``d = R · d_cam / |d_cam|`` with
 ``R = transform_matrix[:3, :3]``, origin ``transform_matrix[:3, 3]``; the surface point is
 ``origin + depth[i, j] · d`` (depth is the Euclidean distance to the camera centre).
+:func:`iter_views` does exactly this for every view of a split (rays, RGB and depth per view).
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
+
+import numpy as np
 
 from kubric.core import camera_geometry as geo
 
@@ -125,3 +128,41 @@ def nerf_transforms(camera, frames: Sequence[int], resolution, splits: Sequence[
             entry[key] = template.format(view)
         out[split]["frames"].append(entry)
     return out
+
+
+def pixel_rays_from_transforms(data: Mapping, entry: Mapping):
+    """(origins (H, W, 3), unit directions (H, W, 3)) of every pixel-centre ray of one frame
+    entry of a transforms file, built from the file's fields alone (see module doc)."""
+    w, h = int(data["w"]), int(data["h"])
+    m = np.asarray(entry["transform_matrix"], np.float64)
+    cols, rows = np.meshgrid(np.arange(w) + 0.5, np.arange(h) + 0.5)
+    local = np.stack([(cols - data["cx"]) / data["fl_x"], -(rows - data["cy"]) / data["fl_y"],
+                      -np.ones_like(cols)], axis=-1)
+    local /= np.linalg.norm(local, axis=-1, keepdims=True)
+    directions = local @ m[:3, :3].T
+    return np.broadcast_to(m[:3, 3], directions.shape).copy(), directions
+
+
+def iter_views(scene_dir, split: str = "train"):
+    """Yield one dict per view of ``split`` of a multi-view scene directory: ``view``, ``rgb``
+    (H, W, 3) uint8, ``depth`` (H, W) metres, ``origins`` / ``directions`` (H, W, 3) world rays and
+    ``transform_matrix`` (4, 4) — what a NeRF data loader needs, from the files alone."""
+    import json
+    import pathlib
+
+    from kubric.io import png_io, tiff_io
+
+    if split not in SPLITS:
+        raise ValueError(f"iter_views: unknown split {split!r}; allowed: {list(SPLITS)}")
+    scene_dir = pathlib.Path(scene_dir)
+    path = scene_dir / f"transforms_{split}.json"
+    if not path.is_file():
+        raise FileNotFoundError(f"iter_views: {path} does not exist (not a multi-view scene?)")
+    data = json.loads(path.read_text())
+    for entry in data["frames"]:
+        origins, directions = pixel_rays_from_transforms(data, entry)
+        rgb = png_io.read_png(scene_dir / (entry["file_path"] + ".png"))[..., :3]
+        depth = tiff_io.read_tiff(scene_dir / entry["depth_file"])[..., 0]
+        yield {"view": int(entry["view"]), "rgb": rgb, "depth": depth, "origins": origins,
+               "directions": directions,
+               "transform_matrix": np.asarray(entry["transform_matrix"], np.float64)}

@@ -112,6 +112,8 @@ class TextureNerf(MultiviewBase, name="texture_nerf"):
     band_width = Option(0.5, "width of a band label interval (decades)", low=0.01)
     texture_size = Option(256, "texture pixels per face side", low=8, high=4096)
     region = Option(3.0, "cubes stand in the square ±region (m) of the floor", low=0.5)
+    camera_distance = Option((6.5, 8.5), MultiviewBase.camera_distance.help, type=float_range,
+                             low=0.1)
 
     def check(self):
         super().check()
