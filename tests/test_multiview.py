@@ -310,6 +310,11 @@ def test_bad_input_fails_in_one_line_before_rendering(tmp_path):
     with pytest.raises(OptionError) as err:
         get_recipe("toybox").from_assignments([f"objects={nocat}"])
     assert "without categories" in str(err.value) and "\n" not in str(err.value)
+    toys = kubasic_with_categories(tmp_path / "toys", TOY_CATEGORIES)
+    with pytest.raises(OptionError, match="'chair'"):
+        get_recipe("toybox").from_assignments([f"objects={toys}", "categories=round,chair"])
+    with pytest.raises(OptionError, match="'banana'"):
+        get_recipe("klevr").from_assignments(["shapes=cube,banana"])
     with pytest.raises(OptionError) as err:
         get_recipe("texture_nerf").from_assignments(["band_range=-1,2.5", "texture_size=256"])
     assert "band_range=-1.0,2.5" in str(err.value) and "128" in str(err.value)

@@ -137,15 +137,21 @@ class Klevr(_SemanticScenes, name="klevr"):
         super().check()
         if not [s for s in self.shapes.split(",") if s.strip()]:
             raise OptionError(f"{self.name}: option shapes={self.shapes!r} names no shape")
+        if self.kubasic_source is None:  # the built KuBasic: its shapes are known up front
+            from kubric.assets.kubasic import SHAPES
+            self.check_shapes(set(SHAPES))
 
-    def class_names(self, sources):
+    def check_shapes(self, available) -> list[str]:
         names = [s.strip() for s in self.shapes.split(",") if s.strip()]
-        available = set(sources["kubasic"].all_asset_ids) - {"dome"}
+        available = set(available) - {"dome"}
         missing = [n for n in names if n not in available]
         if missing:
             raise OptionError(f"{self.name}: option shapes names {missing}, not KuBasic shapes; "
                               f"allowed: {sorted(available)}")
         return names
+
+    def class_names(self, sources):
+        return self.check_shapes(sources["kubasic"].all_asset_ids)
 
     def build_background(self, scene, rng, sources):
         return self.grey_background(scene, rng, sources)
