@@ -24,7 +24,7 @@ demo: $(STAMP)
 	$(BIN)/python -m kubric.demo
 
 bench: $(STAMP)
-	$(BIN)/python -m pip install --quiet -e '.[dev,coacd]'  # bench_assets compares V-HACD with CoACD
+	$(BIN)/python -m pip install --quiet -e '.[dev,coacd,bench]'  # V-HACD vs CoACD, codecs vs libraries
 	$(BIN)/python -m benchmarks
 
 docs: $(STAMP)  # regenerate the generated pages, then build the HTML site into site/
