@@ -123,10 +123,35 @@ def inspect_scene(scene_dir, sheet=None) -> str:
     metadata = file_io.read_json(meta_path) if meta_path.exists() else {}
     events_path = scene_dir / "events.json"
     events = file_io.read_json(events_path) if events_path.exists() else {}
-    layers = file_io.read_image_dict(scene_dir)
+    schema = _schema_of(metadata)
+    layers = file_io.read_image_dict(scene_dir, formats=schema.layers if schema else None)
     if not layers:
         raise ValueError(f"{str(scene_dir)!r} holds no image layers")
     sheet = pathlib.Path(sheet) if sheet else scene_dir / "contact_sheet.png"
     background = metadata.get("metadata", {}).get("background_depth", BACKGROUND_DEPTH)
     contact_sheet(layers, background, sheet)
-    return summarise(scene_dir, layers, metadata, events) + f"\n  contact sheet: {sheet}"
+    return (summarise(scene_dir, layers, metadata, events) + "\n" + schema_line(
+        schema, layers, metadata, events) + f"\n  contact sheet: {sheet}")
+
+
+def _schema_of(metadata: dict):
+    """The recipe schema named by ``flags.recipe`` (None when unknown)."""
+    from kubric.io.schema import SchemaError, get_schema
+    recipe = metadata.get("flags", {}).get("recipe")
+    try:
+        return get_schema(recipe) if recipe else None
+    except SchemaError:
+        return None
+
+
+def schema_line(schema, layers: dict, metadata: dict, events: dict) -> str:
+    """One line: does the scene hold every source of its recipe schema's features?"""
+    from kubric.io.scene_writer import check_scene_content
+    from kubric.io.schema import SchemaError
+    if schema is None:
+        return "  schema: none known for recipe " + repr(metadata.get("flags", {}).get("recipe"))
+    try:
+        check_scene_content(schema, layers, metadata, events)
+    except SchemaError as err:
+        return f"  schema {schema.name}: {len(schema.features)} features; NOT satisfied: {err}"
+    return f"  schema {schema.name}: {len(schema.features)} features, every source present"
