@@ -11,6 +11,7 @@ import sys
 SUBCOMMAND_MODULES = (
     "kubric.pipeline.cli",
     "kubric.assets.cli",
+    "kubric.datasets.cli",
 )
 
 

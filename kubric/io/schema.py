@@ -228,7 +228,7 @@ def get_schema(name: str) -> Schema:
 
 
 # ------------------------------------------------------------------------------ docs
-def _shape_text(feature: Feature, dims: Mapping[str, int] | None = None) -> str:
+def shape_text(feature: Feature, dims: Mapping[str, int] | None = None) -> str:
     shape = feature.full_shape()
     if dims:
         shape = tuple(dims.get(d, d) if isinstance(d, str) else d for d in shape)
@@ -248,7 +248,7 @@ def schema_markdown(schema: Schema | str) -> str:
         dtype = f"class label ({', '.join(f.names)})" if f.names else f.dtype
         source = f"`{f.source}`" + (f" → {f.convert}" if f.convert else "")
         doc = f.doc.replace("|", "\\|")
-        lines.append(f"| `{f.name}` | {dtype} | {_shape_text(f)} | {f.encoding} | {f.unit} | "
+        lines.append(f"| `{f.name}` | {dtype} | {shape_text(f)} | {f.encoding} | {f.unit} | "
                      f"{source} | {doc} |")
     if schema.layers:
         lines += ["", "Layers beyond the standard ones:", "",

@@ -80,7 +80,7 @@ def summarise(scene_dir: pathlib.Path, layers: dict, metadata: dict, events: dic
         label = inst.get("shape") or inst.get("asset_id")
         extra = " ".join(str(inst[key]) for key in ("size_label", "color_label", "material")
                          if inst.get(key))
-        lines.append(f"    {k:>3}: {label} {extra}  visible px {int(np.sum(inst['visibility']))}"
+        lines.append(f"    {k:>3}: {label} {extra}  visible px {int(np.sum(inst.get('visibility', 0)))}"
                      f"  boxes in {len(inst.get('bbox_frames', []))} frames")
     positions = np.asarray(metadata.get("camera", {}).get("positions", np.zeros((1, 3))))
     path = float(np.sum(np.linalg.norm(np.diff(positions, axis=0), axis=-1)))
