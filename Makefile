@@ -11,9 +11,10 @@ $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
 
-# The tests need every optional feature: datasets (TFDS, array-record, Grain, OpenCV) and torch
-# (PyPI's torch wheel brings its CUDA libraries: about 4.5 min and 5.4 GB on a fresh install).
-EXTRAS := dev,datasets,torch
+# The tests need every optional feature: datasets (TFDS, array-record, Grain, OpenCV), torch
+# (PyPI's torch wheel brings its CUDA libraries: about 4.5 min and 5.4 GB on a fresh install) and
+# jax (the README's JAX snippet is run by the tests).
+EXTRAS := dev,datasets,torch,jax
 
 $(STAMP): pyproject.toml | $(BIN)/python
 	$(BIN)/python -m pip install --quiet -e '.[$(EXTRAS)]'

@@ -351,3 +351,22 @@ def test_pack_resumes_after_interruption(packed, tmp_path, monkeypatch):
     assert not (tmp_path / ".ds.incomplete").exists()
     for shard in out.glob("movi_a-*.array_record-*"):
         assert (tmp_path / "ds" / shard.name).read_bytes() == shard.read_bytes()
+
+
+def readme_snippets() -> list[str]:
+    text = (ROOT / "README.md").read_text()
+    section = text.split("## Use the data", 1)[1].split("\n## ", 1)[0]
+    return [block.split("```", 1)[0] for block in section.split("```python\n")[1:]]
+
+
+def test_readme_use_the_data_snippets_run(packed, tmp_path):
+    snippets = readme_snippets()
+    assert len(snippets) == 3 and "torch" in snippets[1] and "jax" in snippets[2]
+    (tmp_path / "datasets").mkdir()
+    (tmp_path / "datasets" / "movi_a").symlink_to(packed[1])
+    for snippet in snippets:
+        proc = subprocess.run([sys.executable, "-c", snippet], cwd=tmp_path, capture_output=True,
+                              text=True, timeout=300)
+        assert proc.returncode == 0, snippet + proc.stderr[-3000:]
+        assert proc.stdout.strip(), snippet
+    assert "(4, 32, 48, 3)" in proc.stdout  # the JAX snippet's surface points

@@ -130,3 +130,10 @@ def test_writer_refuses_scene_off_contract_and_writes_nothing(tmp_path):
     with pytest.raises(SchemaError, match="needs layer 'albedo'"):
         write_scene(schema, tmp_path / "b", {}, {"metadata": {"answer": 1}})
     assert not (tmp_path / "a").exists() and not (tmp_path / "b").exists()
+
+
+def test_docs_table_is_the_schema():
+    import pathlib
+    text = (pathlib.Path(__file__).resolve().parents[1] / "docs" / "datasets.md").read_text()
+    table = text.split("<!-- schema movi_a -->\n", 1)[1].split("<!-- /schema -->", 1)[0]
+    assert table == schema_markdown("movi_a")
