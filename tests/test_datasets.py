@@ -142,7 +142,11 @@ def test_torch_dataloader_two_workers(packed):
     from kubric.datasets.adapters import to_torch, torch_collate
     scenes, out = packed
     source = load(out, "train")
-    loader = torch.utils.data.DataLoader(to_torch(source), batch_size=None, num_workers=2)
+    # spawn: this pytest process has read ArrayRecord shards with torch imported, after which
+    # forked workers crash in array_record's reader (known issue, see docs/datasets.md); the
+    # README snippet runs the default (fork) context in a fresh process
+    loader = torch.utils.data.DataLoader(to_torch(source), batch_size=None, num_workers=2,
+                                         multiprocessing_context="spawn")
     items = list(loader)
     assert len(items) == 3
 
@@ -157,7 +161,8 @@ def test_torch_dataloader_two_workers(packed):
         assert isinstance(item["video"], torch.Tensor)
         _check_against_scene(as_numpy(item), scenes / scene)
     videos = torch.utils.data.DataLoader(to_torch(load(out, "train", task="video")),
-                                         batch_size=2, num_workers=2, collate_fn=torch_collate)
+                                         batch_size=2, num_workers=2, collate_fn=torch_collate,
+                                         multiprocessing_context="spawn")
     batches = list(videos)
     assert [tuple(b["video"].shape) for b in batches] == [(2, T, H, W, 3), (1, T, H, W, 3)]
     assert batches[0]["video_name"] == ["scene_00000003", "scene_00000004"]
@@ -319,7 +324,7 @@ def test_incomplete_and_corrupt_scenes_are_skipped_and_reported(packed, tmp_path
     shutil.copytree(scenes, copy)
     (copy / "scene_00000004" / "_SUCCESS").unlink()
     (copy / "scene_00000005" / "normal_00002.png").write_bytes(b"not a png")
-    from kubric.datasets.pack import pack
+    from kubric.datasets.packer import pack
     result = pack(copy, tmp_path / "ds", splits=SPLITS, progress=False)
     assert result.counts == {"train": 1, "validation": 1} and result.incomplete == 1
     assert [pathlib.Path(p).name for p, _ in result.corrupt] == ["scene_00000005"]
@@ -329,7 +334,7 @@ def test_incomplete_and_corrupt_scenes_are_skipped_and_reported(packed, tmp_path
 
 
 def test_pack_resumes_after_interruption(packed, tmp_path, monkeypatch):
-    from kubric.datasets import pack as pack_module
+    from kubric.datasets import packer as pack_module
     scenes, out = packed
     real, calls = pack_module._encode_scene, []
 

@@ -3,8 +3,9 @@ only, and both flow to the scene directory, the packed dataset, the loader and `
 with no other edit anywhere."""
 
 import numpy as np
+import pytest
 
-from kubric.datasets import load, pack
+from kubric.datasets import DatasetError, load, pack, register_task
 from kubric.io.layers import LayerFormat
 from kubric.io.scene_writer import write_scene
 from kubric.io.schema import Feature, Schema, register_schema
@@ -20,6 +21,8 @@ TOY = register_schema(Schema("test_toy_layers", (
     Feature("albedo", "uint16", ("T", "H", "W", 3), "layer:albedo", "png",
             doc="the toy layer: reflectance in [0, 1] · 65535"),
     Feature("instances/weight", "float32", (), "instance:weight", unit="kg"),
+    Feature("target_points", "float32", ("P", "T", 2), "npz:tracks.npz:target_points",
+            doc="a per-scene file the recipe writes (the point-tracks hook)"),
 ), layers={"albedo": LayerFormat("albedo_{:05d}.png", 3, "unit")}))
 
 
@@ -28,7 +31,8 @@ def toy_layers(seed):
     rgba = rng.randint(0, 256, size=(T, H, W, 4)).astype(np.uint8)
     albedo = rng.rand(T, H, W, 3).astype(np.float32)
     weights = rng.rand(int(rng.randint(0, 4))).astype(np.float32)
-    return rgba, albedo, weights
+    tracks = rng.rand(int(rng.randint(1, 5)), T, 2).astype(np.float32)
+    return rgba, albedo, weights, tracks
 
 
 class ToyLayers(Recipe, name="test_toy_layers"):
@@ -37,7 +41,8 @@ class ToyLayers(Recipe, name="test_toy_layers"):
     schema = TOY
 
     def generate(self, seed, out_dir):
-        rgba, albedo, weights = toy_layers(seed)
+        rgba, albedo, weights, tracks = toy_layers(seed)
+        np.savez(out_dir / "tracks.npz", target_points=tracks)
         metadata = {"flags": self.flags(seed),
                     "metadata": {"resolution": [W, H], "num_frames": T, "seed": seed},
                     "instances": [{"weight": w} for w in weights]}
@@ -55,10 +60,21 @@ def test_toy_layer_flows_from_schema_to_loader(tmp_path):
     source = load(tmp_path / "toy", "train")
     for index, scene in enumerate(source.scenes):
         seed = int(scene.split("_")[1])
-        rgba, albedo, weights = toy_layers(seed)
+        rgba, albedo, weights, tracks = toy_layers(seed)
         example = source[index]
         assert example["metadata"]["seed"] == seed
         assert np.array_equal(example["video"], rgba[..., :3])
         assert example["albedo"].dtype == np.uint16
         assert np.array_equal(example["albedo"], np.rint(albedo.astype(np.float64) * 65535))
         assert np.array_equal(example["instances"]["weight"], weights)
+        assert np.array_equal(example["target_points"], tracks)
+        assert np.array_equal(load(tmp_path / "toy", "train", task="toy_tracks")[index]["tracks"],
+                              tracks[:, ::2])
+    with pytest.raises(DatasetError, match=r"task 'nerf_rays' needs features \['depth', 'camera'"):
+        load(tmp_path / "toy", "train", task="nerf_rays")
+
+
+@register_task("toy_tracks", features=("target_points", "video"))
+def toy_tracks(example, frame):
+    """A recipe's own task: every other frame of its tracks."""
+    return {"tracks": example["target_points"][:, ::2], "video": example["video"][::2]}

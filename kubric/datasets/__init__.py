@@ -14,7 +14,7 @@ TFDS, array_record, torch and Grain are imported only when used.
 from kubric.datasets.adapters import to_grain, to_tf, to_torch, torch_collate
 from kubric.datasets.info import dataset_info
 from kubric.datasets.layout import DatasetError
-from kubric.datasets.pack import pack
+from kubric.datasets.packer import pack
 from kubric.datasets.source import DataSource, load
 from kubric.datasets.tasks import TASKS, register_task
 from kubric.datasets.verify import verify_dataset

@@ -19,7 +19,12 @@ from kubric.datasets.layout import DatasetError
 
 def to_torch(source):
     """``source`` as a ``torch.utils.data.Dataset`` (items stay numpy dicts; collate them with
-    :func:`torch_collate` or torch's default collate)."""
+    :func:`torch_collate` or torch's default collate).
+
+    Known issue: once a process with torch imported has read from any dataset, DataLoader
+    workers *forked* from it crash when they open a shard (a segfault in array_record's reader).
+    Either read only inside the workers, or pass ``multiprocessing_context="spawn"`` (or
+    ``"forkserver"``) to the DataLoader; the source pickles for that."""
     from kubric.datasets.torch_dataset import TorchDataset
     return TorchDataset(source)
 

@@ -12,7 +12,7 @@ def _error(command: str, message) -> int:
 
 def cmd_pack(args) -> int:
     from kubric.datasets.layout import DatasetError
-    from kubric.datasets.pack import pack
+    from kubric.datasets.packer import pack
     from kubric.io.schema import SchemaError
     try:
         result = pack(args.scenes_dir, args.out, name=args.name, splits=args.splits,

@@ -40,7 +40,7 @@ def schema_from_json(data: dict) -> Schema:
                   data.get("version", "1.0.0"))
 
 
-def _regular(f: Feature, value):
+def _regular(f: Feature, value, dims: dict):
     """A TFDS-decoded value of feature ``f`` in the regular form (module doc)."""
     if f.dtype == "str":
         as_str = lambda v: v.decode("utf-8") if isinstance(v, bytes) else str(v)
@@ -54,7 +54,7 @@ def _regular(f: Feature, value):
         if isinstance(value, np.ndarray):
             return value.astype(dtype, copy=False)
         if len(value) == 0:
-            shape = tuple(d if isinstance(d, int) else 0 for d in f.shape)
+            shape = tuple(d if isinstance(d, int) else dims.get(d, 0) for d in f.shape)
             return np.zeros((0, *shape), dtype=dtype)
         return np.stack([np.asarray(v, dtype=dtype) for v in value])
     return np.asarray(value, dtype=dtype)[()] if not f.shape else np.asarray(value, dtype=dtype)
@@ -76,6 +76,11 @@ class DataSource:
         self.dims = dict(self.info["dims"])
         self.task = get_task(task)
         self.task_options = self.task.check_options(task_options)
+        top = {f.name.split("/", 1)[0] for f in self.schema.features}
+        missing = [k for k in self.task.features or () if k not in top]
+        if missing:
+            raise DatasetError(f"task {self.task.name!r} needs features {missing}, which "
+                               f"{str(self.dataset_dir)!r} does not have")
         self.scenes: list[str] = list(self.info["scenes"][split])
         self._frames = self.task.per_frame and int(self.dims["T"])
         self._reader = None
@@ -103,7 +108,10 @@ class DataSource:
             keys = self.task.features or tuple(self._features.keys())
             specs = {k: self._features.get_serialized_info()[k] for k in keys}
             self._parser = (specs, utils.flatten_nest_dict(specs), keys)
-            self._reader = ArrayRecordDataSource(self.shard_paths())
+            # "path[0:n]" gives each shard's record count, so no reader is opened until a read
+            lengths = self.info["shard_lengths"][self.split]
+            self._reader = ArrayRecordDataSource(
+                [f"{p}[0:{n}]" for p, n in zip(self.shard_paths(), lengths, strict=True)])
         return self._reader
 
     # ---------------------------------------------------------------- access
@@ -140,7 +148,7 @@ class DataSource:
         out = {}
         for name, value in flat.items():
             f = by_name.get(name)
-            out[name] = _regular(f, value) if f is not None else value
+            out[name] = _regular(f, value, self.dims) if f is not None else value
         return unflatten(out)
 
     def __getitem__(self, index):

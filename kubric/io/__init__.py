@@ -7,4 +7,6 @@ Modules, one concept each:
 * :mod:`kubric.io.png_io` — PNG 8/16-bit encoder (numpy + zlib), palette and scaled PNG, readers.
 * :mod:`kubric.io.tiff_io` — float32 TIFF encoder and reader.
 * :mod:`kubric.io.layers` — the renderer's layer dict ↔ a scene directory (``write_image_dict``).
+* :mod:`kubric.io.schema` — a recipe's output contract (layers + example features), declared once.
+* :mod:`kubric.io.scene_writer` — ``write_scene``: a scene directory checked against its schema.
 """

@@ -14,7 +14,8 @@ layer or a metadata field to a recipe is one edit of its schema. :func:`schema_m
 a schema as the Markdown table of the generated docs.
 
 Dimensions: ``T`` frames, ``H`` × ``W`` pixels, ``N`` instances, ``K`` collision events,
-``V`` the frames in which one instance is visible (varies per instance). Features named
+``V`` the frames in which one instance is visible (varies per instance), ``P`` points (point
+tracks). Features named
 ``instances/...`` hold one value per instance (their shape omits ``N``), ``events/collisions/...``
 one per event (shape omits ``K``).
 
@@ -47,7 +48,8 @@ from kubric.io.layers import LAYERS, LayerFormat, layer_table
 
 #: named dimensions and what they count
 DIMS = {"T": "frames", "H": "image height (pixels)", "W": "image width (pixels)",
-        "N": "instances", "K": "collision events", "V": "frames in which the instance is visible"}
+        "N": "instances", "K": "collision events", "V": "frames in which the instance is visible",
+        "P": "points (e.g. point tracks)"}
 #: feature name prefixes that hold one value per element of a sequence, and its dimension
 SEQUENCES = {"instances/": "N", "events/collisions/": "K"}
 ENCODINGS = ("none", "png", "zlib", "text", "class_label", "bbox")
@@ -123,7 +125,7 @@ class Feature:
         return ((SEQUENCES[seq],) if seq else ()) + tuple(self.shape)
 
     def concrete_shape(self, dims: Mapping[str, int]) -> tuple:
-        """``shape`` with T / H / W replaced by ``dims``; N, K, V stay None (they vary)."""
+        """``shape`` with T / H / W replaced by ``dims``; N, K, V, P stay None (they vary)."""
         return tuple(d if isinstance(d, int) else dims.get(d) for d in self.shape)
 
 
