@@ -227,6 +227,11 @@ def test_tasks_video_frames(packed):
     assert item["video_name"] == "scene_00000004" and item["frame"] == 2
     assert np.array_equal(item["image"], full[1]["video"][2])
     assert np.array_equal(item["camera_to_world"], full[1]["camera"]["matrices_world"][2])
+    batch = frames.__getitems__([T + 2, 0, T + 3, 2 * T])
+    assert [(b["video_name"], int(b["frame"])) for b in batch] == [
+        ("scene_00000004", 2), ("scene_00000003", 0), ("scene_00000004", 3), ("scene_00000005", 0)]
+    assert np.array_equal(batch[0]["image"], item["image"])
+    assert np.array_equal(batch[3]["image"], full[2]["video"][0])
     with pytest.raises(layout.DatasetError, match="unknown task 'optical'"):
         load(out, "train", task="optical")
     with pytest.raises(layout.DatasetError, match="unknown option"):

@@ -86,11 +86,12 @@ class DataSource:
         self._reader = None
         self._features = None
         self._parser = None
+        self._last = None
 
     # ---------------------------------------------------------------- pickling
     def __getstate__(self):
         state = dict(self.__dict__)
-        state.update(_reader=None, _features=None, _parser=None)
+        state.update(_reader=None, _features=None, _parser=None, _last=None)
         return state
 
     # ---------------------------------------------------------------- lazy openers
@@ -151,16 +152,26 @@ class DataSource:
             out[name] = _regular(f, value, self.dims) if f is not None else value
         return unflatten(out)
 
+    def _scene_example(self, scene: int, record: bytes | None = None) -> dict:
+        """The decoded example of scene ``scene``; per-frame tasks keep the last one, so reading
+        a scene's frames in order decodes it once."""
+        if self._last is not None and self._last[0] == scene:
+            return self._last[1]
+        example = self.decode(self._open()[scene] if record is None else record)
+        if self._frames:
+            self._last = (scene, example)
+        return example
+
     def __getitem__(self, index):
         scene, frame = self._locate(index)
-        example = self.decode(self._open()[scene])
-        return self.task(example, frame, self)
+        return self.task(self._scene_example(scene), frame, self)
 
     def __getitems__(self, indices: Sequence[int]) -> list:
         located = [self._locate(i) for i in indices]
-        records = self._open().__getitems__([s for s, _ in located])
-        return [self.task(self.decode(r), frame, self)
-                for r, (_, frame) in zip(records, located, strict=True)]
+        scenes = sorted({s for s, _ in located})
+        records = dict(zip(scenes, self._open().__getitems__(scenes), strict=True))
+        examples = {s: self._scene_example(s, records[s]) for s in scenes}
+        return [self.task(examples[s], frame, self) for s, frame in located]
 
     def __iter__(self):
         for i in range(len(self)):

@@ -117,8 +117,9 @@ def video_task(example, frame, frame_stride: int = 1, num_frames: int | None = N
 def frames_task(example, frame):
     """Single RGB frames with their camera (OpenCV intrinsics, camera-to-world pose)."""
     camera = example["camera"]
-    return {"image": example["video"][frame], "intrinsics_pixels": camera["intrinsics_pixels"],
-            "camera_to_world": camera["matrices_world"][frame], "frame": np.int32(frame),
+    return {"image": example["video"][frame].copy(),  # the source keeps the scene for its next frame
+            "intrinsics_pixels": camera["intrinsics_pixels"].copy(),
+            "camera_to_world": camera["matrices_world"][frame].copy(), "frame": np.int32(frame),
             "video_name": example["metadata"]["video_name"]}
 
 
