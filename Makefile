@@ -12,7 +12,8 @@ $(BIN)/python:
 	$(BIN)/python -m pip install --quiet --upgrade pip
 
 # The tests need every optional feature: datasets (TFDS, array-record, Grain, OpenCV), torch
-# (PyPI's torch wheel brings its CUDA libraries: about 4.5 min and 5.4 GB on a fresh install) and
+# (PyPI's torch wheel brings its CUDA libraries: a fresh install of everything took 5.3 min and
+# 7.5 GB) and
 # jax (the README's JAX snippet is run by the tests).
 EXTRAS := dev,datasets,torch,jax
 
