@@ -329,11 +329,13 @@ def test_incomplete_and_corrupt_scenes_are_skipped_and_reported(packed, tmp_path
     shutil.copytree(scenes, copy)
     (copy / "scene_00000004" / "_SUCCESS").unlink()
     (copy / "scene_00000005" / "normal_00002.png").write_bytes(b"not a png")
+    (copy / "scene_00000002" / "metadata.json").unlink()  # the first scene
     from kubric.datasets.packer import pack
     result = pack(copy, tmp_path / "ds", splits=SPLITS, progress=False)
-    assert result.counts == {"train": 1, "validation": 1} and result.incomplete == 1
-    assert [pathlib.Path(p).name for p, _ in result.corrupt] == ["scene_00000005"]
-    assert "normal" in result.corrupt[0][1]
+    assert result.counts == {"train": 1, "validation": 0} and result.incomplete == 1
+    corrupt = dict((pathlib.Path(p).name, why) for p, why in result.corrupt)
+    assert sorted(corrupt) == ["scene_00000002", "scene_00000005"]
+    assert "normal" in corrupt["scene_00000005"] and "metadata.json" in corrupt["scene_00000002"]
     assert "skipped corrupt scene" in result.format() and "scene_00000005" in result.format()
     assert load(tmp_path / "ds", "train").scenes == ["scene_00000003"]
 

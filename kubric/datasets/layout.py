@@ -17,7 +17,7 @@ FORMAT = "kubric-dataset"
 FORMAT_VERSION = 1
 INFO_FILE = "kubric_dataset.json"
 FILE_FORMAT = "array_record"
-_SPLIT_NAME = re.compile(r"^[a-z][a-z0-9_]*$")
+NAME_PATTERN = re.compile(r"^[a-z][a-z0-9_]*$")
 
 
 class DatasetError(ValueError):
@@ -73,7 +73,7 @@ def parse_splits(spec) -> dict[str, float]:
     if not pairs:
         raise DatasetError("--splits: no split given (e.g. train=0.9,validation=0.1)")
     for name, fraction in pairs.items():
-        if not _SPLIT_NAME.match(name):
+        if not NAME_PATTERN.match(name):
             raise DatasetError(f"--splits: split name {name!r} must be a lower-case identifier")
         if not fraction > 0:
             raise DatasetError(f"--splits: fraction of {name!r} must be > 0, got {fraction}")

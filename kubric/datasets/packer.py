@@ -76,7 +76,8 @@ def _encode_scene(scene_dir: str) -> tuple[str, bytes | None, str | None]:
         flat = reader.example()
         data = tfds_io.serialize(_WORKER["features"], tfds_io.nested_example(schema, flat))
         return path.name, data, None
-    except (SceneError, OSError, ValueError, KeyError, TypeError) as err:
+    except (SceneError, OSError, ValueError, KeyError, TypeError, RuntimeError) as err:
+        # (TFDS re-raises a feature's encoding error as RuntimeError)
         return path.name, None, str(err).replace("\n", " ")[:500]
 
 
@@ -112,8 +113,21 @@ def _recipe_of(scene: pathlib.Path) -> str:
     try:
         return str(read_json(scene / "metadata.json")["flags"]["recipe"])
     except (OSError, KeyError, TypeError, ValueError):
-        raise DatasetError(f"{str(scene)!r}: metadata.json names no recipe (flags.recipe); "
-                           "pass --schema") from None
+        raise DatasetError(f"{str(scene)!r}: metadata.json is missing or names no recipe "
+                           "(flags.recipe); pass --schema") from None
+
+
+def _schema_and_dims(complete: list[pathlib.Path], schema) -> tuple[Schema, dict]:
+    """The schema (given, or the recipe of the first scene whose metadata.json reads) and the
+    frame count / resolution of the first scene that has them."""
+    errors = []
+    for scene in complete:
+        try:
+            found = get_schema(schema if schema is not None else _recipe_of(scene))
+            return found, SceneReader(scene, found).dims
+        except (SceneError, DatasetError, OSError) as err:
+            errors.append(err)
+    raise DatasetError(f"no complete scene has a readable metadata.json (first: {errors[0]})")
 
 
 def _check_out(out: pathlib.Path, overwrite: bool) -> None:
@@ -149,11 +163,10 @@ def pack(scenes_dir, out, name: str | None = None, splits=DEFAULT_SPLITS, worker
     if not complete:
         raise DatasetError(f"{str(scenes_dir)!r} holds no complete scene directory (with "
                            f"_SUCCESS); {incomplete} incomplete")
-    schema = get_schema(schema if schema is not None else _recipe_of(complete[0]))
+    schema, dims = _schema_and_dims(complete, schema)
     name = name or schema.name
-    if not layout._SPLIT_NAME.match(name):
+    if not layout.NAME_PATTERN.match(name):
         raise DatasetError(f"--name {name!r} must be a lower-case identifier (letters, digits, _)")
-    dims = SceneReader(complete[0], schema).dims
     assignment: dict[str, list[pathlib.Path]] = {s: [] for s in split_fractions}
     corrupt: list[tuple[str, str]] = []
     for scene in complete:
