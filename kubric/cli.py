@@ -18,7 +18,7 @@ SUBCOMMAND_MODULES = (
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="kubric", description="Kubric: generate synthetic computer-vision datasets (scene "
-        "recipes, local runner, asset sources, scene inspection).")
+        "recipes, local runner, asset sources, scene inspection, packed datasets).")
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name in SUBCOMMAND_MODULES:
         try:

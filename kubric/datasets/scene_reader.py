@@ -19,17 +19,13 @@ import numpy as np
 from kubric.io import json_io, layers
 from kubric.io.scene_writer import EVENTS_FILE, METADATA_FILE, lookup
 from kubric.io.schema import Feature, Schema, SchemaError
+from kubric.pipeline.worker import SUCCESS, is_complete
 
 UINT16_MAX = 65535
-SUCCESS = "_SUCCESS"
 
 
 class SceneError(ValueError):
     """A scene directory that cannot become an example (corrupt or off-contract)."""
-
-
-def is_complete(scene_dir: pathlib.Path) -> bool:
-    return (pathlib.Path(scene_dir) / SUCCESS).is_file()
 
 
 def _hex_to_rgb(value) -> np.ndarray:
