@@ -278,6 +278,12 @@ def test_repack_gives_identical_shards(packed, tmp_path):
                       "movi_a-validation.array_record-00000-of-00001"]
     for name in shards:
         assert (out / name).read_bytes() == (tmp_path / "again" / name).read_bytes(), name
+    proc = kubric_cli("pack", scenes, "--out", tmp_path / "again", "--splits", "train=1",
+                      "--no-progress", "--overwrite")
+    assert proc.returncode == 0, proc.stderr
+    assert sorted(p.name for p in (tmp_path / "again").glob("movi_a-*")) == \
+        ["movi_a-train.array_record-00000-of-00001"]
+    assert not list(tmp_path.glob(".again*"))
 
 
 def test_datasets_info(packed):
