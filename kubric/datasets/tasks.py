@@ -14,13 +14,17 @@ task=NAME, **options)`` uses it. Built in:
   ``depth`` (H, W) in metres (distance along the ray: ``origin + depth · direction`` is the
   surface point), plus ``frame`` and ``video_name``.
 
-Adding a task (e.g. point tracks from a ``tracks.npz`` a recipe writes: declare
-``Feature("target_points", ..., source="npz:tracks.npz:target_points")`` in the recipe's schema,
-then)::
+* ``point_tracks`` (datasets packed with a ``<recipe>_tracks`` schema, e.g. ``kubric pack DIR
+  --schema movi_e_tracks``): TAP-Vid's training fields ``video`` (T, H, W, 3) uint8,
+  ``query_points`` (P, 3) (t, y, x), ``target_points`` (P, T, 2) (x, y) in pixels (centres at
+  +0.5), ``occluded`` (P, T) bool, plus ``video_name``.
 
-    @register_task("point_tracks", features=("video", "target_points", "metadata"))
-    def point_tracks(example, frame, source):
-        return {"video": example["video"], "tracks": example["target_points"]}
+Adding a task: declare the features it needs in the recipe's schema (e.g.
+``Feature("tracks/target_points", ..., source="npz:tracks.npz:target_points")``), then::
+
+    @register_task("my_task", features=("video", "tracks", "metadata"))
+    def my_task(example, frame):
+        return {"video": example["video"], "tracks": example["tracks"]["target_points"]}
 
 ``features`` are top-level names of the packed example (only those are decoded); ``per_frame``
 makes one item per frame (``frame`` is then the frame index, else None).
@@ -153,3 +157,12 @@ def nerf_rays_task(example, frame):
     return {"ray_origins": origins, "ray_directions": dirs,
             "rgb": example["video"][frame].astype(np.float32) / 255.0, "depth": depth,
             "frame": np.int32(frame), "video_name": example["metadata"]["video_name"]}
+
+
+@register_task("point_tracks", features=("video", "tracks", "metadata"))
+def point_tracks_task(example, frame):
+    """TAP-Vid's fields from a dataset packed with a ``<recipe>_tracks`` schema."""
+    tracks = example["tracks"]
+    return {"video": example["video"], "query_points": tracks["query_points"],
+            "target_points": tracks["target_points"], "occluded": tracks["occluded"],
+            "video_name": example["metadata"]["video_name"]}

@@ -19,10 +19,11 @@ ADD = "Addition: "
 MOVI_BASE = Schema("movi", (
     # ---------------------------------------------------------------- metadata
     F("metadata/video_name", "str", (), "scene_name", "text", doc="scene id (directory name)"),
-    F("metadata/width", "int32", (), "meta:resolution.0", unit="px"),
-    F("metadata/height", "int32", (), "meta:resolution.1", unit="px"),
-    F("metadata/num_frames", "int32", (), "meta:num_frames"),
-    F("metadata/num_instances", "uint16", (), "meta:num_instances"),
+    F("metadata/width", "int32", (), "meta:resolution.0", unit="px", doc="image width W"),
+    F("metadata/height", "int32", (), "meta:resolution.1", unit="px", doc="image height H"),
+    F("metadata/num_frames", "int32", (), "meta:num_frames", doc="rendered frames T"),
+    F("metadata/num_instances", "uint16", (), "meta:num_instances",
+      doc="instances N (segmentation labels 1..N)"),
     F("metadata/depth_range", "float32", (2,), "range:depth", unit="m",
       doc="min, max of depth: depth = q / 65535 · (max − min) + min"),
     F("metadata/forward_flow_range", "float32", (2,), "range:forward_flow", unit="px",
@@ -34,15 +35,18 @@ MOVI_BASE = Schema("movi", (
     # ---------------------------------------------------------------- instances
     F("instances/asset_id", "str", (), "instance:asset_id", "text",
       doc="asset id (addition for A/B)"),
-    F("instances/mass", "float32", (), "instance:mass", unit="kg"),
-    F("instances/friction", "float32", (), "instance:friction"),
-    F("instances/restitution", "float32", (), "instance:restitution"),
+    F("instances/mass", "float32", (), "instance:mass", unit="kg", doc="mass"),
+    F("instances/friction", "float32", (), "instance:friction",
+      doc="Coulomb friction coefficient"),
+    F("instances/restitution", "float32", (), "instance:restitution",
+      doc="restitution (bounciness)"),
     F("instances/positions", "float32", _T3, "instance:positions", unit="m",
       doc="centre of mass, world frame"),
     F("instances/quaternions", "float32", _T4, "instance:quaternions", doc="WXYZ"),
-    F("instances/velocities", "float32", _T3, "instance:velocities", unit="m/s"),
+    F("instances/velocities", "float32", _T3, "instance:velocities", unit="m/s",
+      doc="linear velocity per frame, world frame"),
     F("instances/angular_velocities", "float32", _T3, "instance:angular_velocities",
-      unit="rad/s"),
+      unit="rad/s", doc="angular velocity per frame, world frame"),
     F("instances/bboxes_3d", "float32", ("T", 8, 3), "instance:bboxes_3d", unit="m",
       doc="world corners of the scaled local box; corner order (x, y, z) ∈ {min, max}³"),
     F("instances/image_positions", "float32", ("T", 2), "instance:image_positions",
@@ -54,11 +58,14 @@ MOVI_BASE = Schema("movi", (
     F("instances/visibility", "uint16", ("T",), "instance:visibility", unit="px",
       doc="visible pixels per frame"),
     # ---------------------------------------------------------------- camera
-    F("camera/focal_length", "float32", (), "camera:focal_length", unit="mm"),
-    F("camera/sensor_width", "float32", (), "camera:sensor_width", unit="mm"),
+    F("camera/focal_length", "float32", (), "camera:focal_length", unit="mm",
+      doc="lens focal length"),
+    F("camera/sensor_width", "float32", (), "camera:sensor_width", unit="mm",
+      doc="sensor width"),
     F("camera/field_of_view", "float32", (), "camera:field_of_view", unit="rad",
       doc="horizontal"),
-    F("camera/positions", "float32", _T3, "camera:positions", unit="m"),
+    F("camera/positions", "float32", _T3, "camera:positions", unit="m",
+      doc="camera centre per frame, world frame"),
     F("camera/quaternions", "float32", _T4, "camera:quaternions", doc="WXYZ"),
     F("camera/matrices_world", "float32", ("T", 4, 4), "camera:matrices_world",
       doc=ADD + "camera → world, Blender camera axes (x right, y up, looking down −z)"),
@@ -71,11 +78,14 @@ MOVI_BASE = Schema("movi", (
       convert="negative_to_uint16_max", doc="instance indices; 65535 = floor / other"),
     F("events/collisions/frame", "int32", (), "collision:frame", convert="floor",
       doc="frame the collision falls in"),
-    F("events/collisions/force", "float32", (), "collision:force", unit="N"),
-    F("events/collisions/position", "float32", (3,), "collision:position", unit="m"),
+    F("events/collisions/force", "float32", (), "collision:force", unit="N",
+      doc="largest normal force of the event"),
+    F("events/collisions/position", "float32", (3,), "collision:position", unit="m",
+      doc="contact point, world frame"),
     F("events/collisions/image_position", "float32", (2,), "collision:image_position",
       doc="normalised (x, y), projected at the event's frame"),
-    F("events/collisions/contact_normal", "float32", (3,), "collision:contact_normal"),
+    F("events/collisions/contact_normal", "float32", (3,), "collision:contact_normal",
+      doc="unit contact normal, world frame"),
     # ---------------------------------------------------------------- dense layers
     F("video", "uint8", ("T", "H", "W", 3), "layer:rgba[:3]", "png", doc="RGB (alpha dropped)"),
     F("segmentations", "uint8", ("T", "H", "W", 1), "layer:segmentation", "png",
@@ -99,20 +109,22 @@ MATERIALS = ("metal", "rubber")
 
 MOVI_A = register_schema(MOVI_BASE.extend("movi_a", (
     F("instances/shape_label", "int64", (), "instance:shape", "class_label",
-      names=("cube", "cylinder", "sphere")),
+      names=("cube", "cylinder", "sphere"), doc="CLEVR shape"),
     F("instances/size_label", "int64", (), "instance:size_label", "class_label",
-      names=("small", "large")),
+      names=("small", "large"), doc="CLEVR size: scale 0.7 (small) or 1.4 (large)"),
     F("instances/color", "float32", (3,), "instance:color", doc="linear RGB"),
-    F("instances/color_label", "int64", (), "instance:color_label", "class_label", names=COLORS),
+    F("instances/color_label", "int64", (), "instance:color_label", "class_label", names=COLORS,
+      doc="CLEVR colour name"),
     F("instances/material_label", "int64", (), "instance:material", "class_label",
-      names=MATERIALS),
+      names=MATERIALS, doc="metal or rubber"),
 ), description="MOVi-A: CLEVR shapes, 8 colours, 2 sizes, metal / rubber."))
 
 MOVI_B = register_schema(MOVI_BASE.extend("movi_b", (
-    F("instances/shape_label", "int64", (), "instance:shape", "class_label", names=SHAPES_B),
+    F("instances/shape_label", "int64", (), "instance:shape", "class_label", names=SHAPES_B,
+      doc="KuBasic shape"),
     F("instances/color", "float32", (3,), "instance:color", doc="linear RGB"),
     F("instances/material_label", "int64", (), "instance:material", "class_label",
-      names=MATERIALS),
+      names=MATERIALS, doc="metal or rubber"),
     F("instances/size", "float32", (), "instance:size", doc=ADD + "object scale"),
     F("background_color", "float32", (3,), "meta:background", convert="hex_to_rgb",
       doc="dome colour"),
@@ -121,7 +133,8 @@ MOVI_B = register_schema(MOVI_BASE.extend("movi_b", (
 _C_EXTRAS = (
     F("background", "str", (), "meta:background", "text", doc="HDRI id"),
     F("instances/scale", "float32", (), "instance:scale", unit="m", doc="largest extent"),
-    F("instances/is_dynamic", "bool", (), "instance:is_dynamic"),
+    F("instances/is_dynamic", "bool", (), "instance:is_dynamic",
+      doc="moves in the simulation (false for settled static objects)"),
 )
 MOVI_C = register_schema(MOVI_BASE.extend("movi_c", _C_EXTRAS,
                                           description="MOVi-C: mesh objects on an HDRI dome."))
@@ -129,3 +142,31 @@ MOVI_D = register_schema(MOVI_C.extend("movi_d", description="MOVi-D: settled st
                                        "and a few dynamic ones."))
 MOVI_E = register_schema(MOVI_C.extend("movi_e", description="MOVi-E: as D, moving camera."))
 MOVI_F = register_schema(MOVI_C.extend("movi_f", description="MOVi-F: as E, motion blur."))
+
+#: Point tracks (``tracks.npz``, written with ``--set tracks=N``; docs/tracks.md). Every MOVi
+#: variant has a ``<name>_tracks`` schema with these features: pack with
+#: ``kubric pack DIR --schema movi_e_tracks`` and read with the ``point_tracks`` task.
+TRACK_FEATURES = (
+    F("tracks/query_points", "float32", ("P", 3), "npz:tracks.npz:query_points",
+      doc="(t, y, x): query frame index and pixel position (pixel centres at +0.5)"),
+    F("tracks/target_points", "float32", ("P", "T", 2), "npz:tracks.npz:target_points",
+      unit="px", doc="(x, y) pixel position per frame (pixel centres at +0.5)"),
+    F("tracks/occluded", "bool", ("P", "T"), "npz:tracks.npz:occluded",
+      doc="behind the camera, outside the image, or hidden by another surface"),
+    F("tracks/occlusion_reason", "uint8", ("P", "T"), "npz:tracks.npz:occlusion_reason",
+      doc="bits: 1 behind camera, 2 outside image, 4 another instance, 8 depth closer"),
+    F("tracks/visible", "float32", ("P", "T"), "npz:tracks.npz:visible",
+      doc="sub-pixel visible fraction in [0, 1]"),
+    F("tracks/depth", "float32", ("P", "T"), "npz:tracks.npz:depth", unit="m",
+      doc="distance of the point to the camera centre"),
+    F("tracks/points_world", "float32", ("P", "T", 3), "npz:tracks.npz:points_world",
+      unit="m", doc="3D position per frame, world frame"),
+    F("tracks/instance_id", "int32", ("P",), "npz:tracks.npz:instance_id",
+      doc="0 = background, k = instances[k − 1]"),
+    F("tracks/is_foreground", "bool", ("P",), "npz:tracks.npz:is_foreground",
+      doc="the point lies on an instance"),
+)
+MOVI_TRACKS = {schema.name: register_schema(schema.extend(
+    f"{schema.name}_tracks", TRACK_FEATURES,
+    description=f"{schema.description} With point tracks (tracks.npz)."))
+    for schema in (MOVI_A, MOVI_B, MOVI_C, MOVI_D, MOVI_E, MOVI_F)}
