@@ -12,6 +12,7 @@ SUBCOMMAND_MODULES = (
     "kubric.pipeline.cli",
     "kubric.assets.cli",
     "kubric.annotations.tracks_cli",
+    "kubric.viewer.cli",
 )
 
 
