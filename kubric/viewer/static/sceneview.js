@@ -125,8 +125,8 @@ const KVScene = (function () {
     const rows = [];
     for (const key of keys) if (inst[key] !== undefined) rows.push(KV.el("span", {}, key), KV.el("span", {}, KV.fmt(inst[key])));
     const t = s.frame;
-    for (const key of ["positions", "velocities", "image_positions"]) {
-      if (inst[key] && inst[key][t]) rows.push(KV.el("span", {}, key.replace(/s$/, "") + ` @${t}`), KV.el("span", {}, KV.fmt(inst[key][t])));
+    for (const [key, label] of [["positions", "position (m)"], ["velocities", "velocity (m/s)"], ["image_positions", "image position"]]) {
+      if (inst[key] && inst[key][t]) rows.push(KV.el("span", {}, `${label} @${t}`), KV.el("span", {}, KV.fmt(inst[key][t])));
     }
     const vis = inst.visibility || [];
     rows.push(KV.el("span", {}, `visible px @${t}`), KV.el("span", { id: "instance-visibility" }, KV.fmt(vis[t])));
