@@ -78,7 +78,7 @@ def browser():
     options = webdriver.ChromeOptions()
     options.binary_location = binary
     for arg in ("--headless=new", "--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage",
-                "--window-size=1400,1000", "--force-device-scale-factor=1"):
+                "--window-size=1280,1300", "--force-device-scale-factor=1"):
         options.add_argument(arg)
     driver = webdriver.Chrome(options=options, service=Service(driver_path))
     driver.set_script_timeout(20)
@@ -133,9 +133,18 @@ def test_list_page_shows_scenes_and_thumbnails(browser, server, shots):
         "const i = document.querySelector('td.thumb img'); return i && i.complete && "
         "i.naturalWidth === 40"), "the thumbnail")
     assert "_SUCCESS" in rows[1].find_element("css selector", "td.status-bad").text
+    browser.find_element("id", "app").screenshot(str(shots / "viewer_list.png"))
     browser.find_element("id", "filter").send_keys("99")
     wait_for(lambda: len(browser.find_elements("css selector", "tr.scene-row")) == 1, "filtering")
-    browser.save_screenshot(str(shots / "viewer_list.png"))
+    assert browser.find_element("css selector", "tr.scene-row").get_attribute("data-name") == \
+        "scene_00000099"
+    browser.find_element("css selector", "th[data-key=seed]").click()  # sort by seed: still one
+    browser.execute_script("const f = document.getElementById('filter'); f.value = '';"
+                           "f.dispatchEvent(new Event('input'));")
+    for _ in range(2):  # name ascending, then descending
+        browser.find_element("css selector", "th[data-key=name]").click()
+    wait_for(lambda: [r.get_attribute("data-name") for r in browser.find_elements(
+        "css selector", "tr.scene-row")] == ["scene_00000099", SCENE], "sorting by name, descending")
 
 
 def test_scrubbing_changes_the_frame(browser, server, dataset):

@@ -238,11 +238,11 @@ const KVScene = (function () {
       KV.el("div", { class: "layout" },
         KV.el("div", { style: `width:${Math.max(W * scale + 2, 420)}px` }, stage, s.imgError,
           KV.el("div", { class: "panel", style: "margin-top:12px" }, KV.el("h3", {}, "reproduce"),
-            KV.el("code", { class: "cmd", id: "worker-command" }, scene.worker_command))),
+            KV.el("code", { class: "cmd", id: "worker-command" }, scene.worker_command)),
+          KV.el("div", { class: "panel", style: "margin-top:12px" }, KV.el("h3", {}, "camera & trajectories"), canvas3d)),
         KV.el("div", { class: "side" },
           KV.el("div", { class: "panel" }, KV.el("h3", {}, "pixel"), s.readout),
           KV.el("div", { class: "panel" }, KV.el("h3", {}, "object"), s.instancePanel),
-          KV.el("div", { class: "panel" }, KV.el("h3", {}, "camera & trajectories"), canvas3d),
           KV.el("div", { class: "panel" }, KV.el("h3", {}, "scene"), facts))));
     s.view3d = KV3D.create(canvas3d, scene);
     if (sm.has_tracks) {

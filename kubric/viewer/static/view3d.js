@@ -4,7 +4,7 @@
 // position at the current frame. World z is up.
 const KV3D = (function () {
   function create(canvas, scene) {
-    const view = { yaw: -0.6, pitch: 0.5, frame: 0, selected: null };
+    const view = { yaw: -0.6, pitch: 0.35, frame: 0, selected: null };
     const cam = scene.metadata.camera || {};
     const instances = scene.metadata.instances || [];
     const paths = instances.map((inst) => inst.positions || []);
@@ -13,6 +13,9 @@ const KV3D = (function () {
     const centre = [0, 1, 2].map((k) => all.length ? all.reduce((s, p) => s + p[k], 0) / all.length : 0);
     centre[2] = 0;
     const extent = Math.max(1, ...all.map((p) => Math.hypot(p[0] - centre[0], p[1] - centre[1], p[2])));
+    if (camPath.length) {  // start looking from the side of the camera's line of sight
+      view.yaw = 0.5 - Math.atan2(camPath[0][1] - centre[1], camPath[0][0] - centre[0]);
+    }
 
     function project(p) {
       const x0 = p[0] - centre[0], y0 = p[1] - centre[1], z0 = p[2] - centre[2];
