@@ -163,6 +163,10 @@ def test_scrubbing_changes_the_frame(browser, server, dataset):
     frame2 = image_pixels(browser, "main-img")
     np.testing.assert_array_equal(frame2, read_frame(dataset / SCENE, "rgba", 2))
     assert (frame2 != frame0).any()  # the objects moved
+    from selenium.webdriver.common.keys import Keys
+    browser.find_element("tag name", "body").send_keys(Keys.ARROW_RIGHT)  # wraps to frame 0
+    wait_for(lambda: browser.find_element("id", "frame-label").text.startswith("frame 0 / 2"),
+             "the → key")
 
 
 def _hover(browser, col, row, width, click=False):
@@ -292,3 +296,9 @@ def test_probe_point_lies_on_the_object(server, dataset):
         assert (lo <= np.asarray(p["point"])).all() and (np.asarray(p["point"]) <= hi).all()
         checked += 1
     assert checked >= 1
+
+
+def test_no_javascript_errors(browser):
+    """Runs last (file order): the console collected no error over all the browser tests."""
+    errors = [e for e in browser.get_log("browser") if e["level"] == "SEVERE"]
+    assert not errors, errors

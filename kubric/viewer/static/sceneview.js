@@ -253,6 +253,12 @@ const KVScene = (function () {
     setFrame(0);
     for (let i = 1; i < s.T; i++) new Image().src = KV.frameUrl(name, s.layer, i);  // warm the cache
   }
+  document.addEventListener("keydown", (e) => {  // ← / → step through frames, space plays
+    if (!s || e.target.tagName === "INPUT" || e.target.tagName === "SELECT") return;
+    if (e.key === "ArrowRight") setFrame(s.frame + 1);
+    else if (e.key === "ArrowLeft") setFrame(s.frame - 1);
+    else if (e.key === " ") { document.getElementById("play").click(); e.preventDefault(); }
+  });
   return { show, stop };
 })();
 window.KVScene = KVScene;
