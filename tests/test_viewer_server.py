@@ -182,6 +182,21 @@ def test_corrupt_and_incomplete_scenes_give_errors_not_crashes(dataset):
         assert "unreadable" in errors["scene_00000005"] and errors["scene_00000003"] is None
 
 
+def test_new_and_finished_scenes_appear(dataset, monkeypatch):
+    """Scenes written while the server runs show up; an incomplete one turns ok with _SUCCESS."""
+    import kubric.viewer.source as source_module
+    monkeypatch.setattr(source_module, "RESCAN_SECONDS", 0.0)
+    root, _, _ = dataset
+    with serving(root) as (addr, _):
+        assert len(get_json(addr, "/api/scenes")[1]["scenes"]) == 2
+        synthetic_scene(root / "scene_00000007", seed=7, success=False)
+        rows = {r["name"]: r for r in get_json(addr, "/api/scenes")[1]["scenes"]}
+        assert "_SUCCESS" in rows["scene_00000007"]["error"]
+        (root / "scene_00000007" / "_SUCCESS").write_text("")
+        rows = {r["name"]: r for r in get_json(addr, "/api/scenes")[1]["scenes"]}
+        assert rows["scene_00000007"]["error"] is None
+
+
 def test_frames_are_cached(dataset):
     root, _, _ = dataset
     with serving(root) as (addr, service):

@@ -49,6 +49,13 @@ class LRUCache:
         return value
 
 
+    def discard(self, key) -> None:
+        with self._lock:
+            old = self._items.pop(key, None)
+            if old is not None:
+                self._bytes -= old.nbytes if isinstance(old, np.ndarray) else len(old)
+
+
 def _scalar(value) -> str:
     if value is None:
         return "none"
@@ -80,8 +87,12 @@ class ViewerService:
 
     # ------------------------------------------------------------------ JSON
     def summary(self, name: str) -> dict:
-        return self.cache.get_or_make(("summary", name),
-                                      lambda: _Json(self.source.summary(name))).value
+        """The scene's list row; cached once the scene is complete (an incomplete scene's row is
+        read again, so a scene being written turns "ok" when its ``_SUCCESS`` appears)."""
+        row = self.cache.get_or_make(("summary", name), lambda: _Json(self.source.summary(name)))
+        if row.value["error"] is not None:
+            self.cache.discard(("summary", name))
+        return row.value
 
     def scene_list(self) -> dict:
         return {"scenes": [self.summary(n) for n in self.source.names()]}

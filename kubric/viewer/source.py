@@ -15,6 +15,7 @@ from __future__ import annotations
 import abc
 import pathlib
 import re
+import time
 
 import numpy as np
 
@@ -27,6 +28,8 @@ NAME_PATTERN = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.\-]{0,199}\Z")
 VIEW_LAYERS = ("rgba", "rgb", "depth", "z", "forward_flow", "backward_flow", "normal",
                "object_coordinates", "uv", "segmentation")
 SUCCESS_FILE = "_SUCCESS"
+#: how often a folder is rescanned for new scenes (seconds)
+RESCAN_SECONDS = 2.0
 
 
 class SceneError(Exception):
@@ -86,16 +89,19 @@ class DirectorySource(SceneSource):
                                      "directory or a folder of scenes)")
         self.root = root
         self.single = _looks_like_scene(root)
-        self._names: list[str] | None = None
+        self._names: list[str] = []
+        self._scanned = -np.inf
 
     def names(self) -> list[str]:
-        if self._names is None:
+        """Rescanned at most every :data:`RESCAN_SECONDS`: scenes a running ``kubric generate``
+        adds appear in the list."""
+        if time.monotonic() - self._scanned >= RESCAN_SECONDS:
             if self.single:
-                self._names = [self.root.name]
+                names = [self.root.name]
             else:
-                self._names = sorted(p.name for p in self.root.iterdir()
-                                     if p.is_dir() and NAME_PATTERN.match(p.name)
-                                     and _looks_like_scene(p))
+                names = sorted(p.name for p in self.root.iterdir()
+                               if p.is_dir() and NAME_PATTERN.match(p.name) and _looks_like_scene(p))
+            self._names, self._scanned = names, time.monotonic()
         return self._names
 
     def directory(self, name: str) -> pathlib.Path:
