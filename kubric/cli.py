@@ -13,6 +13,7 @@ SUBCOMMAND_MODULES = (
     "kubric.assets.cli",
     "kubric.annotations.tracks_cli",
     "kubric.datasets.cli",
+    "kubric.viewer.cli",
 )
 
 

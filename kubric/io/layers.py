@@ -266,6 +266,33 @@ def _decode_frame(name: str, fmt: LayerFormat, path, value_range, raw: bool = Fa
     return arr[..., :fmt.channels]
 
 
+def _layer_range(directory, name: str, value_range, fmt: LayerFormat):
+    """The (min, max) that decodes a scaled layer: ``value_range`` or data_ranges.json's entry."""
+    if fmt.kind != "scaled":
+        return value_range
+    if value_range is None:
+        range_path = directory / DATA_RANGES_FILE
+        ranges = read_json(range_path) if range_path.exists() else {}
+        if name not in ranges:
+            raise ValueError(f"{str(range_path)!r} has no range for layer {name!r}")
+        value_range = ranges[name]
+    return png_io._range_pair(value_range, f"read_layer({name!r})")
+
+
+def read_frame(directory: PathLike, name: str, index: int, file_templates: Mapping[str, str]
+               | None = None, value_range=None) -> np.ndarray:
+    """Frame ``index`` (0-based) of one layer as an (H, W, C) array, decoded like
+    :func:`read_layer` (which reads all frames); only that one file is read."""
+    directory = as_path(directory)
+    if name not in LAYERS:
+        raise ValueError(f"read_frame: unknown layer {name!r}; known: {sorted(LAYERS)}")
+    path = directory / frame_filename(_templates(file_templates)[name], int(index))
+    if not path.is_file():
+        raise FileNotFoundError(f"{str(directory)!r} has no frame {index} of layer {name!r}")
+    fmt = LAYERS[name]
+    return _decode_frame(name, fmt, path, _layer_range(directory, name, value_range, fmt))
+
+
 def read_layer(directory: PathLike, name: str, file_templates: Mapping[str, str] | None = None,
                value_range=None, formats: Mapping[str, LayerFormat] | None = None,
                raw: bool = False) -> np.ndarray:
@@ -284,13 +311,7 @@ def read_layer(directory: PathLike, name: str, file_templates: Mapping[str, str]
     if not paths:
         raise FileNotFoundError(f"{str(directory)!r} has no frames of layer {name!r}")
     if fmt.kind == "scaled" and not raw:
-        if value_range is None:
-            range_path = directory / DATA_RANGES_FILE
-            ranges = read_json(range_path) if range_path.exists() else {}
-            if name not in ranges:
-                raise ValueError(f"{str(range_path)!r} has no range for layer {name!r}")
-            value_range = ranges[name]
-        value_range = png_io._range_pair(value_range, f"read_layer({name!r})")
+        value_range = _layer_range(directory, name, value_range, fmt)
     frames = [_decode_frame(name, fmt, p, value_range, raw) for p in paths]
     if len({f.shape for f in frames}) > 1:
         raise ValueError(f"{str(directory)!r}: frames of layer {name!r} differ in shape")

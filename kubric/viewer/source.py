@@ -1,0 +1,180 @@
+"""Where the viewer's data comes from: the :class:`SceneSource` interface and its scene-directory
+implementation.
+
+The server only talks to a :class:`SceneSource`; a packed-dataset backend implements the same
+six abstract methods (``names``, ``summary``, ``metadata``, ``events``, ``frame``, ``tracks``)
+and plugs in without touching the server or the page.
+
+Scenes are addressed by **name** (the directory name, e.g. ``scene_00000007``), never by a path:
+a name must match :data:`NAME_PATTERN` and be one of the names the source found, so nothing in a
+URL can reach a file outside the served folder. Every read is read-only.
+"""
+
+from __future__ import annotations
+
+import abc
+import pathlib
+import re
+import time
+
+import numpy as np
+
+from kubric.io.json_io import read_json
+from kubric.io.layers import LAYERS, frame_filename, read_frame
+
+#: a scene name: letters, digits, ``_ . -``, not starting with a dot (no separators, no ``..``)
+NAME_PATTERN = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.\-]{0,199}\Z")
+#: layers the viewer shows, in the selector's order
+VIEW_LAYERS = ("rgba", "rgb", "depth", "z", "forward_flow", "backward_flow", "normal",
+               "object_coordinates", "uv", "segmentation")
+SUCCESS_FILE = "_SUCCESS"
+#: how often a folder is rescanned for new scenes (seconds)
+RESCAN_SECONDS = 2.0
+
+
+class SceneError(Exception):
+    """A scene that cannot be shown (incomplete, corrupt): the page shows the message."""
+
+
+class SceneSource(abc.ABC):
+    """Read-only access to the scenes of one dataset."""
+
+    @abc.abstractmethod
+    def names(self) -> list[str]:
+        """Scene names, sorted."""
+
+    @abc.abstractmethod
+    def summary(self, name: str) -> dict:
+        """One row of the scene list: name, recipe, seed, split, num_instances, num_frames,
+        resolution, layers, has_tracks, and ``error`` (None for a good scene)."""
+
+    @abc.abstractmethod
+    def metadata(self, name: str) -> dict:
+        """The scene's metadata.json content (raises SceneError when absent or unreadable)."""
+
+    @abc.abstractmethod
+    def events(self, name: str) -> dict:
+        """The scene's events.json content ({"collisions": []} when absent)."""
+
+    @abc.abstractmethod
+    def frame(self, name: str, layer: str, index: int) -> np.ndarray:
+        """One decoded (H, W, C) frame of a layer (units as in docs/scene-format.md)."""
+
+    @abc.abstractmethod
+    def tracks(self, name: str) -> dict | None:
+        """The scene's point tracks (``tracks.npz`` fields) or None when it has none."""
+
+    def output_root(self, name: str) -> str:
+        """The ``--out`` that regenerates the scene in place (shown in its worker command)."""
+        return "OUT"
+
+    def check_name(self, name: str) -> str:
+        """``name`` when it is a scene of this source; KeyError otherwise."""
+        if not isinstance(name, str) or not NAME_PATTERN.match(name) or name not in self.names():
+            raise KeyError(f"no scene named {name!r}")
+        return name
+
+
+class DirectorySource(SceneSource):
+    """A scene directory (one scene) or a folder whose sub-directories are scenes.
+
+    A folder's scenes are its non-hidden sub-directories holding ``metadata.json`` or
+    ``_SUCCESS`` or named ``scene_*``; the hidden work directories of scenes being written are
+    left out. Scenes without ``_SUCCESS`` are listed with an error (incomplete)."""
+
+    def __init__(self, path):
+        root = pathlib.Path(path).expanduser().resolve()
+        if not root.is_dir():
+            raise NotADirectoryError(f"kubric view: {str(path)!r} is not a directory (give a scene "
+                                     "directory or a folder of scenes)")
+        self.root = root
+        self.single = _looks_like_scene(root)
+        self._names: list[str] = []
+        self._scanned = -np.inf
+
+    def names(self) -> list[str]:
+        """Rescanned at most every :data:`RESCAN_SECONDS`: scenes a running ``kubric generate``
+        adds appear in the list."""
+        if time.monotonic() - self._scanned >= RESCAN_SECONDS:
+            if self.single:
+                names = [self.root.name]
+            else:
+                names = sorted(p.name for p in self.root.iterdir()
+                               if p.is_dir() and NAME_PATTERN.match(p.name) and _looks_like_scene(p))
+            self._names, self._scanned = names, time.monotonic()
+        return self._names
+
+    def directory(self, name: str) -> pathlib.Path:
+        self.check_name(name)
+        return self.root if self.single else self.root / name
+
+    def output_root(self, name: str) -> str:
+        return str(self.directory(name).parent)
+
+    def summary(self, name: str) -> dict:
+        directory = self.directory(name)
+        row = {"name": name, "recipe": None, "seed": None, "split": None, "num_instances": None,
+               "num_frames": None, "resolution": None, "layers": [], "has_tracks": False,
+               "error": None}
+        try:
+            meta = self.metadata(name)
+        except SceneError as err:
+            row["error"] = str(err)
+            return row
+        flags, info = meta.get("flags", {}), meta.get("metadata", {})
+        row.update(recipe=flags.get("recipe"), seed=flags.get("seed", info.get("seed")),
+                   split=flags.get("split") or info.get("split"),
+                   num_instances=len(meta.get("instances", [])),
+                   num_frames=info.get("num_frames"), resolution=info.get("resolution"),
+                   layers=[n for n in VIEW_LAYERS if (directory / frame_filename(
+                       LAYERS[n].template, 0)).is_file()],
+                   has_tracks=(directory / "tracks.npz").is_file())
+        if not (directory / SUCCESS_FILE).is_file():
+            row["error"] = f"incomplete scene: {name} has no {SUCCESS_FILE} (still being " \
+                           "written, or its worker failed)"
+        return row
+
+    def metadata(self, name: str) -> dict:
+        return self._json(name, "metadata.json", required=True)
+
+    def events(self, name: str) -> dict:
+        return self._json(name, "events.json", required=False) or {"collisions": []}
+
+    def _json(self, name: str, filename: str, required: bool):
+        path = self.directory(name) / filename
+        if not path.is_file():
+            if required:
+                raise SceneError(f"{name} has no {filename}")
+            return None
+        try:
+            data = read_json(path)
+        except (ValueError, OSError) as err:
+            raise SceneError(f"{name}/{filename} is unreadable: {err}") from None
+        if not isinstance(data, dict):
+            raise SceneError(f"{name}/{filename} is not a JSON object")
+        return data
+
+    def frame(self, name: str, layer: str, index: int) -> np.ndarray:
+        if layer not in VIEW_LAYERS:
+            raise KeyError(f"unknown layer {layer!r}; allowed: {', '.join(VIEW_LAYERS)}")
+        try:
+            return read_frame(self.directory(name), layer, index)
+        except FileNotFoundError as err:
+            raise KeyError(str(err)) from None
+        except (ValueError, OSError, RuntimeError) as err:  # truncated / corrupt files
+            raise SceneError(f"{name}: cannot decode frame {index} of {layer}: {err}") from None
+
+    def tracks(self, name: str) -> dict | None:
+        directory = self.directory(name)
+        if not (directory / "tracks.npz").is_file():
+            return None
+        from kubric.annotations.track_files import read_tracks
+        try:
+            return read_tracks(directory)
+        except (ValueError, OSError) as err:
+            raise SceneError(f"{name}/tracks.npz is unreadable: {err}") from None
+
+
+def _looks_like_scene(path: pathlib.Path) -> bool:
+    return (path / "metadata.json").is_file() or (path / SUCCESS_FILE).is_file() or \
+        path.name.startswith("scene_")

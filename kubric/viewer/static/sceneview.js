@@ -1,0 +1,264 @@
+"use strict";
+// One scene: main layer + overlays with a frame scrubber and play/pause, a hover readout of what
+// the files hold at a pixel, instance details on click, a 3D view and the reproducing command.
+const KVScene = (function () {
+  const LAYER_NAMES = {
+    rgba: "RGB", rgb: "RGB", depth: "depth (m)", z: "z (m)", forward_flow: "forward flow",
+    backward_flow: "backward flow", normal: "normals", object_coordinates: "object coordinates",
+    uv: "UV", segmentation: "segmentation",
+  };
+  let s = null;  // the open scene's state
+
+  function stop() {
+    if (s && s.timer) clearInterval(s.timer);
+    s = null;
+  }
+
+  function numFrames(scene) {
+    return scene.summary.num_frames || (scene.metadata.metadata || {}).num_frames || 1;
+  }
+
+  function mainUrl() {
+    const depthLike = s.layer === "depth" || s.layer === "z";
+    return KV.frameUrl(s.name, s.layer, s.frame, depthLike ? s.lo.value : undefined,
+      depthLike ? s.hi.value : undefined);
+  }
+
+  function setFrame(frame) {
+    s.frame = ((frame % s.T) + s.T) % s.T;
+    s.slider.value = s.frame;
+    const start = (s.scene.metadata.metadata || {}).frame_start;
+    s.frameLabel.textContent = `frame ${s.frame} / ${s.T - 1}` +
+      (start !== undefined ? ` (scene frame ${start + s.frame})` : "");
+    s.img.src = mainUrl();
+    s.outline.src = KV.frameUrl(s.name, "outline", s.frame);
+    drawOverlay();
+    if (s.view3d) s.view3d.setFrame(s.frame);
+    if (s.selected !== null) showInstance(s.selected);
+    if (s.lastProbe) probe(s.lastProbe[0], s.lastProbe[1]);
+  }
+
+  function drawOverlay() {
+    const ctx = s.canvas.getContext("2d");
+    ctx.clearRect(0, 0, s.canvas.width, s.canvas.height);
+    const k = s.scale, opacity = s.opacity.value / 100;
+    s.outline.style.opacity = s.showOutline.checked ? opacity : 0;
+    s.canvas.style.opacity = opacity;
+    if (s.showBoxes.checked) {
+      (s.scene.metadata.instances || []).forEach((inst, i) => {
+        const at = (inst.bbox_frames || []).indexOf(s.frame);
+        if (at < 0) return;
+        const [ymin, xmin, ymax, xmax] = inst.bboxes[at];
+        ctx.strokeStyle = KV.rgb(s.scene.palette[i + 1]);
+        ctx.lineWidth = s.selected === i ? 3 : 1.5;
+        ctx.strokeRect(xmin * s.W * k, ymin * s.H * k, (xmax - xmin) * s.W * k, (ymax - ymin) * s.H * k);
+        ctx.fillStyle = ctx.strokeStyle; ctx.font = "12px sans-serif";
+        ctx.fillText(String(i), xmin * s.W * k + 2, ymin * s.H * k + 12);
+      });
+    }
+    if (s.showTracks.checked && s.tracks) {
+      const tr = s.tracks, trail = 8;
+      tr.target_points.forEach((points, n) => {
+        const hue = (n * 0.618033988749895) % 1;
+        ctx.strokeStyle = ctx.fillStyle = `hsl(${Math.round(hue * 360)}, 85%, 60%)`;
+        ctx.lineWidth = 1.5;
+        for (let t = Math.max(0, s.frame - trail); t < s.frame; t++) {
+          if (tr.occluded[n][t] || tr.occluded[n][t + 1]) continue;
+          ctx.beginPath(); ctx.moveTo(points[t][0] * k, points[t][1] * k);
+          ctx.lineTo(points[t + 1][0] * k, points[t + 1][1] * k); ctx.stroke();
+        }
+        const [x, y] = points[s.frame];
+        ctx.beginPath(); ctx.arc(x * k, y * k, Math.max(3, k / 3), 0, 2 * Math.PI);
+        if (tr.occluded[n][s.frame]) ctx.stroke(); else ctx.fill();
+      });
+    }
+  }
+
+  async function probe(col, row) {
+    s.lastProbe = [col, row];
+    if (s.probing) { s.pendingProbe = true; return; }
+    s.probing = true;
+    const frame = s.frame, name = s.name;
+    try {
+      const p = await KV.getJSON(`/api/probe/${encodeURIComponent(name)}/${frame}?row=${row}&col=${col}`);
+      if (s && s.name === name) showReadout(p);
+    } catch (err) {
+      if (s) s.readout.replaceChildren(KV.errorCard("probe", err.message));
+    } finally {
+      if (s) {
+        s.probing = false;
+        if (s.pendingProbe) { s.pendingProbe = false; probe(s.lastProbe[0], s.lastProbe[1]); }
+      }
+    }
+  }
+
+  function showReadout(p) {
+    const item = (label, id, value) => [KV.el("span", {}, label), KV.el("span", { id }, value)];
+    const inst = p.instance === null || p.instance === undefined ? "background" : String(p.instance);
+    const flow = (f) => (f ? `Δrow ${f[0].toFixed(2)}, Δcol ${f[1].toFixed(2)} px` : "–");
+    s.readout.replaceChildren(KV.el("div", { class: "kv", "data-frame": p.frame },
+      item("pixel", "readout-pixel", `row ${p.row}, col ${p.col}`),
+      item("instance", "readout-instance", inst),
+      item("asset", "readout-asset", p.asset_id || "–"),
+      item("depth", "readout-depth", p.background ? "background" :
+        p.depth === undefined ? "–" : p.depth.toFixed(4) + " m"),
+      item("forward flow", "readout-flow", flow(p.forward_flow)),
+      item("backward flow", "readout-bflow", flow(p.backward_flow)),
+      item("3D point", "readout-point", p.point ? KV.fmt(p.point) + " m" : "–"),
+      item("RGBA", "readout-rgba", p.rgba ? KV.fmt(p.rgba) : "–")));
+  }
+
+  function pixelAt(event) {
+    const rect = s.img.getBoundingClientRect();
+    const col = Math.floor((event.clientX - rect.left) / rect.width * s.W);
+    const row = Math.floor((event.clientY - rect.top) / rect.height * s.H);
+    return col >= 0 && row >= 0 && col < s.W && row < s.H ? [col, row] : null;
+  }
+
+  function showInstance(k) {
+    s.selected = k;
+    const inst = (s.scene.metadata.instances || [])[k];
+    if (!inst) { s.instancePanel.replaceChildren(KV.el("p", { class: "muted" }, "click an object")); return; }
+    const colour = KV.rgb(s.scene.palette[k + 1]);
+    const keys = ["asset_id", "shape", "size_label", "material", "color_label", "category", "mass",
+      "friction", "restitution", "scale", "is_dynamic"];
+    const rows = [];
+    for (const key of keys) if (inst[key] !== undefined) rows.push(KV.el("span", {}, key), KV.el("span", {}, KV.fmt(inst[key])));
+    const t = s.frame;
+    for (const [key, label] of [["positions", "position (m)"], ["velocities", "velocity (m/s)"], ["image_positions", "image position"]]) {
+      if (inst[key] && inst[key][t]) rows.push(KV.el("span", {}, `${label} @${t}`), KV.el("span", {}, KV.fmt(inst[key][t])));
+    }
+    const vis = inst.visibility || [];
+    rows.push(KV.el("span", {}, `visible px @${t}`), KV.el("span", { id: "instance-visibility" }, KV.fmt(vis[t])));
+    const plot = KV.el("canvas", { class: "plot", width: 300, height: 90, id: "visibility-plot" });
+    const collisions = ((s.scene.events || {}).collisions || []).filter((c) => c.instances.includes(k));
+    const collisionList = KV.el("div", { class: "scroll" }, collisions.length ? KV.el("table", {},
+      KV.el("tr", {}, KV.el("th", {}, "frame"), KV.el("th", {}, "with"), KV.el("th", {}, "force (N)")),
+      collisions.map((c) => {
+        const other = c.instances[0] === k ? c.instances[1] : c.instances[0];
+        return KV.el("tr", {}, KV.el("td", {}, c.frame.toFixed(2)),
+          KV.el("td", {}, other < 0 ? "floor / dome" : "instance " + other), KV.el("td", {}, KV.fmt(c.force, 2)));
+      })) : KV.el("span", { class: "muted" }, "no collisions"));
+    const trajectory = KV.el("div", { class: "scroll" }, KV.el("table", {},
+      KV.el("tr", {}, KV.el("th", {}, "frame"), KV.el("th", {}, "position (m)"), KV.el("th", {}, "visible px")),
+      (inst.positions || []).map((p, i) => KV.el("tr", { style: i === t ? "color:#fff;font-weight:600" : "" },
+        KV.el("td", {}, i), KV.el("td", {}, KV.fmt(p, 2)), KV.el("td", {}, KV.fmt(vis[i]))))));
+    s.instancePanel.replaceChildren(
+      KV.el("h3", { style: `color:${colour}` }, `instance ${k}`),
+      KV.el("div", { class: "kv", id: "instance-details", "data-instance": k }, rows),
+      KV.el("h3", { style: "margin-top:8px" }, "visibility over time"), plot,
+      KV.el("h3", { style: "margin-top:8px" }, `collisions (${collisions.length})`), collisionList,
+      KV.el("h3", { style: "margin-top:8px" }, "trajectory"), trajectory);
+    KVPlot.visibility(plot, vis, t, colour);
+    if (s.view3d) s.view3d.select(k);
+    drawOverlay();
+  }
+
+  function buildControls(scene) {
+    const layers = scene.summary.layers.filter((l) => l !== "rgb" || !scene.summary.layers.includes("rgba"));
+    s.layer = layers[0];
+    const select = KV.el("select", { id: "layer-select", onchange: (e) => {
+      s.layer = e.target.value;
+      s.depthBox.style.display = s.layer === "depth" || s.layer === "z" ? "" : "none";
+      setFrame(s.frame);
+    } }, layers.map((l) => KV.el("option", { value: l }, LAYER_NAMES[l] || l)));
+    const range = scene.depth_range || [0, 10];
+    s.lo = KV.el("input", { type: "number", step: "0.1", id: "depth-lo", value: range[0].toFixed(2), onchange: () => setFrame(s.frame) });
+    s.hi = KV.el("input", { type: "number", step: "0.1", id: "depth-hi", value: range[1].toFixed(2), onchange: () => setFrame(s.frame) });
+    s.depthBox = KV.el("span", { style: "display:none" }, "range ", s.lo, " – ", s.hi, " m");
+    const check = (id, label, disabled) => {
+      const box = KV.el("input", { type: "checkbox", id, disabled, onchange: drawOverlay });
+      return [box, KV.el("label", { for: id }, label)];
+    };
+    const [outlineBox, outlineLabel] = check("overlay-outline", "segmentation outlines", !scene.summary.layers.includes("segmentation"));
+    const [boxesBox, boxesLabel] = check("overlay-boxes", "2D boxes", false);
+    const [tracksBox, tracksLabel] = check("overlay-tracks", "point tracks", !scene.summary.has_tracks);
+    s.showOutline = outlineBox; s.showBoxes = boxesBox; s.showTracks = tracksBox;
+    s.opacity = KV.el("input", { type: "range", min: 0, max: 100, value: 90, id: "overlay-opacity", oninput: drawOverlay });
+    s.slider = KV.el("input", { type: "range", min: 0, max: s.T - 1, value: 0, id: "frame-slider",
+      oninput: (e) => setFrame(Number(e.target.value)) });
+    s.frameLabel = KV.el("span", { id: "frame-label" }, "");
+    const play = KV.el("button", { id: "play", onclick: () => {
+      if (s.timer) { clearInterval(s.timer); s.timer = null; play.textContent = "▶ play"; return; }
+      const rate = (scene.metadata.metadata || {}).frame_rate || 12;
+      s.timer = setInterval(() => setFrame(s.frame + 1), 1000 / rate);
+      play.textContent = "❚❚ pause";
+    } }, "▶ play");
+    return [
+      KV.el("div", { class: "toolbar" }, "layer ", select, s.depthBox),
+      KV.el("div", { class: "toolbar" }, "overlays ", outlineBox, outlineLabel, boxesBox, boxesLabel,
+        tracksBox, tracksLabel, " opacity ", s.opacity),
+      KV.el("div", { class: "toolbar" }, play, s.slider, s.frameLabel),
+    ];
+  }
+
+  async function show(app, name) {
+    document.getElementById("crumb").textContent = "/ " + name;
+    app.replaceChildren(KV.el("p", { class: "muted" }, "loading " + name + "…"));
+    let scene;
+    try {
+      scene = await KV.getJSON(KV.sceneUrl(name));
+    } catch (err) {
+      app.replaceChildren(KV.errorCard("cannot show " + name, err.message), KV.el("a", { href: "#/" }, "← all scenes"));
+      return;
+    }
+    const [W, H] = scene.summary.resolution || scene.metadata.metadata.resolution;
+    const scale = Math.max(1, Math.floor(Math.min(640 / W, 480 / H)));
+    s = { name, scene, W, H, scale, T: numFrames(scene), frame: 0, selected: null, timer: null };
+    s.img = KV.el("img", { id: "main-img", width: W * scale, height: H * scale, alt: "frame" });
+    s.outline = KV.el("img", { id: "outline-img", width: W * scale, height: H * scale, alt: "" });
+    s.canvas = KV.el("canvas", { id: "overlay-canvas", width: W * scale, height: H * scale });
+    const stage = KV.el("div", { class: "stage", id: "stage", style: `width:${W * scale + 2}px` }, s.img, s.outline, s.canvas);
+    s.imgError = KV.el("div", { id: "frame-error" });
+    s.img.addEventListener("error", async () => {
+      const url = s.img.src;
+      try { await KV.getJSON(url); } catch (err) { if (s) s.imgError.replaceChildren(KV.errorCard("cannot show this frame", err.message)); }
+    });
+    s.img.addEventListener("load", () => { if (s) s.imgError.replaceChildren(); });
+    s.canvas.addEventListener("mousemove", (e) => { const px = pixelAt(e); if (px) probe(px[0], px[1]); });
+    s.canvas.addEventListener("click", async (e) => {
+      const px = pixelAt(e);
+      if (!px) return;
+      const p = await KV.getJSON(`/api/probe/${encodeURIComponent(name)}/${s.frame}?row=${px[1]}&col=${px[0]}`);
+      if (p.instance !== null && p.instance !== undefined) showInstance(p.instance);
+    });
+    s.readout = KV.el("div", { id: "readout" }, KV.el("span", { class: "muted" }, "hover the image"));
+    s.instancePanel = KV.el("div", { id: "instance-panel" }, KV.el("p", { class: "muted" }, "click an object"));
+    const canvas3d = KV.el("canvas", { class: "view3d", width: 420, height: 300, id: "view3d" });
+    const sm = scene.summary, info = scene.metadata.metadata || {};
+    const facts = KV.el("div", { class: "kv" },
+      ["recipe", sm.recipe, "seed", sm.seed, "split", sm.split, "instances", sm.num_instances,
+        "frames", s.T, "resolution", `${W}×${H}`, "background", info.background,
+        "spp", (info.renderer || {}).samples_per_pixel, "kubric", ((info.versions || {}).kubric)]
+        .map((v, i) => KV.el("span", {}, KV.fmt(v))));
+    app.replaceChildren(
+      KV.el("a", { href: "#/" }, "← all scenes"),
+      sm.error ? KV.errorCard("incomplete scene", sm.error) : "",
+      ...buildControls(scene),
+      KV.el("div", { class: "layout" },
+        KV.el("div", { style: `width:${Math.max(W * scale + 2, 420)}px` }, stage, s.imgError,
+          KV.el("div", { class: "panel", style: "margin-top:12px" }, KV.el("h3", {}, "reproduce"),
+            KV.el("code", { class: "cmd", id: "worker-command" }, scene.worker_command)),
+          KV.el("div", { class: "panel", style: "margin-top:12px" }, KV.el("h3", {}, "camera & trajectories"), canvas3d)),
+        KV.el("div", { class: "side" },
+          KV.el("div", { class: "panel" }, KV.el("h3", {}, "pixel"), s.readout),
+          KV.el("div", { class: "panel" }, KV.el("h3", {}, "object"), s.instancePanel),
+          KV.el("div", { class: "panel" }, KV.el("h3", {}, "scene"), facts))));
+    s.view3d = KV3D.create(canvas3d, scene);
+    if (sm.has_tracks) {
+      try { s.tracks = await KV.getJSON("/api/tracks/" + encodeURIComponent(name)); } catch (err) {
+        s.imgError.append(KV.errorCard("tracks", err.message));
+      }
+    }
+    setFrame(0);
+    for (let i = 1; i < s.T; i++) new Image().src = KV.frameUrl(name, s.layer, i);  // warm the cache
+  }
+  document.addEventListener("keydown", (e) => {  // ← / → step through frames, space plays
+    if (!s || e.target.tagName === "INPUT" || e.target.tagName === "SELECT") return;
+    if (e.key === "ArrowRight") setFrame(s.frame + 1);
+    else if (e.key === "ArrowLeft") setFrame(s.frame - 1);
+    else if (e.key === " ") { document.getElementById("play").click(); e.preventDefault(); }
+  });
+  return { show, stop };
+})();
+window.KVScene = KVScene;
