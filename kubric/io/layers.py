@@ -286,7 +286,7 @@ def read_frame(directory: PathLike, name: str, index: int, file_templates: Mappi
     directory = as_path(directory)
     if name not in LAYERS:
         raise ValueError(f"read_frame: unknown layer {name!r}; known: {sorted(LAYERS)}")
-    path = directory / frame_filename(_templates(file_templates)[name], int(index))
+    path = directory / frame_filename(_templates(file_templates, LAYERS)[name], int(index))
     if not path.is_file():
         raise FileNotFoundError(f"{str(directory)!r} has no frame {index} of layer {name!r}")
     fmt = LAYERS[name]
