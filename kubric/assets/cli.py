@@ -57,6 +57,15 @@ def _gso(args) -> int:
     return _print_report(report, time.perf_counter() - t0)
 
 
+def _polyhaven(args) -> int:
+    from kubric.assets.polyhaven import build_polyhaven
+
+    t0 = time.perf_counter()
+    report = build_polyhaven(args.out, resolution=args.resolution, fmt=args.format,
+                             limit=args.limit, base_url=args.base_url)
+    return _print_report(report, time.perf_counter() - t0)
+
+
 def _hdri(args) -> int:
     from kubric.assets.hdri import bpy_world_hdri_dir, build_hdri_source
 
@@ -135,6 +144,19 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--limit", type=int, default=None, help="only the first N models (sorted)")
     p.add_argument("--workers", type=int, default=None, help="processes (default: all cores)")
     p.set_defaults(func=_gso)
+
+    from kubric.assets import polyhaven
+
+    p = sub.add_parser("polyhaven", help="download Poly Haven HDRIs (CC0) → HDRI source")
+    p.add_argument("--out", required=True, help="output folder (re-running resumes)")
+    p.add_argument("--resolution", default="2k", choices=polyhaven.RESOLUTIONS,
+                   help="file resolution (default %(default)s)")
+    p.add_argument("--format", default="hdr", choices=polyhaven.FORMATS,
+                   help="file format (default %(default)s)")
+    p.add_argument("--limit", type=int, default=None, help="only the first N HDRIs (sorted ids)")
+    p.add_argument("--base-url", default=polyhaven.API_URL,
+                   help="API server (default %(default)s)")
+    p.set_defaults(func=_polyhaven)
 
     p = sub.add_parser("hdri", help="environment maps (.hdr/.exr) → Texture source")
     p.add_argument("src_dir", nargs="?", default=None,
