@@ -66,6 +66,17 @@ def _polyhaven(args) -> int:
     return _print_report(report, time.perf_counter() - t0)
 
 
+def _shapenet(args) -> int:
+    from kubric.assets.shapenet import build_shapenet
+
+    t0 = time.perf_counter()
+    report = build_shapenet(args.src, args.out, synsets=args.synsets, workers=args.workers,
+                            limit_per_synset=args.limit_per_synset)
+    code = _print_report(report, time.perf_counter() - t0)
+    print("  repairs: " + ", ".join(f"{k} {v}" for k, v in report["repairs"].items()))
+    return code
+
+
 def _hdri(args) -> int:
     from kubric.assets.hdri import bpy_world_hdri_dir, build_hdri_source
 
@@ -157,6 +168,16 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--base-url", default=polyhaven.API_URL,
                    help="API server (default %(default)s)")
     p.set_defaults(func=_polyhaven)
+
+    p = sub.add_parser("shapenet", help="ShapeNetCore v2 (SYNSET/MODEL/models/...) → source")
+    p.add_argument("src", help="ShapeNetCore.v2 folder (with taxonomy.json)")
+    p.add_argument("--out", required=True, help="output folder")
+    p.add_argument("--synsets", nargs="+", default=None, metavar="SYNSET",
+                   help="only these synset ids (e.g. 02691156 03001627)")
+    p.add_argument("--limit-per-synset", type=int, default=None,
+                   help="only the first N models (sorted) of each synset")
+    p.add_argument("--workers", type=int, default=None, help="processes (default: all cores)")
+    p.set_defaults(func=_shapenet)
 
     p = sub.add_parser("hdri", help="environment maps (.hdr/.exr) → Texture source")
     p.add_argument("src_dir", nargs="?", default=None,
