@@ -136,17 +136,24 @@ def test_hostile_models_are_reported_and_the_rest_converted(tmp_path):
                                              "v 1 0 0\nv 0 1 0\n"))
     write_zip(src / "BadTexture.zip", gso_files("BadTexture", texture=b"not an image at all"))
     (src / "Corrupt.zip").write_bytes(b"PK\x03\x04 truncated")
+    linked = src / "Linked_Folder"
+    for member, data in gso_files("Linked_Folder").items():
+        (linked / member).parent.mkdir(parents=True, exist_ok=True)
+        (linked / member).write_bytes(data)
+    (linked / "meshes" / "secret").symlink_to("/etc/hostname")
     out = tmp_path / "out"
     report = build_gso(src, out, workers=1, progress=False)
     reasons = {s["id"]: s["reason"] for s in report["skipped"]}
     assert report["converted"] == 1 and set(reasons) == {"Escape", "Link", "NaN", "NoFaces",
-                                                         "BadTexture", "Corrupt"}
+                                                         "BadTexture", "Corrupt",
+                                                         "Linked_Folder"}
     assert "leaves the extraction directory" in reasons["Escape"]
     assert "is a link" in reasons["Link"]
     assert "non-finite vertex coordinates in vertex 4" in reasons["NaN"]
     assert "not a triangle mesh (got PointCloud" in reasons["NoFaces"]
     assert "not a readable image" in reasons["BadTexture"]
     assert "cannot read zip" in reasons["Corrupt"]
+    assert "symbolic link" in reasons["Linked_Folder"]
     assert AssetSource(out).all_asset_ids == ["Good"]
     assert not (tmp_path / "evil.txt").exists() and not (out.parent / "evil.txt").exists()
     written = {p.relative_to(out).as_posix() for p in out.rglob("*")}

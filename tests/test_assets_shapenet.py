@@ -152,3 +152,21 @@ def test_unknown_synset_and_missing_taxonomy_are_clear(shapenet, tmp_path, capsy
         build_shapenet(src, tmp_path / "o", synsets=["99999999"], progress=False)
     with pytest.raises(FileNotFoundError, match="no taxonomy.json"):
         build_shapenet(tmp_path, tmp_path / "o", progress=False)
+
+
+def test_missing_or_broken_textures_are_reported(tmp_path):
+    src = tmp_path / "sn"
+    src.mkdir()
+    (src / "taxonomy.json").write_text(json.dumps([{"synsetId": "02691156",
+                                                    "name": "airplane", "children": []}]))
+    box = box_obj(HALF, mtllib="model_normalized.mtl")
+    _model(src, "02691156", "good", box)
+    _model(src, "02691156", "missing", box, texture=False)
+    _model(src, "02691156", "broken", box)
+    (src / "02691156" / "broken" / "images" / "texture0.png").write_bytes(b"GIF89a junk")
+    report = build_shapenet(src, tmp_path / "out", workers=1, progress=False)
+    reasons = {s["id"]: s["reason"] for s in report["skipped"]}
+    assert report["converted"] == 1 and report["total"] == 3
+    assert "texture '../images/texture0.png' named by model_normalized.mtl is missing" in \
+        reasons["02691156/missing"]
+    assert "is not a readable image" in reasons["02691156/broken"]

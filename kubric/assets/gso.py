@@ -175,10 +175,11 @@ def read_model_metadata(model_dir: Path) -> dict:
     return meta
 
 
-def check_texture(obj_path: Path) -> None:
+def check_texture(obj_path: Path, copy_missing: bool = True) -> None:
     """Make the OBJ's textures findable and readable: each ``map_Kd`` of its MTL files must be an
-    image; GSO keeps it in ``materials/textures/`` while the MTL names it next to the mesh, so a
-    missing one is copied there from that folder. Raises ``ValueError`` naming the file."""
+    image. GSO keeps it in ``materials/textures/`` while the MTL names it next to the mesh, so
+    with ``copy_missing`` a missing one is copied there from that folder. Raises ``ValueError``
+    naming the file."""
     from PIL import Image, UnidentifiedImageError
 
     folder = obj_path.parent
@@ -197,7 +198,7 @@ def check_texture(obj_path: Path) -> None:
             tex = folder / rel
             if not tex.is_file():
                 alt = folder.parent / "materials" / "textures" / Path(rel).name
-                if not alt.is_file():
+                if not (copy_missing and alt.is_file()):
                     raise ValueError(f"texture {rel!r} named by {mtl.name} is missing")
                 shutil.copyfile(alt, tex)
             try:

@@ -170,6 +170,7 @@ def build_shapenet(src_dir: str | os.PathLike, out_dir: str | os.PathLike, synse
     """Convert ShapeNetCore v2 models under ``src_dir`` into the source ``out_dir``; returns the
     report (with the repair totals under ``"repairs"``)."""
     from kubric.assets.converter import REPORT_NAME, ConvertJob, convert_jobs
+    from kubric.assets.gso import check_texture
     from kubric.assets.writer import dumps
 
     src = Path(src_dir)
@@ -183,20 +184,27 @@ def build_shapenet(src_dir: str | os.PathLike, out_dir: str | os.PathLike, synse
             raise ValueError(f"unknown synset ids {unknown}; taxonomy.json has e.g. "
                              f"{sorted(taxonomy)[:5]}")
     models = find_models(src, synsets)
-    jobs, per_synset = [], {}
+    jobs, per_synset, skipped = [], {}, []
     for synset, model, obj in models:
         per_synset[synset] = per_synset.get(synset, 0) + 1
         if limit_per_synset is not None and per_synset[synset] > limit_per_synset:
+            continue
+        try:
+            check_texture(obj, copy_missing=False)
+        except ValueError as err:  # missing or unreadable texture: reported, not converted
+            skipped.append({"id": f"{synset}/{model}", "source": str(obj),
+                            "reason": f"ValueError: {err}"})
             continue
         names = taxonomy.get(synset, [synset])
         meta = {"category": names[0], "category_names": names, "synset_id": synset,
                 "model_id": model, "description": f"ShapeNet {names[0]} {model}"}
         jobs.append(ConvertJob(f"{synset}/{model}", str(obj), LICENSE, up="y", metadata=meta,
                                repair=repair_mesh))
-    if not jobs:
+    if not jobs and not skipped:
         raise ValueError(f"no SYNSET/MODEL/{MODEL_FILE.as_posix()} under {str(src)!r}"
                          + (f" for synsets {sorted(synsets)}" if synsets else ""))
-    report = convert_jobs(jobs, out_dir, name, VERSION, workers=workers, progress=progress)
+    report = convert_jobs(jobs, out_dir, name, VERSION, workers=workers, progress=progress,
+                          skipped=skipped)
     manifest = json.loads((Path(out_dir) / "manifest.json").read_text())
     totals = dict.fromkeys(REPAIR_KEYS, 0)
     totals["assets_repaired"] = totals["not_watertight"] = 0
