@@ -38,6 +38,9 @@ def test_movi_c_on_gso_and_polyhaven_with_a_category(tmp_path, monkeypatch):
         cmd += ["--set", opt]
     proc = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=400)
     assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-2000:]
+    from kubric.docgen import undocumented_scene_fields
+
+    assert undocumented_scene_fields(out / "scene_00000003") == []
     meta = json.loads((out / "scene_00000003" / "metadata.json").read_text())
     used = {inst["asset_id"] for inst in meta["instances"]}
     assert used and used <= {"Toy_1", "Toy_2"}
