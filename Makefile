@@ -5,7 +5,7 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: install test demo bench lint docs clean
+.PHONY: install test demo bench lint docs clean slurm
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -24,13 +24,16 @@ demo: $(STAMP)
 	$(BIN)/python -m kubric.demo
 
 bench: $(STAMP)
-	$(BIN)/python -m pip install --quiet -e '.[dev,coacd]'  # bench_assets compares V-HACD with CoACD
+	$(BIN)/python -m pip install --quiet -e '.[dev,coacd,bench]'  # V-HACD vs CoACD, codecs vs libraries
 	$(BIN)/python -m benchmarks
 
 docs: $(STAMP)  # regenerate the generated pages, then build the HTML site into site/
 	$(BIN)/python -m kubric.docgen
 	$(BIN)/python -m pip install --quiet 'mkdocs>=1.6'
 	$(BIN)/mkdocs build --strict --quiet
+
+slurm:  # Debian's Slurm, so that the single-node Slurm test runs instead of being skipped (root)
+	apt-get install -y --no-install-recommends slurmctld slurmd slurm-client munge
 
 lint: $(STAMP)
 	$(BIN)/ruff check kubric tests

@@ -188,12 +188,68 @@ def test_png_encoder_is_deterministic_and_readable_by_pillow():
     with Image.open(io.BytesIO(first)) as img:
         assert img.mode == "RGBA"
         np.testing.assert_array_equal(np.asarray(img), image)
-    for method in png_io.FILTERS:  # every filter decodes identically (pypng and numpy path)
-        image16 = rng.integers(0, 65536, (4, 7, 3), dtype=np.uint16)
-        data = fio.encode_png(image16, filter_method=method)
-        np.testing.assert_array_equal(fio.decode_png(data)[0], image16)
-        _, _, pixels, _ = png.Reader(bytes=data).read_flat()
-        np.testing.assert_array_equal(np.asarray(pixels).reshape(4, 7, 3), image16)
+    for method in png_io.FILTERS:  # every filter and strategy decodes identically (libpng, pypng)
+        for strategy in png_io.STRATEGIES:
+            image16 = rng.integers(0, 65536, (4, 7, 3), dtype=np.uint16)
+            data = fio.encode_png(image16, filter_method=method, strategy=strategy)
+            np.testing.assert_array_equal(fio.decode_png(data)[0], image16)
+            _, _, pixels, _ = png.Reader(bytes=data).read_flat()
+            np.testing.assert_array_equal(np.asarray(pixels).reshape(4, 7, 3), image16)
+    with pytest.raises(ValueError, match="zlib strategy must be one of.*'huffman'"):
+        fio.encode_png(image, strategy="huffman")
+
+
+def test_png_strategy_is_run_length_for_8_bit_colour_only():
+    """The measured choice (benchmarks/bench_codecs.py): the default output is the chosen
+    strategy's, and differs from the other one's on an image whose repeats are far apart."""
+    tile = np.random.default_rng(4).integers(0, 40, (4, 5, 3))
+    palette = fio.default_palette()
+    cases = [(np.tile(tile, (8, 8, 1)).astype(np.uint8), None, "rle", "default"),
+             (np.tile(tile, (8, 8, 1)).astype(np.uint16), None, "default", "rle"),
+             (np.tile(tile[..., :1], (8, 8, 1)).astype(np.uint8), palette, "default", "rle")]
+    for image, pal, strategy, other in cases:
+        assert png_io.default_strategy(8 * image.itemsize, pal is not None) == strategy
+        data = fio.encode_png(image, palette=pal)
+        assert data == fio.encode_png(image, palette=pal, strategy=strategy)
+        assert data != fio.encode_png(image, palette=pal, strategy=other)
+        np.testing.assert_array_equal(fio.decode_png(data)[0], image)
+
+
+def test_png_decoder_reads_files_of_other_encoders_and_rejects_corrupt_ones(tmp_path):
+    cv2 = pytest.importorskip("cv2")
+    rng = np.random.default_rng(5)
+    image16 = rng.integers(0, 65536, (6, 9, 3), dtype=np.uint16)
+    image16[2:] = image16[1]  # some structure, so libpng's adaptive filter picks several filters
+    ok, buf = cv2.imencode(".png", image16[..., ::-1], [cv2.IMWRITE_PNG_COMPRESSION, 9])
+    assert ok
+    np.testing.assert_array_equal(fio.decode_png(buf.tobytes())[0], image16)
+    grey_alpha = rng.integers(0, 65536, (3, 4, 2), dtype=np.uint16)
+    data = io.BytesIO()
+    png.Writer(4, 3, greyscale=True, alpha=True, bitdepth=16).write_array(data, grey_alpha.ravel())
+    np.testing.assert_array_equal(fio.decode_png(data.getvalue())[0], grey_alpha)
+    good = fio.encode_png(image16)
+    (tmp_path / "cut.png").write_bytes(good[: len(good) // 2])
+    with pytest.raises(ValueError, match=r"cut\.png.*corrupt PNG data"):
+        fio.read_png(tmp_path / "cut.png")
+
+
+def test_pngs_decode_with_tfds_opencv_path(tmp_path):
+    """TFDS decodes images without TensorFlow as ``cv2.imdecode(bytes, IMREAD_UNCHANGED)`` and
+    then reorders BGR(A) to RGB(A) (tensorflow_datasets/core/features/image_feature.py); every
+    non-palette PNG kind a scene directory holds must come back exactly that way."""
+    cv2 = pytest.importorskip("cv2")
+    scene = _scene(np.random.default_rng(6), 1, 5, 7, max_label=300, flow_scale=5.0)
+    fio.write_image_dict(scene, tmp_path)
+    for name in ("rgba", "segmentation", "forward_flow", "normal", "object_coordinates"):
+        path = tmp_path / f"{name}_00000.png"
+        stored = fio.read_png(path)
+        decoded = cv2.imdecode(np.frombuffer(path.read_bytes(), np.uint8), cv2.IMREAD_UNCHANGED)
+        if decoded.ndim == 3:
+            conversion = {3: cv2.COLOR_BGR2RGB, 4: cv2.COLOR_BGRA2RGBA}[decoded.shape[2]]
+            decoded = cv2.cvtColor(decoded, conversion)
+        assert decoded.dtype == stored.dtype, name
+        np.testing.assert_array_equal(decoded.reshape(stored.shape), stored, err_msg=name)
+    assert fio.read_png(tmp_path / "forward_flow_00000.png").dtype == np.uint16
 
 
 # ------------------------------------------------------------------------------------ TIFF
@@ -226,8 +282,11 @@ def test_tiff_reads_pillow_written_file_and_casts_float64(tmp_path):
     np.testing.assert_array_equal(back[..., 0], depth)
     with pytest.raises(TypeError, match="got dtype uint8"):
         fio.write_tiff(np.zeros((2, 2, 1), np.uint8), tmp_path / "x.tiff")
-    with pytest.raises(ValueError, match="not a classic TIFF"):
+    with pytest.raises(ValueError, match="not a TIFF file libtiff can read"):
         fio.decode_tiff(b"GIF89a.....")
+    Image.fromarray(depth).save(tmp_path / "deflate.tiff", format="TIFF",
+                                compression="tiff_adobe_deflate")
+    np.testing.assert_array_equal(fio.read_tiff(tmp_path / "deflate.tiff")[..., 0], depth)
 
 
 # ------------------------------------------------------------------------- JSON and pickle
@@ -465,6 +524,22 @@ def test_write_image_dict_round_trip(seed, t, h, w, max_label, flow_scale):
     np.testing.assert_allclose(back["normal"], scene["normal"], rtol=0, atol=STEP16 + 1e-6)
     for key in ("object_coordinates", "uv"):
         np.testing.assert_allclose(back[key], scene[key], rtol=0, atol=0.5 * STEP16 + 1e-6)
+
+
+def test_scene_directory_bytes_are_deterministic(tmp_path):
+    """Same seed ⇒ same scene ⇒ byte-identical files, whatever the number of writer threads."""
+    def write(seed, directory, threads):
+        scene = _scene(np.random.default_rng(seed), 2, 16, 12, max_label=300, flow_scale=5.0)
+        scene["segmentation"][1] %= 200  # frame 1 fits 8 bits, the scene still needs 16
+        fio.write_image_dict(scene, directory, max_write_threads=threads)
+        return {p.name: p.read_bytes() for p in sorted(directory.iterdir())}
+
+    first = write(7, tmp_path / "a", threads=1)
+    assert len(first) == 2 * len(EXPECTED_FILES) + 1
+    assert write(7, tmp_path / "b", threads=4) == first
+    other = write(8, tmp_path / "c", threads=4)
+    assert other.keys() == first.keys()
+    assert all(other[name] != first[name] for name in first if name.endswith((".png", ".tiff")))
 
 
 def test_flow_file_encoding_matches_spec(tmp_path):

@@ -269,7 +269,7 @@ def test_every_movi_recipe_writes_tracks_same_seed_same_tracks(tmp_path):
     def run(out):
         cmd = [sys.executable, "-m", "kubric", "worker", "movi_a", "--seed", "5", "--out",
                str(tmp_path / out)]
-        for o in ["resolution=32", "frame_end=3", "samples=2", "denoise=false",
+        for o in ["resolution=64", "frame_end=3", "samples=2", "denoise=false",
                   "min_num_objects=3", "max_num_objects=3", "tracks=40"]:
             cmd += ["--set", o]
         return subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE,

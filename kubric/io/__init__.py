@@ -4,7 +4,8 @@ Modules, one concept each:
 
 * :mod:`kubric.io.paths` — ``as_path`` and atomic writes (temporary file + ``os.replace``).
 * :mod:`kubric.io.json_io` — deterministic, numpy-aware JSON and pickle.
-* :mod:`kubric.io.png_io` — PNG 8/16-bit encoder (numpy + zlib), palette and scaled PNG, readers.
-* :mod:`kubric.io.tiff_io` — float32 TIFF encoder and reader.
+* :mod:`kubric.io.png_io` — PNG 8/16-bit and palette encoder (numpy + zlib), scaled PNG; reading
+  via libpng (imagecodecs) and Pillow (palette).
+* :mod:`kubric.io.tiff_io` — float32 TIFF encoder; reading via libtiff (imagecodecs).
 * :mod:`kubric.io.layers` — the renderer's layer dict ↔ a scene directory (``write_image_dict``).
 """

@@ -1,4 +1,4 @@
-"""PNG files: a minimal numpy + zlib encoder (8/16-bit, 1–4 channels, palette) and readers.
+"""PNG files: our numpy + zlib encoder (8/16-bit, 1–4 channels, palette), libpng decoding.
 
 Sample conventions (all images are ``(H, W, C)`` arrays, row 0 at the top):
 
@@ -13,11 +13,14 @@ Sample conventions (all images are ``(H, W, C)`` arrays, row 0 at the top):
   and returns ``{"min": min, "max": max}``; ``max == min`` stores zeros (no division by zero).
   The decode is ``q / 65535 * (max - min) + min``, exact to half a step, ``(max - min) / 131070``.
 
-The encoder writes IHDR, optional PLTE, one IDAT and IEND; every row uses the same filter
-(:data:`DEFAULT_FILTER`) and zlib level :data:`DEFAULT_COMPRESS_LEVEL` (chosen for speed, see
-``benchmarks/bench_file_io.py``). Output is deterministic (no timestamps or text chunks).
-Reading uses Pillow, except 16-bit multi-channel PNGs, which Pillow truncates to 8 bits: those are
-read with pypng.
+Codecs, chosen by measurement (``benchmarks/bench_codecs.py``; README "PNG and TIFF codecs"):
+the encoder is ours — it writes IHDR, optional PLTE, one IDAT and IEND, every row with the same
+filter (:data:`DEFAULT_FILTER`), zlib level :data:`DEFAULT_COMPRESS_LEVEL` and the zlib strategy
+of :func:`default_strategy` (run-length for 8-bit colour, where it is faster and smaller; zlib's
+default for 16-bit and palette data, whose run-length files decode slower). It is as fast as
+libpng at the same settings (zlib does the work) and deterministic: no timestamps or text chunks.
+Reading uses libpng through ``imagecodecs`` (16-bit colour included, any filter), except palette
+PNGs, which Pillow reads (it keeps the indices and the palette).
 """
 
 from __future__ import annotations
@@ -39,6 +42,7 @@ COLOR_TYPE_FOR_CHANNELS = {1: 0, 2: 4, 3: 2, 4: 6}
 CHANNELS_FOR_COLOR_TYPE = {0: 1, 2: 3, 3: 1, 4: 2, 6: 4}
 PALETTE_COLOR_TYPE = 3
 FILTERS = {"none": 0, "sub": 1, "up": 2, "paeth": 4}
+STRATEGIES = {"default": zlib.Z_DEFAULT_STRATEGY, "filtered": zlib.Z_FILTERED, "rle": zlib.Z_RLE}
 DEFAULT_FILTER = "up"
 DEFAULT_COMPRESS_LEVEL = 2
 UINT16_MAX = 65535
@@ -81,13 +85,21 @@ def _filter_rows(raw: np.ndarray, bpp: int, method: str) -> np.ndarray:
     return out
 
 
+def default_strategy(bitdepth: int, palette: bool = False) -> str:
+    """The measured zlib strategy: "rle" for 8-bit images (rendered RGBA: ~2× faster to encode,
+    ~10 % smaller, faster to decode), "default" for 16-bit and palette data (run-length files
+    there decode 2–4× slower, and object-coordinate ramps grow ~6×)."""
+    return "rle" if bitdepth == 8 and not palette else "default"
+
+
 def encode_png(pixels: np.ndarray, *, palette: np.ndarray | None = None,
                compress_level: int = DEFAULT_COMPRESS_LEVEL,
-               filter_method: str = DEFAULT_FILTER) -> bytes:
+               filter_method: str = DEFAULT_FILTER, strategy: str | None = None) -> bytes:
     """Encode ``pixels`` (H, W, C) uint8/uint16, C in 1..4, as PNG bytes (already validated).
 
     With ``palette`` ((N, 3) uint8, N ≤ 256) the single-channel uint8 ``pixels`` are palette
     indices (colour type 3, filter "none" as the PNG spec recommends for palette images).
+    ``strategy``: a zlib strategy of :data:`STRATEGIES`; None uses :func:`default_strategy`.
     """
     height, width, channels = pixels.shape
     if height < 1 or width < 1:
@@ -104,7 +116,11 @@ def encode_png(pixels: np.ndarray, *, palette: np.ndarray | None = None,
     parts = [PNG_SIGNATURE, _chunk(b"IHDR", ihdr)]
     if palette is not None:
         parts.append(_chunk(b"PLTE", np.ascontiguousarray(palette, dtype=np.uint8).tobytes()))
-    parts.append(_chunk(b"IDAT", zlib.compress(filtered, compress_level)))
+    strategy = default_strategy(bitdepth, palette is not None) if strategy is None else strategy
+    if strategy not in STRATEGIES:
+        raise ValueError(f"zlib strategy must be one of {sorted(STRATEGIES)}, got {strategy!r}")
+    deflate = zlib.compressobj(compress_level, zlib.DEFLATED, 15, 8, STRATEGIES[strategy])
+    parts.append(_chunk(b"IDAT", deflate.compress(filtered) + deflate.flush()))
     parts.append(_chunk(b"IEND", b""))
     return b"".join(parts)
 
@@ -304,74 +320,51 @@ def png_header(data: bytes, name: str = "data") -> dict:
     return {"width": width, "height": height, "bitdepth": bitdepth, "color_type": color_type}
 
 
-def _decode_png_numpy(data: bytes, shape: tuple, name: str) -> np.ndarray | None:
-    """Fast numpy decode of a non-interlaced 16-bit PNG whose rows all use one of the filters
-    none / sub / up (what :func:`encode_png` writes); None for any other file (pypng reads it)."""
-    if data[28] != 0:  # interlaced
-        return None
-    height, width, channels = shape
-    idat, pos = [], 8
-    while pos + 8 <= len(data):
-        (length,) = struct.unpack(">I", data[pos:pos + 4])
-        tag = data[pos + 4:pos + 8]
-        if tag == b"IDAT":
-            idat.append(data[pos + 8:pos + 8 + length])
-        elif tag == b"IEND":
-            break
-        pos += 12 + length
-    try:
-        raw = np.frombuffer(zlib.decompress(b"".join(idat)), dtype=np.uint8)
-    except zlib.error as err:
-        raise ValueError(f"{name}: corrupt PNG image data ({err})") from None
-    bpp, row_bytes = 2 * channels, 2 * channels * width
-    if raw.size < height * (row_bytes + 1):
-        raise ValueError(f"{name}: PNG image data is truncated")
-    rows = raw[:height * (row_bytes + 1)].reshape(height, row_bytes + 1)
-    types, body = rows[:, 0], rows[:, 1:]
-    if np.all(types == 0):
-        out = body
-    elif np.all(types == 2):
-        out = np.cumsum(body, axis=0, dtype=np.uint8)
-    elif np.all(types == 1):
-        out = np.cumsum(body.reshape(height, width, bpp), axis=1, dtype=np.uint8)
-    else:
-        return None
-    return np.ascontiguousarray(out).view(">u2").reshape(shape).astype(np.uint16)
-
-
-def decode_png(data: bytes, name: str = "data") -> tuple[np.ndarray, np.ndarray | None]:
-    """Decode PNG bytes to ((H, W, C) samples, palette or None).
-
-    Samples are the stored values: uint8 for 8-bit, uint16 for 16-bit, palette indices (uint8)
-    for palette PNGs (the palette is returned as (N, 3) uint8).
-    """
+def png_samples_layout(data: bytes, name: str = "data") -> tuple[tuple[int, int, int], int, int]:
+    """``((H, W, C), bitdepth, colour type)`` of PNG bytes this module reads, else a clear error."""
     header = png_header(data, name)
     bitdepth, color_type = header["bitdepth"], header["color_type"]
     if color_type not in CHANNELS_FOR_COLOR_TYPE:
         raise ValueError(f"{name}: invalid PNG colour type {color_type}")
     if bitdepth not in (8, 16) and color_type != PALETTE_COLOR_TYPE:
         raise ValueError(f"{name}: only 8- and 16-bit PNG samples are supported, got {bitdepth}")
-    channels = CHANNELS_FOR_COLOR_TYPE[color_type]
-    shape = (header["height"], header["width"], channels)
-    if bitdepth == 16 and channels > 1:  # Pillow would drop the low byte
-        fast = _decode_png_numpy(data, shape, name)
-        if fast is not None:
-            return fast, None
-        import png
+    shape = (header["height"], header["width"], CHANNELS_FOR_COLOR_TYPE[color_type])
+    return shape, bitdepth, color_type
 
-        _, _, pixels, _ = png.Reader(bytes=data).read_flat()
-        return np.asarray(pixels, dtype=np.uint16).reshape(shape), None
+
+def decode_png(data: bytes, name: str = "data") -> tuple[np.ndarray, np.ndarray | None]:
+    """Decode PNG bytes to ((H, W, C) samples, palette or None).
+
+    Samples are the stored values: uint8 for 8-bit, uint16 for 16-bit, palette indices (uint8)
+    for palette PNGs (the palette is returned as (N, 3) uint8). Palette PNGs are read with Pillow,
+    all others with libpng (``imagecodecs``; Pillow would truncate 16-bit colour to 8 bits).
+    """
+    shape, bitdepth, color_type = png_samples_layout(data, name)
+    if color_type == PALETTE_COLOR_TYPE:
+        return _decode_palette_png(data, shape, name)
+    import imagecodecs
+
+    try:
+        arr = imagecodecs.png_decode(data)
+    except Exception as err:  # PngError, or UnicodeDecodeError from libpng's message on garbage
+        raise ValueError(f"{name}: corrupt PNG data ({type(err).__name__}: {err})") from None
+    if arr.dtype != (np.uint16 if bitdepth == 16 else np.uint8) or arr.size != np.prod(shape):
+        raise ValueError(f"{name}: decoded {arr.dtype} {arr.shape}, but the header says "
+                         f"{bitdepth}-bit {shape}")
+    return arr.reshape(shape), None
+
+
+def _decode_palette_png(data: bytes, shape: tuple, name: str) -> tuple[np.ndarray, np.ndarray]:
     from PIL import Image
 
-    with Image.open(io.BytesIO(data)) as img:
-        img.load()
-        palette = None
-        if img.mode == "P":
-            pal = img.getpalette() or []
-            palette = np.array(pal, dtype=np.uint8).reshape(-1, 3)
-        arr = np.asarray(img)
-    arr = arr.astype(np.uint16 if bitdepth == 16 else np.uint8, copy=False)
-    return arr.reshape(shape), palette
+    try:
+        with Image.open(io.BytesIO(data)) as img:
+            img.load()
+            palette = np.array(img.getpalette() or [], dtype=np.uint8).reshape(-1, 3)
+            arr = np.asarray(img)
+    except (OSError, SyntaxError) as err:  # Pillow raises SyntaxError for some broken chunks
+        raise ValueError(f"{name}: corrupt PNG data ({err})") from None
+    return arr.astype(np.uint8, copy=False).reshape(shape), palette
 
 
 def read_png(filename: PathLike, rescale_range=None) -> np.ndarray:

@@ -35,6 +35,7 @@ def _terminate(signum, _frame):
 
 
 def cmd_worker(args) -> int:
+    from kubric.io import storage
     from kubric.pipeline.recipe import get_recipe
     from kubric.pipeline.worker import run_scene
     _die_with_parent()
@@ -46,12 +47,59 @@ def cmd_worker(args) -> int:
         recipe = get_recipe(args.recipe).from_assignments(args.set)
     except OptionError as err:
         return _error("worker", err)
-    result = run_scene(recipe, seed, args.out)
+    if storage.is_url(args.out):
+        from kubric.pipeline.remote import run_scene_remote
+        result = run_scene_remote(recipe, seed, storage.normalise(args.out),
+                                  echo=lambda line: print(line, flush=True))
+    else:
+        result = run_scene(recipe, seed, args.out)
     print(f"{result.status}: {result.path} ({result.seconds:.1f} s)")
     return 0
 
 
+#: cluster flags → their defaults; the slurm ones apply to --cluster slurm only
+CLUSTER_FLAGS = {"threads_per_scene": 1, "connect_timeout": 20.0, "dashboard_address": ":8787"}
+SLURM_FLAGS = {"jobs": 1, "cores_per_job": 1, "memory": "4GB", "walltime": "01:00:00",
+               "queue": None, "job_directive": [], "print_job_script": False}
+
+
+def _flag(name: str) -> str:
+    return "--" + name.replace("_", "-")
+
+
+def _misplaced_flag(args) -> str | None:
+    """A one-line complaint about a flag given where it means nothing, or None."""
+    given = [n for n in (*CLUSTER_FLAGS, *SLURM_FLAGS) if getattr(args, n) not in (None, False)]
+    if args.cluster is None:
+        return f"{_flag(given[0])} needs --cluster" if given else None
+    slurm_only = [n for n in given if n in SLURM_FLAGS]
+    if args.cluster != "slurm" and slurm_only:
+        return f"{_flag(slurm_only[0])} applies to --cluster slurm only"
+    if args.cluster not in ("local", "slurm"):
+        for name in ("workers", "dashboard_address"):
+            if getattr(args, name) is not None:
+                return (f"{_flag(name)} does not apply to a running scheduler ({args.cluster}): "
+                        f"its workers and dashboard are started with it")
+    if args.cluster == "slurm" and args.workers is not None:
+        return "--workers does not apply to --cluster slurm (use --jobs and --cores-per-job)"
+    return None
+
+
+def _cluster_options(args):
+    from kubric.pipeline.dask_runner import ClusterOptions
+    value = {n: d if getattr(args, n) is None else getattr(args, n)
+             for n, d in {**CLUSTER_FLAGS, **SLURM_FLAGS}.items()}
+    return ClusterOptions(spec=args.cluster, workers=args.workers,
+                          threads_per_scene=value["threads_per_scene"],
+                          connect_timeout=value["connect_timeout"],
+                          dashboard_address=value["dashboard_address"], jobs=value["jobs"],
+                          cores_per_job=value["cores_per_job"], memory=value["memory"],
+                          walltime=value["walltime"], queue=value["queue"],
+                          job_directives=value["job_directive"])
+
+
 def cmd_generate(args) -> int:
+    from kubric.io import storage
     from kubric.pipeline.recipe import get_recipe, recipe_spec
     from kubric.pipeline.runner import LocalRunner
     if args.scenes < 1:
@@ -62,16 +110,58 @@ def cmd_generate(args) -> int:
         return _error("generate", f"--workers must be ≥ 1, got {args.workers}")
     if args.retries < 0:
         return _error("generate", f"--retries must be ≥ 0, got {args.retries}")
+    if args.timeout is not None and args.timeout <= 0:
+        return _error("generate", f"--timeout must be > 0, got {args.timeout}")
+    misplaced = _misplaced_flag(args)
+    if misplaced:
+        return _error("generate", misplaced)
+    cluster_options = None
+    if args.cluster is not None:
+        from kubric.pipeline.dask_runner import ClusterError, slurm_job_script
+        cluster_options = _cluster_options(args)
+        try:
+            cluster_options.validate()
+        except ClusterError as err:
+            return _error("generate", err)
+        if args.print_job_script:
+            print(slurm_job_script(cluster_options))
+            return 0
     try:
         cls = get_recipe(args.recipe)
         cls.from_assignments(args.set).prepare()
     except OptionError as err:
         return _error("generate", err)
-    runner = LocalRunner(recipe_spec(cls), args.out,
-                         range(args.first_seed, args.first_seed + args.scenes),
-                         assignments=args.set, workers=args.workers, retries=args.retries,
-                         timeout=args.timeout, progress=not args.no_progress)
-    summary = runner.run()
+    try:
+        out = storage.normalise(args.out)
+        if out.startswith("memory://"):
+            raise storage.StorageError(f"--out {args.out!r}: an in-memory filesystem is private to "
+                                       f"one process, and every scene runs in its own process; "
+                                       f"use a directory or an object store URL")
+        storage.check_writable(out)
+    except storage.StorageError as err:
+        return _error("generate", err)
+    seeds = range(args.first_seed, args.first_seed + args.scenes)
+    common = dict(assignments=args.set, retries=args.retries, timeout=args.timeout,
+                  progress=not args.no_progress)
+    client = cluster = None
+    if cluster_options is None:
+        runner = LocalRunner(recipe_spec(cls), out, seeds, workers=args.workers, **common)
+    else:
+        from kubric.pipeline.dask_runner import DaskRunner, open_cluster
+        try:
+            client, cluster = open_cluster(cluster_options)
+        except ClusterError as err:
+            return _error("generate", err)
+        print(f"Dask dashboard: {client.dashboard_link}", flush=True)
+        runner = DaskRunner(recipe_spec(cls), out, seeds, client,
+                            threads_per_scene=cluster_options.threads_per_scene, **common)
+    try:
+        summary = runner.run()
+    finally:
+        if client is not None:
+            client.close()
+        if cluster is not None:
+            cluster.close()
     print(summary.format(runner.out_root))
     if summary.interrupted:
         return 130
@@ -99,9 +189,14 @@ def cmd_recipes(args) -> int:
 
 
 def cmd_inspect(args) -> int:
+    from kubric.io import storage
     from kubric.pipeline.inspect import inspect_scene
     try:
-        report = inspect_scene(args.scene_dir, args.sheet)
+        if storage.is_url(args.scene_dir):
+            from kubric.pipeline.inspect import inspect_url
+            report = inspect_url(args.scene_dir, args.sheet)
+        else:
+            report = inspect_scene(args.scene_dir, args.sheet)
     except (FileNotFoundError, ValueError) as err:
         return _error("inspect", err)
     print(report)
@@ -119,22 +214,46 @@ def add_parser(subparsers) -> None:
     seed.add_argument("--index", type=int, help="array-job index (e.g. $SLURM_ARRAY_TASK_ID or "
                       "$JOB_COMPLETION_INDEX): seed = --first-seed + index")
     p.add_argument("--first-seed", type=int, default=0, help="seed of index 0 (default 0)")
-    p.add_argument("--out", required=True, help="output root directory")
+    p.add_argument("--out", required=True, help="output root: a directory or an fsspec URL "
+                   "(the scene renders into local scratch and is uploaded, _SUCCESS last)")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help="recipe option (repeatable)")
     p.set_defaults(func=cmd_worker)
 
-    p = subparsers.add_parser("generate", help="generate many scenes locally (process pool)",
-                              description="One fresh worker process per scene; resumable.")
+    p = subparsers.add_parser("generate", help="generate many scenes (process pool or Dask)",
+                              description="One fresh worker process per scene; resumable. "
+                              "Default: a local process pool; --cluster runs the same workers "
+                              "as Dask tasks.")
     p.add_argument("recipe")
-    p.add_argument("--out", required=True, help="output root directory")
+    p.add_argument("--out", required=True, help="output root: a directory or an fsspec URL "
+                   "(s3://bucket/run, gs://..., memory://..., file://...)")
     p.add_argument("--scenes", type=int, required=True, help="number of scenes")
     p.add_argument("--first-seed", type=int, default=0, help="seed of the first scene")
-    p.add_argument("--workers", type=int, default=None, help="parallel workers (default: cores)")
+    p.add_argument("--workers", type=int, default=None, help="parallel workers (default: cores; "
+                   "with --cluster local: cores // --threads-per-scene)")
     p.add_argument("--retries", type=int, default=2, help="extra attempts per failed scene")
     p.add_argument("--timeout", type=float, default=None, help="seconds per worker attempt")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    g = p.add_argument_group("Dask cluster (kubric.pipeline.dask_runner)")
+    g.add_argument("--cluster", default=None, metavar="local|tcp://HOST:PORT|slurm",
+                   help="run on Dask: a LocalCluster, a running scheduler, or Slurm jobs")
+    g.add_argument("--threads-per-scene", type=int, default=None,
+                   help="render threads of each scene (one scene per worker slot; default 1)")
+    g.add_argument("--connect-timeout", type=float, default=None,
+                   help="seconds to wait for the scheduler (default 20)")
+    g.add_argument("--dashboard-address", default=None,
+                   help="dashboard address of a cluster started here (default :8787)")
+    g.add_argument("--jobs", type=int, default=None, help="slurm: worker jobs to submit")
+    g.add_argument("--cores-per-job", type=int, default=None, help="slurm: cores of each job")
+    g.add_argument("--memory", default=None, help="slurm: memory of each job (default 4GB)")
+    g.add_argument("--walltime", default=None, help="slurm: time limit of each job")
+    g.add_argument("--queue", default=None, help="slurm: partition")
+    g.add_argument("--job-directive", action="append", default=None, metavar="DIRECTIVE",
+                   help="slurm: extra #SBATCH line, e.g. --job-directive=--gres=gpu:1 "
+                   "(repeatable)")
+    g.add_argument("--print-job-script", action="store_true",
+                   help="slurm: print the worker job script and exit (submits nothing)")
     p.set_defaults(func=cmd_generate)
 
     p = subparsers.add_parser("recipes", help="list recipes and their options")
@@ -142,7 +261,7 @@ def add_parser(subparsers) -> None:
     p.set_defaults(func=cmd_recipes)
 
     p = subparsers.add_parser("inspect", help="summarise a scene directory, write a contact sheet")
-    p.add_argument("scene_dir")
+    p.add_argument("scene_dir", help="a scene directory or its URL (s3://.../scene_00000000)")
     p.add_argument("--sheet", default=None, help="contact sheet path (default: "
                    "SCENE_DIR/contact_sheet.png; .gif for an animation)")
     p.set_defaults(func=cmd_inspect)

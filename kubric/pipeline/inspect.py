@@ -200,3 +200,24 @@ def inspect_scene(scene_dir, sheet=None) -> str:
     contact_sheet(layers, background, sheet, tracks=tracks)
     return summarise(scene_dir, layers, metadata, events) + extra + \
         f"\n  contact sheet: {sheet}"
+
+
+def inspect_url(scene_url: str, sheet=None) -> str:
+    """:func:`inspect_scene` for a scene at an fsspec URL (e.g. ``s3://bucket/run/scene_…``):
+    only a complete scene (``_SUCCESS`` present) is read; it is downloaded into a temporary
+    directory. The contact sheet defaults to ``./{scene name}_contact_sheet.png``."""
+    import tempfile
+
+    from kubric.io import storage
+
+    scene_url = storage.normalise(scene_url)
+    if not storage.isfile(storage.join(scene_url, "_SUCCESS")):
+        what = "does not exist" if not storage.listdir(scene_url) else \
+            "is incomplete (no _SUCCESS: an interrupted or running upload)"
+        raise FileNotFoundError(f"{scene_url!r} {what}")
+    name = scene_url.rsplit("/", 1)[-1]
+    sheet = pathlib.Path(sheet) if sheet else pathlib.Path.cwd() / f"{name}_contact_sheet.png"
+    with tempfile.TemporaryDirectory(prefix="kubric-inspect-") as tmp:
+        local = storage.download_dir(scene_url, pathlib.Path(tmp) / name)
+        report = inspect_scene(local, sheet.resolve())
+    return report.replace(str(local), scene_url, 1)

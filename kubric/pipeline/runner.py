@@ -1,4 +1,8 @@
-"""The local runner: many scenes, one fresh ``python -m kubric worker`` process per scene.
+"""Runners: many scenes, one fresh ``python -m kubric worker`` process per scene.
+
+:class:`Runner` holds what every runner shares (output root as a path or fsspec URL, per-scene
+logs, resume, progress bar, summary, signals); :class:`LocalRunner` is the process pool below,
+:class:`kubric.pipeline.dask_runner.DaskRunner` the same on a Dask cluster. The local runner:
 
 * a pool of ``workers`` concurrent processes (default: the usable cores);
 * a tqdm progress bar with ETA and the failure count;
@@ -18,13 +22,15 @@ import pathlib
 import signal
 import subprocess
 import sys
+import tempfile
 import threading
 import time
 from collections.abc import Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
-from kubric.pipeline.worker import is_complete, remove_stale, scene_name
+from kubric.io import storage
+from kubric.pipeline.worker import SUCCESS, remove_stale, scene_name
 
 #: environment variable telling a worker to die with the runner that started it.
 PARENT_ENV = "KUBRIC_RUNNER_PID"
@@ -81,8 +87,185 @@ def worker_command(recipe_spec: str, seed: int, out_root, assignments: Sequence[
     return cmd
 
 
-class LocalRunner:
-    """Run ``recipe_spec`` (see :func:`kubric.pipeline.recipe.recipe_spec`) for ``seeds``.
+def run_logged(cmd: Sequence[str], log: pathlib.Path, attempt: int, timeout: float | None = None,
+               env: dict | None = None, start=None, should_stop=None, poll: float = 2.0,
+               where: str = "") -> int | None:
+    """Run one worker attempt with stdout+stderr appended to ``log`` between ``=== attempt`` and
+    ``=== exit status`` lines; kill it after ``timeout`` seconds or once ``should_stop()`` is
+    true (polled every ``poll`` s). ``start(cmd, **popen_kwargs)`` replaces ``subprocess.Popen``
+    (returning None = do not start). Returns the exit status, None when not started."""
+    start = start or subprocess.Popen
+    with open(log, "a") as fh:
+        fh.write(f"=== attempt {attempt} at {time.strftime('%Y-%m-%d %H:%M:%S')}{where}: "
+                 f"{' '.join(cmd)}\n")
+        fh.flush()
+        proc = start(list(cmd), stdout=fh, stderr=subprocess.STDOUT, env=env,
+                     stdin=subprocess.DEVNULL)
+        if proc is None:
+            return None
+        deadline = None if timeout is None else time.monotonic() + timeout
+        while True:
+            wait = None if deadline is None else max(0.0, deadline - time.monotonic())
+            if should_stop is not None:
+                wait = poll if wait is None else min(wait, poll)
+            try:
+                rc = proc.wait(timeout=wait)
+                break
+            except subprocess.TimeoutExpired:
+                if deadline is not None and time.monotonic() >= deadline:
+                    proc.kill()
+                    rc = proc.wait()
+                    fh.write(f"=== timed out after {timeout} s\n")
+                    break
+                if should_stop is not None and should_stop():
+                    proc.terminate()
+                    try:
+                        rc = proc.wait(timeout=15)
+                    except subprocess.TimeoutExpired:
+                        proc.kill()
+                        rc = proc.wait()
+                    fh.write("=== stopped: the run was interrupted\n")
+                    break
+        fh.write(f"=== exit status {rc}\n")
+    return rc
+
+
+class SceneLogs:
+    """One log per scene at ``OUT/logs/scene_{seed:08d}.log``, all attempts appended. For a URL
+    output the log is kept in a local staging directory and uploaded whole after each attempt
+    (object stores cannot append)."""
+
+    def __init__(self, out_root: str):
+        self.root = storage.join(out_root, "logs")
+        self.remote = storage.is_url(out_root)
+        self.dir = pathlib.Path(tempfile.mkdtemp(prefix="kubric-logs-")) if self.remote \
+            else pathlib.Path(self.root)
+        self._fetched: set[int] = set()
+
+    def prepare(self) -> None:
+        if not self.remote:
+            self.dir.mkdir(parents=True, exist_ok=True)
+
+    def path(self, seed: int) -> pathlib.Path:
+        """The local file to append to (a remote log is fetched first, once)."""
+        local = self.dir / f"{scene_name(seed)}.log"
+        if self.remote and seed not in self._fetched:
+            self._fetched.add(seed)
+            if storage.exists(self.location(seed)):
+                local.write_bytes(storage.read_bytes(self.location(seed)))
+        return local
+
+    def location(self, seed: int) -> str:
+        return storage.join(self.root, f"{scene_name(seed)}.log")
+
+    def append(self, seed: int, text: str) -> None:
+        with open(self.path(seed), "a") as fh:
+            fh.write(text)
+        self.publish(seed)
+
+    def publish(self, seed: int) -> None:
+        if self.remote:
+            storage.write_bytes(self.location(seed), self.path(seed).read_bytes())
+
+
+class Runner:
+    """What every runner shares: seeds, options, output root (path or URL), per-scene logs,
+    resume (complete scenes skipped, stale work directories removed), the progress bar, the
+    summary and SIGINT/SIGTERM handling. Subclasses implement :meth:`_execute`."""
+
+    def __init__(self, recipe_spec: str, out_root, seeds: Sequence[int],
+                 assignments: Sequence[str] = (), retries: int = 2,
+                 timeout: float | None = None, progress: bool = True):
+        if retries < 0:
+            raise ValueError(f"retries must be ≥ 0, got {retries}")
+        self.recipe_spec = recipe_spec
+        root = storage.normalise(out_root)
+        self.remote = storage.is_url(root)
+        #: a ``pathlib.Path`` for local outputs, the URL string otherwise
+        self.out_root = root if self.remote else pathlib.Path(root)
+        self.seeds = list(dict.fromkeys(int(s) for s in seeds))
+        self.assignments = list(assignments)
+        self.retries = retries
+        self.timeout = timeout
+        self.progress = progress
+        self.kill_after = 15.0  # seconds between terminate and kill on interruption
+        self.logs = SceneLogs(self.out_root)
+        self._stop = threading.Event()
+        self._lock = threading.Lock()
+
+    def scene_location(self, seed: int) -> str:
+        return storage.join(self.out_root, scene_name(seed))
+
+    def scene_complete(self, seed: int) -> bool:
+        return storage.isfile(storage.join(self.scene_location(seed), SUCCESS))
+
+    def command(self, seed: int) -> list[str]:
+        return worker_command(self.recipe_spec, seed, self.out_root, self.assignments)
+
+    def _record(self, seed: int, ok: bool, summary: RunSummary, bar) -> None:
+        """Book a finished scene: done, or failed for good (after its last attempt)."""
+        with self._lock:
+            if ok:
+                summary.done.append(seed)
+                summary.failed.pop(seed, None)
+            else:
+                summary.failed[seed] = self.logs.path(seed)
+            if bar:
+                bar.update(1)
+                bar.set_postfix(failed=len(summary.failed))
+
+    def stop(self, *_args) -> None:
+        """Start no new scene; subclasses also end the running ones."""
+        self._stop.set()
+
+    def _install_signals(self):
+        if threading.current_thread() is not threading.main_thread():
+            return {}
+        previous = {}
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            previous[sig] = signal.signal(sig, self.stop)
+        return previous
+
+    def _execute(self, todo: list[int], summary: RunSummary, bar) -> None:
+        raise NotImplementedError
+
+    def run(self) -> RunSummary:
+        start = time.time()
+        summary = RunSummary(requested=len(self.seeds))
+        if not self.remote:
+            pathlib.Path(self.out_root).mkdir(parents=True, exist_ok=True)
+            remove_stale(pathlib.Path(self.out_root))
+        self.logs.prepare()
+        complete = set(storage.complete_scenes(self.out_root, SUCCESS))
+        todo = []
+        for seed in self.seeds:
+            (summary.skipped if scene_name(seed) in complete else todo).append(seed)
+        bar = None
+        if self.progress and todo:
+            from tqdm import tqdm
+            bar = tqdm(total=len(todo), unit="scene", desc=self.recipe_spec.rsplit(":", 1)[-1],
+                       dynamic_ncols=True)
+            bar.set_postfix(failed=0)
+        previous = self._install_signals()
+        try:
+            if todo:
+                self._execute(todo, summary, bar)
+        finally:
+            for sig, handler in previous.items():
+                signal.signal(sig, handler)
+            if bar:
+                bar.close()
+        summary.interrupted = self._stop.is_set()
+        if summary.interrupted and not self.remote:
+            time.sleep(0.2)
+            remove_stale(pathlib.Path(self.out_root))
+        summary.seconds = time.time() - start
+        return summary
+
+
+class LocalRunner(Runner):
+    """Run ``recipe_spec`` (see :func:`kubric.pipeline.recipe.recipe_spec`) for ``seeds`` on a
+    pool of ``workers`` local processes.
 
     ``assignments`` are ``key=value`` option strings passed to every worker; validate them
     (build the recipe once) before calling :meth:`run`.
@@ -91,50 +274,31 @@ class LocalRunner:
     def __init__(self, recipe_spec: str, out_root, seeds: Sequence[int],
                  assignments: Sequence[str] = (), workers: int | None = None, retries: int = 2,
                  timeout: float | None = None, progress: bool = True):
-        if retries < 0:
-            raise ValueError(f"retries must be ≥ 0, got {retries}")
         if workers is not None and workers < 1:
             raise ValueError(f"workers must be ≥ 1, got {workers}")
-        self.recipe_spec = recipe_spec
-        self.out_root = pathlib.Path(out_root).resolve()
-        self.seeds = list(dict.fromkeys(int(s) for s in seeds))
-        self.assignments = list(assignments)
+        super().__init__(recipe_spec, out_root, seeds, assignments, retries, timeout, progress)
         self.workers = workers or usable_cores()
-        self.retries = retries
-        self.timeout = timeout
-        self.progress = progress
-        self.kill_after = 15.0  # seconds between terminate and kill on interruption
-        self.log_dir = self.out_root / "logs"
-        self._stop = threading.Event()
         self._procs: set[subprocess.Popen] = set()
-        self._lock = threading.Lock()
 
     # ------------------------------------------------------------------ one scene
+    def _start(self, cmd, **kwargs):
+        with self._lock:
+            if self._stop.is_set():
+                return None
+            proc = subprocess.Popen(cmd, **kwargs)
+            self._procs.add(proc)
+            return proc
+
     def _attempt(self, seed: int, attempt: int) -> bool:
-        log = self.log_dir / f"{scene_name(seed)}.log"
-        cmd = worker_command(self.recipe_spec, seed, self.out_root, self.assignments)
         env = dict(os.environ, **{PARENT_ENV: str(os.getpid())})
-        with open(log, "a") as fh:
-            fh.write(f"=== attempt {attempt} at {time.strftime('%Y-%m-%d %H:%M:%S')}: "
-                     f"{' '.join(cmd)}\n")
-            fh.flush()
+        try:
+            rc = run_logged(self.command(seed), self.logs.path(seed), attempt, self.timeout, env,
+                            start=self._start)
+        finally:
             with self._lock:
-                if self._stop.is_set():
-                    return False
-                proc = subprocess.Popen(cmd, stdout=fh, stderr=subprocess.STDOUT, env=env,
-                                        stdin=subprocess.DEVNULL)
-                self._procs.add(proc)
-            try:
-                rc = proc.wait(timeout=self.timeout)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                rc = proc.wait()
-                fh.write(f"=== timed out after {self.timeout} s\n")
-            finally:
-                with self._lock:
-                    self._procs.discard(proc)
-            fh.write(f"=== exit status {rc}\n")
-        return rc == 0 and is_complete(self.out_root / scene_name(seed))
+                self._procs = {p for p in self._procs if p.poll() is None}
+        self.logs.publish(seed)
+        return rc == 0 and self.scene_complete(seed)
 
     def _run_one(self, seed: int, summary: RunSummary, bar) -> None:
         for attempt in range(1, self.retries + 2):
@@ -143,24 +307,16 @@ class LocalRunner:
             with self._lock:
                 summary.attempts += 1
             if self._attempt(seed, attempt):
-                with self._lock:
-                    summary.done.append(seed)
-                    summary.failed.pop(seed, None)
-                    bar and bar.update(1)
+                self._record(seed, True, summary, bar)
                 return
             if self._stop.is_set():
                 return
-            with self._lock:
-                summary.failed[seed] = self.log_dir / f"{scene_name(seed)}.log"
-        with self._lock:
-            if bar:
-                bar.update(1)
-                bar.set_postfix(failed=len(summary.failed))
+        self._record(seed, False, summary, bar)
 
     # ------------------------------------------------------------------ signals
     def stop(self, *_args) -> None:
         """Start no new scene and terminate the running workers."""
-        self._stop.set()
+        super().stop()
         with self._lock:
             procs = list(self._procs)
         for proc in procs:
@@ -177,49 +333,11 @@ class LocalRunner:
             if proc.poll() is None:
                 proc.kill()
 
-    def _install_signals(self):
-        if threading.current_thread() is not threading.main_thread():
-            return {}
-        previous = {}
-        for sig in (signal.SIGINT, signal.SIGTERM):
-            previous[sig] = signal.signal(sig, self.stop)
-        return previous
-
     # ------------------------------------------------------------------ all scenes
-    def run(self) -> RunSummary:
-        start = time.time()
-        summary = RunSummary(requested=len(self.seeds))
-        self.out_root.mkdir(parents=True, exist_ok=True)
-        self.log_dir.mkdir(exist_ok=True)
-        remove_stale(self.out_root)
-        todo = []
-        for seed in self.seeds:
-            if is_complete(self.out_root / scene_name(seed)):
-                summary.skipped.append(seed)
-            else:
-                todo.append(seed)
-        bar = None
-        if self.progress and todo:
-            from tqdm import tqdm
-            bar = tqdm(total=len(todo), unit="scene", desc=self.recipe_spec.rsplit(":", 1)[-1],
-                       dynamic_ncols=True)
-            bar.set_postfix(failed=0)
-        previous = self._install_signals()
-        try:
-            with ThreadPoolExecutor(max_workers=min(self.workers, max(1, len(todo)))) as pool:
-                futures = [pool.submit(self._run_one, s, summary, bar) for s in todo]
-                while any(not f.done() for f in futures):
-                    time.sleep(0.1)
-                for f in futures:
-                    f.result()
-        finally:
-            for sig, handler in previous.items():
-                signal.signal(sig, handler)
-            if bar:
-                bar.close()
-        summary.interrupted = self._stop.is_set()
-        if summary.interrupted:
-            time.sleep(0.2)
-            remove_stale(self.out_root)
-        summary.seconds = time.time() - start
-        return summary
+    def _execute(self, todo: list[int], summary: RunSummary, bar) -> None:
+        with ThreadPoolExecutor(max_workers=min(self.workers, max(1, len(todo)))) as pool:
+            futures = [pool.submit(self._run_one, s, summary, bar) for s in todo]
+            while any(not f.done() for f in futures):
+                time.sleep(0.1)
+            for f in futures:
+                f.result()

@@ -22,6 +22,8 @@ Options:
   defaults, or an int ≥ 0 limiting every bounce kind), light_tree (bool, default False: faster on
   small lamp-lit scenes), verbose (bool: show Blender's console output), scratch_dir (where frames
   are written; default a new temporary directory).
+Render threads: Blender's automatic count (all cores), or exactly N when the environment variable
+KUBRIC_RENDER_THREADS is N ≥ 1 (set by ``kubric generate --threads-per-scene``).
 Depth of field comes from the perspective camera's ``use_dof`` / ``focus_distance`` /
 ``aperture_fstop`` (RGB only).
 """
@@ -113,6 +115,16 @@ def _live_option(name, convert, apply):
 
 def _set_cycles(attr):
     return lambda bscene, value: setattr(bscene.cycles, attr, value)
+
+
+def render_threads() -> int | None:
+    """The render thread count from KUBRIC_RENDER_THREADS (None = Blender's automatic count)."""
+    value = os.environ.get("KUBRIC_RENDER_THREADS", "").strip()
+    if not value:
+        return None
+    if not value.isdigit() or int(value) < 1:
+        raise ValueError(f"KUBRIC_RENDER_THREADS must be an integer ≥ 1, got {value!r}")
+    return int(value)
 
 
 class Blender(TableView):
@@ -224,6 +236,10 @@ class Blender(TableView):
         s.render.use_sequencer = False
         s.cycles.use_light_tree = self.light_tree
         s.cycles.denoiser = "OPENIMAGEDENOISE"
+        threads = render_threads()
+        s.render.threads_mode = "FIXED" if threads else "AUTO"
+        if threads:
+            s.render.threads = threads
         self._setup_device()
         layer = s.view_layers[0]
         aov = layer.aovs.add()

@@ -1,0 +1,168 @@
+"""The camera export of the multi-view recipes: NeRF "blender" ``transforms_{split}.json`` files.
+
+Every multi-view scene is one render whose frames are the views (view ``i`` = frame
+``frame_start + i`` = the files ``*_{i:05d}.*``). The views are split into ``train`` / ``val`` /
+``test`` by :func:`view_splits`, a deterministic function of the view index and the recipe's
+``split_ratio`` option, and each split gets one file ``transforms_{split}.json`` beside the
+scene's images, readable unchanged by the original NeRF code, instant-ngp and nerfstudio:
+
+* ``camera_angle_x``: horizontal field of view (radians), as the NeRF "blender" loader reads it;
+  ``camera_angle_y`` likewise vertically;
+* ``fl_x``, ``fl_y``, ``cx``, ``cy``, ``w``, ``h``: pinhole intrinsics in pixels as instant-ngp and
+  nerfstudio read them (origin at the top-left image corner, pixel (row r, col c) centred at
+  ``(c + 0.5, r + 0.5)``, so ``cx = w / 2`` for an unshifted camera);
+* ``frames``: one entry per view of the split, in view order, with ``file_path`` (the RGBA image
+  without its ``.png`` extension, relative to the JSON file: ``./rgba_00007``, as in the NeRF
+  "blender" data sets, whose loaders append ``.png``), ``transform_matrix`` (4×4 camera → world,
+  Blender camera axes: x right, y up, looking down −z — the NeRF / OpenGL convention), and our
+  per-view additions: ``view`` (index), ``frame`` (scene frame), ``split``, and the file names of the
+  view's other layers (``depth_file``, ``segmentation_file``, ...: see each recipe).
+
+Reading a pixel's ray from the JSON alone (what the tests do): for pixel (row i, col j),
+``d_cam = ((j + 0.5 − cx) / fl_x, −(i + 0.5 − cy) / fl_y, −1)``, ``d = R · d_cam / |d_cam|`` with
+``R = transform_matrix[:3, :3]``, origin ``transform_matrix[:3, 3]``; the surface point is
+``origin + depth[i, j] · d`` (depth is the Euclidean distance to the camera centre).
+:func:`iter_views` does exactly this for every view of a split (rays, RGB and depth per view).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+
+import numpy as np
+
+from kubric.core import camera_geometry as geo
+
+SPLITS = ("train", "val", "test")
+
+
+def split_ratio(value) -> tuple[int, int, int]:
+    """Converter for the ``split_ratio`` option: three integers ``train,val,test`` ≥ 0 with a
+    positive train weight, e.g. ``"8,1,1"`` or ``(8, 1, 1)``."""
+    if isinstance(value, str):
+        value = value.replace(":", ",").split(",")
+    try:
+        parts = [int(str(v).strip()) for v in value]
+    except (TypeError, ValueError):
+        raise ValueError("expected three integers train,val,test") from None
+    if len(parts) != 3 or min(parts) < 0 or parts[0] < 1:
+        raise ValueError("expected three integers train,val,test ≥ 0 with train ≥ 1")
+    return tuple(parts)
+
+
+split_ratio.allowed = "three integers train,val,test (train ≥ 1, others ≥ 0), e.g. 8,1,1"
+
+
+def view_splits(num_views: int, ratio: Sequence[int]) -> list[str]:
+    """The split of every view: view ``v`` at position ``p = v mod (a + b + c)`` of the ratio
+    ``a:b:c`` is ``train`` for ``p < a``, ``val`` for ``a ≤ p < a + b``, else ``test`` (so the
+    held-out views are spread evenly over the view sequence, e.g. an orbit)."""
+    a, b, c = (int(v) for v in ratio)
+    period = a + b + c
+    out = []
+    for v in range(int(num_views)):
+        p = v % period
+        out.append("train" if p < a else "val" if p < a + b else "test")
+    return out
+
+
+def min_views_for(ratio: Sequence[int]) -> int:
+    """The fewest views for which every split with a positive weight gets at least one view."""
+    a, b, c = (int(v) for v in ratio)
+    return a + b + 1 if c else a + 1 if b else 1
+
+
+def check_views(recipe: str, num_views: int, ratio: Sequence[int]) -> str | None:
+    """A one-line message when ``num_views`` cannot fill every split of ``ratio``, else None."""
+    need = min_views_for(ratio)
+    if num_views < need:
+        named = ",".join(str(v) for v in ratio)
+        return (f"{recipe}: option num_views={num_views} is too few for split_ratio={named}: "
+                f"every split with a positive weight needs a view, so at least {need} views "
+                "(raise num_views or set a split weight to 0)")
+    return None
+
+
+def intrinsics_entry(camera, resolution) -> dict:
+    """The shared camera fields of a transforms file (see module doc)."""
+    w, h = (int(v) for v in resolution)
+    k = geo.pixel_intrinsics(camera, (w, h))
+    fl_x, fl_y, cx, cy = float(k[0, 0]), float(k[1, 1]), float(k[0, 2]), float(k[1, 2])
+    return {
+        "camera_angle_x": 2.0 * math.atan(0.5 * w / fl_x),
+        "camera_angle_y": 2.0 * math.atan(0.5 * h / fl_y),
+        "fl_x": fl_x, "fl_y": fl_y, "cx": cx, "cy": cy, "w": w, "h": h,
+        "k1": 0.0, "k2": 0.0, "p1": 0.0, "p2": 0.0,
+        "camera_model": "OPENCV",
+    }
+
+
+def nerf_transforms(camera, frames: Sequence[int], resolution, splits: Sequence[str],
+                    view_files: Mapping[str, str] | None = None,
+                    extra: Mapping[str, object] | None = None) -> dict[str, dict]:
+    """``{split: transforms dict}`` for the views ``frames`` (view ``i`` = ``frames[i]``).
+
+    Args:
+      camera: the (keyframed) scene camera.
+      frames: scene frame of each view.
+      resolution: (width, height).
+      splits: split name of each view (:func:`view_splits`).
+      view_files: ``{key: file template}`` added to every frame entry formatted with the view index,
+        e.g. ``{"depth_file": "depth_{:05d}.tiff"}``.
+      extra: fields added at the top level of every file (e.g. ``split_ratio``).
+    """
+    if len(frames) != len(splits):
+        raise ValueError(f"nerf_transforms: {len(frames)} frames but {len(splits)} split names")
+    unknown = sorted(set(splits) - set(SPLITS))
+    if unknown:
+        raise ValueError(f"nerf_transforms: unknown split(s) {unknown}; allowed: {list(SPLITS)}")
+    shared = intrinsics_entry(camera, resolution)
+    out = {s: {**shared, **dict(extra or {}), "split": s, "frames": []} for s in SPLITS}
+    matrices = geo.camera_to_world_matrices(camera, list(frames))
+    for view, (frame, split) in enumerate(zip(frames, splits, strict=True)):
+        entry = {"file_path": f"./rgba_{view:05d}",
+                 "transform_matrix": matrices[view].tolist(),
+                 "view": view, "frame": int(frame), "split": split}
+        for key, template in dict(view_files or {}).items():
+            entry[key] = template.format(view)
+        out[split]["frames"].append(entry)
+    return out
+
+
+def pixel_rays_from_transforms(data: Mapping, entry: Mapping):
+    """(origins (H, W, 3), unit directions (H, W, 3)) of every pixel-centre ray of one frame
+    entry of a transforms file, built from the file's fields alone (see module doc)."""
+    w, h = int(data["w"]), int(data["h"])
+    m = np.asarray(entry["transform_matrix"], np.float64)
+    cols, rows = np.meshgrid(np.arange(w) + 0.5, np.arange(h) + 0.5)
+    local = np.stack([(cols - data["cx"]) / data["fl_x"], -(rows - data["cy"]) / data["fl_y"],
+                      -np.ones_like(cols)], axis=-1)
+    local /= np.linalg.norm(local, axis=-1, keepdims=True)
+    directions = local @ m[:3, :3].T
+    return np.broadcast_to(m[:3, 3], directions.shape).copy(), directions
+
+
+def iter_views(scene_dir, split: str = "train"):
+    """Yield one dict per view of ``split`` of a multi-view scene directory: ``view``, ``rgb``
+    (H, W, 3) uint8, ``depth`` (H, W) metres, ``origins`` / ``directions`` (H, W, 3) world rays and
+    ``transform_matrix`` (4, 4) — what a NeRF data loader needs, from the files alone."""
+    import json
+    import pathlib
+
+    from kubric.io import png_io, tiff_io
+
+    if split not in SPLITS:
+        raise ValueError(f"iter_views: unknown split {split!r}; allowed: {list(SPLITS)}")
+    scene_dir = pathlib.Path(scene_dir)
+    path = scene_dir / f"transforms_{split}.json"
+    if not path.is_file():
+        raise FileNotFoundError(f"iter_views: {path} does not exist (not a multi-view scene?)")
+    data = json.loads(path.read_text())
+    for entry in data["frames"]:
+        origins, directions = pixel_rays_from_transforms(data, entry)
+        rgb = png_io.read_png(scene_dir / (entry["file_path"] + ".png"))[..., :3]
+        depth = tiff_io.read_tiff(scene_dir / entry["depth_file"])[..., 0]
+        yield {"view": int(entry["view"]), "rgb": rgb, "depth": depth, "origins": origins,
+               "directions": directions,
+               "transform_matrix": np.asarray(entry["transform_matrix"], np.float64)}

@@ -1,0 +1,231 @@
+"""Paths and URLs alike: a small fsspec-aware layer for output roots and scene directories.
+
+An output location is either a local path (``out/``, ``/data/run``) or an fsspec URL
+(``s3://bucket/run``, ``gs://bucket/run``, ``memory://run``, ``file:///data/run``, ...).
+Local paths never import fsspec; URLs import it lazily, with the protocol's package
+(``s3fs`` for ``s3://``, ``gcsfs`` for ``gs://``) installed. Connection settings come from
+fsspec's own configuration, e.g. ``FSSPEC_S3_ENDPOINT_URL=http://127.0.0.1:9000`` and the usual
+``AWS_ACCESS_KEY_ID`` / ``AWS_SECRET_ACCESS_KEY`` for an S3-compatible server.
+
+Object stores have no atomic directory rename, so a scene is uploaded file by file with
+``_SUCCESS`` last (:func:`upload_dir`); readers trust only directories holding ``_SUCCESS``
+(:func:`complete_scenes`).
+"""
+
+from __future__ import annotations
+
+import os
+import pathlib
+import re
+from collections.abc import Callable
+
+_URL_RE = re.compile(r"^([a-zA-Z][a-zA-Z0-9+.\-]*)://(.*)$")
+
+
+class StorageError(ValueError):
+    """A malformed, unreachable or unwritable location (one line, names the location)."""
+
+
+def is_url(location) -> bool:
+    """True for ``scheme://...`` strings (``file://`` included); False for plain paths."""
+    return isinstance(location, str) and bool(_URL_RE.match(location))
+
+
+def normalise(location) -> str:
+    """A canonical string form: URLs without a trailing slash, local paths absolute."""
+    if is_url(location):
+        scheme, rest = _URL_RE.match(location).groups()
+        rest = rest.rstrip("/")
+        if not rest:
+            raise StorageError(f"output URL {location!r} names no bucket or path")
+        return f"{scheme.lower()}://{rest}"
+    return str(pathlib.Path(location).expanduser().resolve())
+
+
+def join(location, *parts: str) -> str:
+    """``location/part/...`` for URLs and paths."""
+    if is_url(location):
+        return "/".join([str(location).rstrip("/"), *(p.strip("/") for p in parts)])
+    return str(pathlib.Path(location, *parts))
+
+
+def _fs(location):
+    """(filesystem, path) for ``location``; a local filesystem for plain paths. The filesystem's
+    cached listings are dropped first: other processes write the same store."""
+    fs, path = _filesystem(location)
+    fs.invalidate_cache()
+    return fs, path
+
+
+def _filesystem(location):
+    try:
+        import fsspec
+    except ModuleNotFoundError as err:  # pragma: no cover - fsspec ships with the cluster extra
+        raise StorageError(f"{location!r}: URLs need fsspec (pip install 'kubric[cluster]')") \
+            from err
+    if not is_url(location):
+        return fsspec.filesystem("file"), str(location)
+    scheme = _URL_RE.match(location).group(1).lower()
+    try:
+        if scheme in ("file", "local"):  # as local paths: parent directories made on write
+            return fsspec.filesystem("file", auto_mkdir=True), _URL_RE.match(location).group(2)
+        return fsspec.core.url_to_fs(location)
+    except ValueError as err:
+        raise StorageError(f"{location!r}: unknown storage protocol {scheme!r} ({err})") from err
+    except ImportError as err:
+        raise StorageError(f"{location!r}: protocol {scheme!r} needs a package that is not "
+                           f"installed ({err})") from err
+
+
+def exists(location) -> bool:
+    if not is_url(location):
+        return os.path.exists(location)
+    fs, path = _fs(location)
+    return fs.exists(path)
+
+
+def isfile(location) -> bool:
+    if not is_url(location):
+        return os.path.isfile(location)
+    fs, path = _fs(location)
+    return fs.isfile(path)
+
+
+def listdir(location) -> list[str]:
+    """Names (not paths) directly under ``location``; empty when it does not exist."""
+    if not is_url(location):
+        try:
+            return sorted(os.listdir(location))
+        except (FileNotFoundError, NotADirectoryError):
+            return []
+    fs, path = _fs(location)
+    try:
+        entries = fs.ls(path, detail=False)
+    except FileNotFoundError:
+        return []
+    return sorted({e.rstrip("/").rsplit("/", 1)[-1] for e in entries} - {""})
+
+
+def open_file(location, mode: str = "rb"):
+    """A file object for a path or URL (a context manager, as ``open``)."""
+    if not is_url(location):
+        return open(location, mode)
+    fs, path = _fs(location)
+    return fs.open(path, mode)
+
+
+def read_bytes(location) -> bytes:
+    with open_file(location, "rb") as fh:
+        return fh.read()
+
+
+def write_bytes(location, data: bytes) -> None:
+    """Write a whole file (local: via a temporary sibling and rename)."""
+    if not is_url(location):
+        target = pathlib.Path(location)
+        target.parent.mkdir(parents=True, exist_ok=True)
+        tmp = target.with_name(f".{target.name}.tmp-{os.getpid()}")
+        tmp.write_bytes(data)
+        os.replace(tmp, target)
+        return
+    fs, path = _fs(location)
+    fs.pipe_file(path, data)
+
+
+def remove(location) -> None:
+    """Delete a file or a directory tree; nothing when absent."""
+    if not is_url(location):
+        import shutil
+        if os.path.isdir(location):
+            shutil.rmtree(location, ignore_errors=True)
+        elif os.path.exists(location):
+            os.remove(location)
+        return
+    fs, path = _fs(location)
+    try:
+        fs.rm(path, recursive=True)
+    except FileNotFoundError:
+        pass
+
+
+def upload_dir(local_dir, location, last: str = "_SUCCESS",
+               on_file: Callable[[str, int, int], None] | None = None) -> list[str]:
+    """Copy the files under ``local_dir`` to ``location`` one by one, ``last`` (when present)
+    after all others; returns the relative paths in upload order. Whatever ``location`` held
+    before is removed first, so a half-finished earlier upload never mixes with this one.
+    ``on_file(relative_path, k, n)`` is called after each file."""
+    local_dir = pathlib.Path(local_dir)
+    files = sorted(p.relative_to(local_dir).as_posix() for p in local_dir.rglob("*") if p.is_file())
+    order = [f for f in files if f != last] + ([last] if last in files else [])
+    remove(location)
+    if not is_url(location):
+        import shutil
+        for k, rel in enumerate(order, start=1):
+            target = pathlib.Path(location, rel)
+            target.parent.mkdir(parents=True, exist_ok=True)
+            shutil.copyfile(local_dir / rel, target)
+            on_file and on_file(rel, k, len(order))
+        return order
+    fs, path = _fs(location)
+    for k, rel in enumerate(order, start=1):
+        fs.put_file(str(local_dir / rel), f"{path.rstrip('/')}/{rel}")
+        on_file and on_file(rel, k, len(order))
+    return order
+
+
+def download_dir(location, local_dir) -> pathlib.Path:
+    """Copy the files under ``location`` into ``local_dir`` (created); returns it."""
+    local_dir = pathlib.Path(local_dir)
+    local_dir.mkdir(parents=True, exist_ok=True)
+    fs, path = _fs(location)
+    root = path.rstrip("/")
+    for remote in fs.find(root):
+        rel = remote[len(root):].lstrip("/")
+        if not rel:
+            continue
+        target = local_dir / rel
+        target.parent.mkdir(parents=True, exist_ok=True)
+        fs.get_file(remote, str(target))
+    return local_dir
+
+
+def complete_scenes(root, success: str = "_SUCCESS") -> list[str]:
+    """Names of the ``scene_*`` directories under ``root`` that hold ``success`` — the only ones
+    a reader (pack, inspect, resume) may treat as data."""
+    names = [n for n in listdir(root) if n.startswith("scene_")]
+    if not is_url(root):
+        return [n for n in names if os.path.isfile(os.path.join(root, n, success))]
+    fs, path = _fs(root)
+    found = fs.glob(f"{path.rstrip('/')}/scene_*/{success}")
+    done = {f.rstrip("/").rsplit("/", 2)[-2] for f in found}
+    return [n for n in names if n in done]
+
+
+def check_writable(location) -> None:
+    """Raise :class:`StorageError` (one line) unless files can be written under ``location``;
+    leaves nothing behind (a URL gets a probe file, deleted again)."""
+    probe_name = f".kubric-write-test-{os.getpid()}"
+    if not is_url(location):  # checked without creating anything
+        path = pathlib.Path(location).expanduser().absolute()
+        existing = next(p for p in (path, *path.parents) if p.exists())
+        if not existing.is_dir():
+            raise StorageError(f"output {str(location)!r}: {str(existing)!r} is a file, not a "
+                               f"directory")
+        if not os.access(existing, os.W_OK | os.X_OK):
+            raise StorageError(f"output {str(location)!r} is not writable: no write permission "
+                               f"on {str(existing)!r}")
+        return
+    probe = join(location, probe_name)
+    try:
+        write_bytes(probe, b"")
+        remove(probe)
+    except StorageError:
+        raise
+    except Exception as err:  # each backend raises its own types (botocore, aiohttp, OSError)
+        detail = str(err).splitlines()[0] if str(err) else type(err).__name__
+        raise StorageError(f"output {location!r} is not writable: {detail}") from err
+
+
+__all__ = ["StorageError", "is_url", "normalise", "join", "exists", "isfile", "listdir",
+           "open_file", "read_bytes", "write_bytes", "remove", "upload_dir", "download_dir",
+           "complete_scenes", "check_writable"]

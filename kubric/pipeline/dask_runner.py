@@ -1,0 +1,269 @@
+"""The Dask runner: the same worker contract as the local runner, on a Dask distributed cluster.
+
+``kubric generate ... --cluster local|tcp://HOST:PORT|slurm``:
+
+* ``local`` starts a ``LocalCluster`` in this process (``--workers`` slots);
+* ``tcp://HOST:PORT`` (or ``tls://``) joins a running scheduler; start its workers with
+  ``dask worker tcp://HOST:PORT --nthreads 1 --resources scene=1``;
+* ``slurm`` submits Dask worker jobs with dask-jobqueue (``--jobs``, ``--cores-per-job``,
+  ``--memory``, ``--walltime``, ``--queue``, ``--job-directive``); every job runs
+  ``cores-per-job // threads-per-scene`` worker processes.
+
+Each Dask task (:func:`scene_task`) runs one scene in a **fresh** ``python -m kubric worker``
+subprocess (Blender keeps state across scenes) with the per-scene timeout, and returns its log
+text, which the client appends to ``OUT/logs/scene_{seed:08d}.log``. Tasks ask for the resource
+``scene=1``, so a worker slot renders one scene at a time with ``--threads-per-scene`` render
+threads (``KUBRIC_RENDER_THREADS``). A failed attempt is resubmitted up to ``--retries`` times; a
+task whose worker dies is rerun elsewhere by the scheduler. Completeness is decided as locally:
+exit status 0 and ``_SUCCESS`` present. SIGINT sets a cluster-wide stop event: queued scenes do
+not start, running subprocesses are terminated (they delete their work directories).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import re
+import shutil
+import socket
+import sys
+import tempfile
+import time
+import uuid
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+from kubric.pipeline.runner import PARENT_ENV, Runner, RunSummary, run_logged, usable_cores
+
+#: the resource every scene task asks for (one per worker slot).
+RESOURCE = "scene"
+_ADDRESS_RE = re.compile(r"^(tcp|tls)://([^\s:/]+|\[[0-9a-fA-F:]+\]):(\d{1,5})$")
+
+
+class ClusterError(ValueError):
+    """A bad ``--cluster`` value or a cluster that cannot be reached or started (one line)."""
+
+
+@dataclass
+class ClusterOptions:
+    """Everything ``--cluster`` and its flags say; see the module doc."""
+
+    spec: str = "local"
+    workers: int | None = None            # local: slots (default cores // threads_per_scene)
+    threads_per_scene: int = 1
+    connect_timeout: float = 20.0
+    dashboard_address: str = ":8787"
+    jobs: int = 1                         # slurm
+    cores_per_job: int = 1
+    memory: str = "4GB"
+    walltime: str = "01:00:00"
+    queue: str | None = None
+    job_directives: list[str] = field(default_factory=list)
+
+    @property
+    def kind(self) -> str:
+        if self.spec in ("local", "slurm"):
+            return self.spec
+        if _ADDRESS_RE.match(self.spec):
+            return "address"
+        raise ClusterError(f"--cluster {self.spec!r}: expected local, slurm or a scheduler "
+                           f"address tcp://HOST:PORT (or tls://HOST:PORT)")
+
+    def validate(self) -> None:
+        kind = self.kind
+        for name in ("threads_per_scene", "jobs", "cores_per_job"):
+            if getattr(self, name) < 1:
+                raise ClusterError(f"--{name.replace('_', '-')} must be ≥ 1, got "
+                                   f"{getattr(self, name)}")
+        if self.workers is not None and self.workers < 1:
+            raise ClusterError(f"--workers must be ≥ 1, got {self.workers}")
+        if self.connect_timeout <= 0:
+            raise ClusterError(f"--connect-timeout must be > 0, got {self.connect_timeout}")
+        if kind == "address" and int(_ADDRESS_RE.match(self.spec).group(3)) > 65535:
+            raise ClusterError(f"--cluster {self.spec!r}: port must be ≤ 65535")
+        if kind == "slurm" and self.cores_per_job < self.threads_per_scene:
+            raise ClusterError(f"--cores-per-job {self.cores_per_job} is less than "
+                               f"--threads-per-scene {self.threads_per_scene}")
+
+    def slurm_kwargs(self) -> dict:
+        """dask-jobqueue ``SLURMCluster`` arguments: one Dask worker process per scene slot,
+        each offering the ``scene=1`` resource."""
+        return dict(cores=self.cores_per_job,
+                    processes=max(1, self.cores_per_job // self.threads_per_scene),
+                    memory=self.memory, walltime=self.walltime, queue=self.queue,
+                    job_extra_directives=list(self.job_directives), python=sys.executable,
+                    worker_extra_args=["--resources", f"{RESOURCE}=1"],
+                    job_name="kubric-worker", scheduler_options={"dashboard_address":
+                                                                 self.dashboard_address})
+
+
+def _quiet():
+    import logging
+    for name in ("distributed", "distributed.scheduler", "distributed.worker", "bokeh",
+                 "tornado", "distributed.nanny", "distributed.core"):
+        logging.getLogger(name).setLevel(logging.ERROR)
+
+
+def slurm_job_script(options: ClusterOptions) -> str:
+    """The sbatch script dask-jobqueue would submit for ``options`` (nothing is submitted)."""
+    from dask_jobqueue import SLURMCluster
+    _quiet()
+    cluster = SLURMCluster(**options.slurm_kwargs())
+    try:
+        return cluster.job_script()
+    finally:
+        cluster.close()
+
+
+def open_cluster(options: ClusterOptions):
+    """(client, cluster or None) for ``options``; raises :class:`ClusterError` (one line)."""
+    options.validate()
+    kind = options.kind
+    if kind == "slurm" and shutil.which("sbatch") is None:
+        raise ClusterError("--cluster slurm: sbatch is not on the PATH (run on a Slurm login node, "
+                           "or use --print-job-script to see the job script)")
+    _quiet()
+    from distributed import Client, LocalCluster
+    cluster = None
+    try:
+        if kind == "local":
+            slots = options.workers or max(1, usable_cores() // options.threads_per_scene)
+            cluster = LocalCluster(n_workers=slots, threads_per_worker=1, processes=False,
+                                   resources={RESOURCE: 1}, dashboard_address=
+                                   options.dashboard_address, silence_logs=40)
+            client = Client(cluster)
+        elif kind == "slurm":
+            from dask_jobqueue import SLURMCluster
+            cluster = SLURMCluster(**options.slurm_kwargs())
+            cluster.scale(jobs=options.jobs)
+            client = Client(cluster)
+        else:
+            client = Client(options.spec, timeout=options.connect_timeout)
+    except (OSError, TimeoutError) as err:
+        if cluster is not None:
+            cluster.close()
+        what = f"no Dask scheduler answered at {options.spec}" if kind == "address" \
+            else f"could not start the {kind} cluster"
+        detail = str(err).splitlines()[0] if str(err) else type(err).__name__
+        raise ClusterError(f"--cluster: {what} within {options.connect_timeout:g} s ({detail})") \
+            from None
+    if kind == "address":
+        workers = client.scheduler_info().get("workers", {})
+        if workers and not any(w.get("resources", {}).get(RESOURCE) for w in workers.values()):
+            client.close()
+            raise ClusterError(f"--cluster {options.spec}: none of its {len(workers)} workers "
+                               f"offers the {RESOURCE!r} resource; start them with `dask worker "
+                               f"{options.spec} --nthreads 1 --resources {RESOURCE}=1`")
+    return client, cluster
+
+
+# ---------------------------------------------------------------------- on the Dask worker
+def scene_task(cmd: Sequence[str], attempt: int, timeout: float | None, threads: int,
+               stop_event: str | None = None, poll: float = 5.0) -> dict:
+    """Run one worker attempt in a fresh subprocess on this Dask worker; returns
+    ``{"rc", "log", "host"}`` (``rc`` None when the run was stopped before it started)."""
+    where = socket.gethostname()
+    event = None
+    try:
+        from distributed import Event, get_worker
+        where = f"{get_worker().address} on {where}"
+        if stop_event:
+            event = Event(stop_event)
+    except (ImportError, ValueError):
+        pass
+    should_stop = (lambda: event.is_set()) if event is not None else None
+
+    def start(command, **kwargs):
+        if should_stop is not None and should_stop():
+            return None
+        import subprocess
+        return subprocess.Popen(command, **kwargs)
+
+    env = dict(os.environ, **{PARENT_ENV: str(os.getpid()), "KUBRIC_RENDER_THREADS":
+                              str(threads), "OMP_NUM_THREADS": str(threads)})
+    fd, log = tempfile.mkstemp(prefix="kubric-scene-", suffix=".log")
+    os.close(fd)
+    try:
+        rc = run_logged(cmd, log, attempt, timeout, env, start=start, should_stop=should_stop,
+                        poll=poll, where=f" on {where}")
+        with open(log, errors="replace") as fh:
+            text = fh.read()
+    finally:
+        os.remove(log)
+    return {"rc": rc, "log": text, "host": where}
+
+
+# ---------------------------------------------------------------------- on the client
+class DaskRunner(Runner):
+    """Run ``recipe_spec`` for ``seeds`` as Dask tasks through ``client`` (see module doc)."""
+
+    def __init__(self, recipe_spec: str, out_root, seeds: Sequence[int], client,
+                 assignments: Sequence[str] = (), retries: int = 2, timeout: float | None = None,
+                 progress: bool = True, threads_per_scene: int = 1):
+        super().__init__(recipe_spec, out_root, seeds, assignments, retries, timeout, progress)
+        if threads_per_scene < 1:
+            raise ValueError(f"threads_per_scene must be ≥ 1, got {threads_per_scene}")
+        self.client = client
+        self.threads_per_scene = threads_per_scene
+        self.run_id = uuid.uuid4().hex[:8]
+        self.poll = 5.0   # seconds between a running task's checks of the stop event
+
+    def _submit(self, seed: int, attempt: int):
+        from kubric.pipeline.worker import scene_name
+        return self.client.submit(
+            scene_task, self.command(seed), attempt, self.timeout, self.threads_per_scene,
+            f"kubric-stop-{self.run_id}", self.poll, resources={RESOURCE: 1}, pure=False,
+            key=f"{scene_name(seed)}-attempt{attempt}-{self.run_id}")
+
+    def _finish(self, future, seed: int, attempt: int, summary: RunSummary, bar):
+        """Book one finished task; returns a resubmitted future or None."""
+        try:
+            result = future.result()
+            rc, text = result["rc"], result["log"]
+        except Exception as err:  # KilledWorker, CancelledError, a lost connection, ...
+            rc = None
+            text = (f"=== attempt {attempt} lost: {type(err).__name__}: "
+                    f"{str(err).splitlines()[0] if str(err) else ''}\n")
+        self.logs.append(seed, text)
+        if self._stop.is_set() and rc != 0:
+            return None
+        ok = rc == 0 and self.scene_complete(seed)
+        if not ok and attempt <= self.retries:
+            with self._lock:
+                summary.attempts += 1
+            return self._submit(seed, attempt + 1)
+        self._record(seed, ok, summary, bar)
+        return None
+
+    def _execute(self, todo: list[int], summary: RunSummary, bar) -> None:
+        from distributed import Event, wait
+        event = Event(f"kubric-stop-{self.run_id}", client=self.client)
+        pending = {}
+        for seed in todo:
+            pending[self._submit(seed, 1)] = (seed, 1)
+        summary.attempts += len(todo)
+        stop_seen = None
+        while pending:
+            if self._stop.is_set() and stop_seen is None:
+                stop_seen = time.monotonic()
+                event.set()
+            if stop_seen is not None and time.monotonic() - stop_seen > self.poll + self.kill_after:
+                self.client.cancel(list(pending))
+                break
+            finished = [f for f in pending if f.done()]
+            if not finished:
+                with contextlib.suppress(TimeoutError):
+                    wait(list(pending), timeout=0.5, return_when="FIRST_COMPLETED")
+                continue
+            for future in finished:
+                seed, attempt = pending.pop(future)
+                again = self._finish(future, seed, attempt, summary, bar)
+                if again is not None:
+                    pending[again] = (seed, attempt + 1)
+                future.release()
+        if stop_seen is not None:
+            time.sleep(0.5)
+
+
+__all__ = ["ClusterError", "ClusterOptions", "DaskRunner", "open_cluster", "scene_task",
+           "slurm_job_script", "RESOURCE"]

@@ -1,0 +1,4 @@
+"""The multi-view recipes (importing this registers them): ``klevr`` and ``toybox``
+(:mod:`kubric.recipes.klevr`), sharing :mod:`kubric.recipes.multiview_base`."""
+
+from kubric.recipes import klevr, multiview_hdri, robust_nerf, texture_nerf  # noqa: F401
