@@ -170,3 +170,18 @@ class LocalServer:
     def __exit__(self, *exc):
         self.httpd.shutdown()
         self.httpd.server_close()
+
+
+def run_worker(recipe: str, seed: int, out, options) -> None:
+    """Run ``kubric worker RECIPE --seed SEED --out OUT --set ...`` in a fresh process; fail the
+    test with its stderr tail if it fails."""
+    import subprocess
+    import sys
+
+    root = Path(__file__).resolve().parents[1]
+    cmd = [sys.executable, "-m", "kubric", "worker", recipe, "--seed", str(seed), "--out",
+           str(out)]
+    for opt in options:
+        cmd += ["--set", opt]
+    proc = subprocess.run(cmd, cwd=root, capture_output=True, text=True, timeout=400)
+    assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-2000:]

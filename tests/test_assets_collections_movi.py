@@ -4,12 +4,9 @@ fixtures in their original layouts), restricted to one object category."""
 from __future__ import annotations
 
 import json
-import pathlib
-import subprocess
-import sys
 
 import pytest
-from collection_fixtures import LocalServer, gso_files, write_zip
+from collection_fixtures import LocalServer, gso_files, run_worker, write_zip
 from test_assets_polyhaven import _api
 
 from kubric.assets import AssetSource
@@ -17,7 +14,6 @@ from kubric.assets.gso import build_gso
 from kubric.assets.polyhaven import build_polyhaven
 
 pytestmark = [pytest.mark.blender, pytest.mark.slow]
-ROOT = pathlib.Path(__file__).resolve().parents[1]
 
 
 def test_movi_c_on_gso_and_polyhaven_with_a_category(tmp_path, monkeypatch):
@@ -31,13 +27,10 @@ def test_movi_c_on_gso_and_polyhaven_with_a_category(tmp_path, monkeypatch):
         server.routes.update(_api(tmp_path, server.url))
         build_polyhaven(tmp_path / "hdri", base_url=server.url, limit=1, progress=False)
     out = tmp_path / "scene"
-    cmd = [sys.executable, "-m", "kubric", "worker", "movi_c", "--seed", "3", "--out", str(out)]
-    for opt in ("resolution=48x32", "frame_end=3", "samples=2", "denoise=false",
-                "min_num_objects=3", "max_num_objects=3", f"objects_source={tmp_path / 'gso'}",
-                f"hdri_source={tmp_path / 'hdri'}", "object_categories=Toys"):
-        cmd += ["--set", opt]
-    proc = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=400)
-    assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-2000:]
+    run_worker("movi_c", 3, out, ("resolution=48x32", "frame_end=3", "samples=2",
+                                  "denoise=false", "min_num_objects=3", "max_num_objects=3",
+                                  f"objects_source={tmp_path / 'gso'}",
+                                  f"hdri_source={tmp_path / 'hdri'}", "object_categories=Toys"))
     from kubric.docgen import undocumented_scene_fields
 
     assert undocumented_scene_fields(out / "scene_00000003") == []

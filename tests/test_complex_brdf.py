@@ -4,19 +4,16 @@ where the geometry puts them (mirror points of the three lights on the sphere)."
 from __future__ import annotations
 
 import json
-import pathlib
-import subprocess
-import sys
 
 import numpy as np
 import pytest
+from collection_fixtures import run_worker
 from PIL import Image
 
 import kubric as kb
 from kubric.core.camera_geometry import project_to_pixels
 
 pytestmark = pytest.mark.blender
-ROOT = pathlib.Path(__file__).resolve().parents[1]
 RES = 48
 
 
@@ -25,13 +22,9 @@ def renders(tmp_path_factory):
     root = tmp_path_factory.mktemp("brdf")
     out = {}
     for material in ("metal", "rubber"):
-        cmd = [sys.executable, "-m", "kubric", "worker", "complex_brdf", "--seed", "1", "--out",
-               str(root / material)]
-        for opt in (f"resolution={RES}", "num_views=3", "split_ratio=1,0,0", "samples=16",
-                    "denoise=false", "shape=sphere", f"material={material}"):
-            cmd += ["--set", opt]
-        proc = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=300)
-        assert proc.returncode == 0, proc.stderr[-2000:]
+        run_worker("complex_brdf", 1, root / material,
+                   (f"resolution={RES}", "num_views=3", "split_ratio=1,0,0", "samples=16",
+                    "denoise=false", "shape=sphere", f"material={material}"))
         out[material] = root / material / "scene_00000001"
     return out
 

@@ -6,5 +6,6 @@ from kubric.recipes import (  # noqa: F401
     klevr,
     multiview_hdri,
     robust_nerf,
+    svr,
     texture_nerf,
 )
