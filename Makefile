@@ -11,8 +11,14 @@ $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
 
+# The tests need every optional feature: datasets (TFDS, array-record, Grain, OpenCV), torch
+# (PyPI's torch wheel brings its CUDA libraries: a fresh install of everything took 5.3 min and
+# 7.5 GB), jax (the README's JAX snippet is run by the tests) and, through dev, the cluster and
+# object-storage extras (Dask, fsspec, s3fs, moto's S3 server).
+EXTRAS := dev,datasets,torch,jax
+
 $(STAMP): pyproject.toml | $(BIN)/python
-	$(BIN)/python -m pip install --quiet -e '.[dev]'
+	$(BIN)/python -m pip install --quiet -e '.[$(EXTRAS)]'
 	touch $(STAMP)
 
 install: $(STAMP)
@@ -24,7 +30,7 @@ demo: $(STAMP)
 	$(BIN)/python -m kubric.demo
 
 bench: $(STAMP)
-	$(BIN)/python -m pip install --quiet -e '.[dev,coacd,bench]'  # V-HACD vs CoACD, codecs vs libraries
+	$(BIN)/python -m pip install --quiet -e '.[$(EXTRAS),coacd,bench]'  # V-HACD vs CoACD, codecs vs libraries
 	$(BIN)/python -m benchmarks
 
 docs: $(STAMP)  # regenerate the generated pages, then build the HTML site into site/

@@ -12,13 +12,14 @@ SUBCOMMAND_MODULES = (
     "kubric.pipeline.cli",
     "kubric.assets.cli",
     "kubric.annotations.tracks_cli",
+    "kubric.datasets.cli",
 )
 
 
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="kubric", description="Kubric: generate synthetic computer-vision datasets (scene "
-        "recipes, local runner, asset sources, scene inspection).")
+        "recipes, local runner, asset sources, scene inspection, packed datasets).")
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name in SUBCOMMAND_MODULES:
         try:

@@ -5,7 +5,8 @@
 disk differs from what the code generates (the test suite runs this check). Generated pages:
 
 * ``docs/recipes.md``: every built-in recipe, its description and its typed options (name, type,
-  default, allowed values, meaning), from the recipes' declared :class:`~kubric.pipeline.Option`\\ s.
+  default, allowed values, meaning), from the recipes' declared :class:`~kubric.pipeline.Option`\\ s;
+* ``docs/features.md``: every recipe schema's packed features (:mod:`kubric.io.schema`).
 
 Hand-written pages (conventions, scene format, asset sources, compatibility) live beside them.
 """
@@ -138,9 +139,37 @@ def undocumented_scene_fields(scene_dir, page: pathlib.Path | None = None) -> li
     return sorted(missing)
 
 
+def features_markdown() -> str:
+    """``docs/features.md``: every registered recipe schema (the features of a packed example
+    and where each comes from in a scene directory)."""
+    from kubric.io.schema import REGISTRY, dims_markdown, get_schema, schema_markdown
+
+    get_schema("movi_a")  # imports the built-in schema modules
+    out = [GENERATED_NOTE, "", "# Packed dataset features", "",
+           "`kubric pack` turns scene directories into examples whose features follow the "
+           "recipe's schema (`kubric.io.schema`), declared once and read by the scene writer, "
+           "the packer, the loaders and `kubric inspect`. MOVi features keep the names and "
+           "dtypes of upstream's published MOVi datasets; additions are new names. How to pack "
+           "and load: [datasets](datasets.md). `kubric datasets schema NAME` prints one table.",
+           "", "Named dimensions:", "", dims_markdown().rstrip(), ""]
+    for name in sorted(REGISTRY):
+        out += [schema_markdown(REGISTRY[name]).rstrip(), ""]
+    return "\n".join(out).rstrip() + "\n"
+
+
+def undocumented_features() -> list[str]:
+    """``schema.feature`` names of registered schemas whose doc is empty."""
+    from kubric.io.schema import REGISTRY, get_schema
+
+    get_schema("movi_a")
+    return [f"{name}.{f.name}" for name, schema in sorted(REGISTRY.items())
+            for f in schema.features if not f.doc.strip()]
+
+
 #: generated page (relative to docs/) → generator
 PAGES: dict[str, Callable[[], str]] = {
     "recipes.md": recipes_markdown,
+    "features.md": features_markdown,
 }
 
 

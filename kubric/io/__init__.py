@@ -8,4 +8,6 @@ Modules, one concept each:
   via libpng (imagecodecs) and Pillow (palette).
 * :mod:`kubric.io.tiff_io` — float32 TIFF encoder; reading via libtiff (imagecodecs).
 * :mod:`kubric.io.layers` — the renderer's layer dict ↔ a scene directory (``write_image_dict``).
+* :mod:`kubric.io.schema` — a recipe's output contract (layers + example features), declared once.
+* :mod:`kubric.io.scene_writer` — ``write_scene``: a scene directory checked against its schema.
 """

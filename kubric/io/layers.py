@@ -79,6 +79,7 @@ LAYERS: dict[str, LayerFormat] = {
 }
 #: layers whose {"min", "max"} goes to data_ranges.json
 RANGE_KINDS = ("scaled", "tiff")
+LAYER_KINDS = ("image8", "tiff", "labels", "scaled", "signed_unit", "unit")
 
 
 def frame_filename(template: str, index: int) -> str:
@@ -99,11 +100,23 @@ def _template_regex(template: str) -> re.Pattern:
     return re.compile("".join(parts) + r"\Z")
 
 
-def _templates(file_templates: Mapping[str, str] | None) -> dict[str, str]:
-    templates = {name: fmt.template for name, fmt in LAYERS.items()}
+def layer_table(formats: Mapping[str, LayerFormat] | None = None) -> dict[str, LayerFormat]:
+    """The standard :data:`LAYERS` plus ``formats`` (a recipe schema's own layers)."""
+    table = dict(LAYERS)
+    for name, fmt in dict(formats or {}).items():
+        if not isinstance(fmt, LayerFormat) or fmt.kind not in LAYER_KINDS:
+            raise ValueError(f"layer {name!r}: expected a LayerFormat with kind in {LAYER_KINDS}, "
+                             f"got {fmt!r}")
+        table[name] = fmt
+    return table
+
+
+def _templates(file_templates: Mapping[str, str] | None, table: Mapping[str, LayerFormat]
+               ) -> dict[str, str]:
+    templates = {name: fmt.template for name, fmt in table.items()}
     for name, template in dict(file_templates or {}).items():
-        if name not in LAYERS:
-            raise ValueError(f"file_templates: unknown layer {name!r}; known: {sorted(LAYERS)}")
+        if name not in table:
+            raise ValueError(f"file_templates: unknown layer {name!r}; known: {sorted(table)}")
         frame_filename(template, 0)
         templates[name] = template
     return templates
@@ -123,9 +136,9 @@ def _unit_interval_to_uint16(arr: np.ndarray, lo: float, hi: float, what: str) -
     return np.rint(scaled).astype(np.uint16)
 
 
-def _prepare_layer(name: str, data, ranges: dict) -> tuple[np.ndarray, Callable]:
+def _prepare_layer(name: str, fmt: LayerFormat, data, ranges: dict
+                   ) -> tuple[np.ndarray, Callable]:
     """Validate one (T, H, W, C) layer; return its per-frame samples and the frame encoder."""
-    fmt = LAYERS[name]
     what = f"write_image_dict: layer {name!r}"
     arr = np.asarray(data)
     if arr.ndim != 4 or arr.shape[-1] != fmt.channels or 0 in arr.shape:
@@ -163,8 +176,11 @@ def _prepare_layer(name: str, data, ranges: dict) -> tuple[np.ndarray, Callable]
 
 def write_image_dict(data_dict: Mapping[str, np.ndarray], directory: PathLike,
                      file_templates: Mapping[str, str] | None = None,
-                     max_write_threads: int = 16) -> dict[str, dict[str, float]]:
+                     max_write_threads: int = 16,
+                     formats: Mapping[str, LayerFormat] | None = None) -> dict[str, dict[str, float]]:
     """Write every layer of ``data_dict`` into ``directory`` (see module docstring).
+
+    ``formats`` adds layers beyond :data:`LAYERS` (a recipe schema's ``layers``).
 
     All layers are validated before any file is written; each file is written atomically by up to
     ``max_write_threads`` threads (zlib releases the GIL). Returns the ranges written to
@@ -173,12 +189,14 @@ def write_image_dict(data_dict: Mapping[str, np.ndarray], directory: PathLike,
     directory = as_path(directory)
     if max_write_threads < 1:
         raise ValueError(f"max_write_threads must be ≥ 1, got {max_write_threads}")
-    unknown = sorted(set(data_dict) - set(LAYERS))
+    table = layer_table(formats)
+    unknown = sorted(set(data_dict) - set(table))
     if unknown:
-        raise ValueError(f"write_image_dict: unknown layer(s) {unknown}; known: {sorted(LAYERS)}")
-    templates = _templates(file_templates)
+        raise ValueError(f"write_image_dict: unknown layer(s) {unknown}; known: {sorted(table)}")
+    templates = _templates(file_templates, table)
     ranges: dict[str, dict[str, float]] = {}
-    prepared = {name: _prepare_layer(name, data, ranges) for name, data in data_dict.items()}
+    prepared = {name: _prepare_layer(name, table[name], data, ranges)
+                for name, data in data_dict.items()}
     shapes = {name: samples.shape[:3] for name, (samples, _) in prepared.items()}
     if len(set(shapes.values())) > 1:
         raise ValueError(f"write_image_dict: layers disagree on (T, H, W): {shapes}")
@@ -223,16 +241,18 @@ def _frame_paths(directory, template: str) -> list:
     return [found[i] for i in range(len(found))]
 
 
-def _decode_frame(name: str, path, value_range) -> np.ndarray:
-    fmt = LAYERS[name]
+def _decode_frame(name: str, fmt: LayerFormat, path, value_range, raw: bool = False
+                  ) -> np.ndarray:
     data = read_bytes(path)
     if fmt.kind == "tiff":
         arr = tiff_io.decode_tiff(data, repr(str(path))).astype(np.float32, copy=False)
     else:
         arr, _ = png_io.decode_png(data, repr(str(path)))
         if fmt.kind == "labels":
-            arr = arr.astype(np.uint32)
+            arr = arr if raw else arr.astype(np.uint32)
         elif fmt.kind != "image8":
+            if raw:
+                return arr[..., :fmt.channels]
             lo, hi = {"scaled": value_range, "signed_unit": (-1.0, 1.0)}.get(fmt.kind, (0, 1))
             if arr.dtype == np.uint8 and fmt.kind != "scaled":  # written from uint8 samples
                 arr = (lo + arr.astype(np.float64) * ((hi - lo) / 255.0)).astype(np.float32)
@@ -247,18 +267,23 @@ def _decode_frame(name: str, path, value_range) -> np.ndarray:
 
 
 def read_layer(directory: PathLike, name: str, file_templates: Mapping[str, str] | None = None,
-               value_range=None) -> np.ndarray:
+               value_range=None, formats: Mapping[str, LayerFormat] | None = None,
+               raw: bool = False) -> np.ndarray:
     """Read all frames of one layer from a scene directory as a (T, H, W, C) array.
 
     Scaled layers (flows) use ``value_range`` or else the entry in ``data_ranges.json``.
+    ``formats`` adds layers beyond :data:`LAYERS`. ``raw=True`` returns the stored samples
+    undecoded: uint16 for the 16-bit layers, labels as stored (uint8 / uint16).
     """
     directory = as_path(directory)
-    if name not in LAYERS:
-        raise ValueError(f"read_layer: unknown layer {name!r}; known: {sorted(LAYERS)}")
-    paths = _frame_paths(directory, _templates(file_templates)[name])
+    table = layer_table(formats)
+    if name not in table:
+        raise ValueError(f"read_layer: unknown layer {name!r}; known: {sorted(table)}")
+    fmt = table[name]
+    paths = _frame_paths(directory, _templates(file_templates, table)[name])
     if not paths:
         raise FileNotFoundError(f"{str(directory)!r} has no frames of layer {name!r}")
-    if LAYERS[name].kind == "scaled":
+    if fmt.kind == "scaled" and not raw:
         if value_range is None:
             range_path = directory / DATA_RANGES_FILE
             ranges = read_json(range_path) if range_path.exists() else {}
@@ -266,26 +291,29 @@ def read_layer(directory: PathLike, name: str, file_templates: Mapping[str, str]
                 raise ValueError(f"{str(range_path)!r} has no range for layer {name!r}")
             value_range = ranges[name]
         value_range = png_io._range_pair(value_range, f"read_layer({name!r})")
-    frames = [_decode_frame(name, p, value_range) for p in paths]
+    frames = [_decode_frame(name, fmt, p, value_range, raw) for p in paths]
     if len({f.shape for f in frames}) > 1:
         raise ValueError(f"{str(directory)!r}: frames of layer {name!r} differ in shape")
     return np.stack(frames)
 
 
 def read_image_dict(directory: PathLike, layers: Iterable[str] | None = None,
-                    file_templates: Mapping[str, str] | None = None) -> dict[str, np.ndarray]:
+                    file_templates: Mapping[str, str] | None = None,
+                    formats: Mapping[str, LayerFormat] | None = None) -> dict[str, np.ndarray]:
     """Decode a scene directory's layers back into the renderer's (T, H, W, C) layer dict.
 
-    ``layers``: names to read (each must be present); None reads every known layer that has at
-    least one frame file.
+    ``layers``: names to read (each must be present); None reads every known layer (of
+    :data:`LAYERS` and ``formats``) that has at least one frame file.
     """
     directory = as_path(directory)
     if not directory.is_dir():
         raise NotADirectoryError(f"read_image_dict: {str(directory)!r} is not a directory")
-    templates = _templates(file_templates)
+    table = layer_table(formats)
+    templates = _templates(file_templates, table)
     if layers is None:
-        layers = [n for n in LAYERS if _frame_paths(directory, templates[n])]
-    return {name: read_layer(directory, name, file_templates) for name in layers}
+        layers = [n for n in table if _frame_paths(directory, templates[n])]
+    return {name: read_layer(directory, name, file_templates, formats=formats)
+            for name in layers}
 
 
 def read_segmentation(directory: PathLike, file_template: str | None = None) -> np.ndarray:

@@ -139,7 +139,7 @@ def summarise(scene_dir: pathlib.Path, layers: dict, metadata: dict, events: dic
         label = inst.get("shape") or inst.get("asset_id")
         extra = " ".join(str(inst[key]) for key in ("size_label", "color_label", "material")
                          if inst.get(key))
-        lines.append(f"    {k:>3}: {label} {extra}  visible px {int(np.sum(inst['visibility']))}"
+        lines.append(f"    {k:>3}: {label} {extra}  visible px {int(np.sum(inst.get('visibility', 0)))}"
                      f"  boxes in {len(inst.get('bbox_frames', []))} frames")
     positions = np.asarray(metadata.get("camera", {}).get("positions", np.zeros((1, 3))))
     path = float(np.sum(np.linalg.norm(np.diff(positions, axis=0), axis=-1)))
@@ -186,7 +186,8 @@ def inspect_scene(scene_dir, sheet=None) -> str:
     metadata = file_io.read_json(meta_path) if meta_path.exists() else {}
     events_path = scene_dir / "events.json"
     events = file_io.read_json(events_path) if events_path.exists() else {}
-    layers = file_io.read_image_dict(scene_dir)
+    schema = _schema_of(metadata)
+    layers = file_io.read_image_dict(scene_dir, formats=schema.layers if schema else None)
     if not layers:
         raise ValueError(f"{str(scene_dir)!r} holds no image layers")
     sheet = pathlib.Path(sheet) if sheet else scene_dir / "contact_sheet.png"
@@ -198,8 +199,8 @@ def inspect_scene(scene_dir, sheet=None) -> str:
                  f" on objects), occluded {float(tracks['occluded'].mean()):.1%} of "
                  f"point-frames; {len(drawn_tracks(len(tracks['target_points'])))} drawn")
     contact_sheet(layers, background, sheet, tracks=tracks)
-    return summarise(scene_dir, layers, metadata, events) + extra + \
-        f"\n  contact sheet: {sheet}"
+    return (summarise(scene_dir, layers, metadata, events) + "\n" + schema_line(
+        schema, layers, metadata, events) + extra + f"\n  contact sheet: {sheet}")
 
 
 def inspect_url(scene_url: str, sheet=None) -> str:
@@ -221,3 +222,26 @@ def inspect_url(scene_url: str, sheet=None) -> str:
         local = storage.download_dir(scene_url, pathlib.Path(tmp) / name)
         report = inspect_scene(local, sheet.resolve())
     return report.replace(str(local), scene_url, 1)
+
+
+def _schema_of(metadata: dict):
+    """The recipe schema named by ``flags.recipe`` (None when unknown)."""
+    from kubric.io.schema import SchemaError, get_schema
+    recipe = metadata.get("flags", {}).get("recipe")
+    try:
+        return get_schema(recipe) if recipe else None
+    except SchemaError:
+        return None
+
+
+def schema_line(schema, layers: dict, metadata: dict, events: dict) -> str:
+    """One line: does the scene hold every source of its recipe schema's features?"""
+    from kubric.io.scene_writer import check_scene_content
+    from kubric.io.schema import SchemaError
+    if schema is None:
+        return "  schema: none known for recipe " + repr(metadata.get("flags", {}).get("recipe"))
+    try:
+        check_scene_content(schema, layers, metadata, events)
+    except SchemaError as err:
+        return f"  schema {schema.name}: {len(schema.features)} features; NOT satisfied: {err}"
+    return f"  schema {schema.name}: {len(schema.features)} features, every source present"

@@ -30,6 +30,7 @@ import kubric as kb
 from kubric.assets.utils import get_clevr_lights
 from kubric.pipeline import Option, OptionError, float_range
 from kubric.randomness import CLEVR_COLORS, CLEVR_SHAPES, CLEVR_SIZES
+from kubric.recipes import movi_schema
 from kubric.recipes.movi_base import (
     DYNAMIC_SPAWN_REGION,
     STATIC_SPAWN_REGION,
@@ -109,6 +110,8 @@ class _ClevrLike(MoviBase):
 class MoviA(_ClevrLike, name="movi_a"):
     """MOVi-A: 3–10 CLEVR shapes (metal / rubber, 8 colours, 2 sizes), grey dome, CLEVR lamps."""
 
+    schema = movi_schema.MOVI_A
+
     def shape_ids(self, sources):
         missing = [s for s in CLEVR_SHAPES if s not in sources["kubasic"]]
         if missing:
@@ -137,6 +140,8 @@ class MoviA(_ClevrLike, name="movi_a"):
 class MoviB(_ClevrLike, name="movi_b"):
     """MOVi-B: 3–10 KuBasic shapes, size U(0.7, 1.4), random hue, dome of random hue."""
 
+    schema = movi_schema.MOVI_B
+
     size_range = Option((0.7, 1.4), "object scale range low,high", type=float_range, low=0.01)
 
     def sample_look(self, rng):
@@ -154,6 +159,8 @@ class MoviB(_ClevrLike, name="movi_b"):
 
 class MoviC(MoviBase, name="movi_c"):
     """MOVi-C: 3–10 scanned-like objects with their own textures on an HDRI dome, HDRI light."""
+
+    schema = movi_schema.MOVI_C
 
     min_num_objects = Option(3, "fewest objects", low=1, high=100)
     max_num_objects = Option(10, "most objects", low=1, high=100)
@@ -231,6 +238,8 @@ class MoviC(MoviBase, name="movi_c"):
 class MoviD(MoviC, name="movi_d"):
     """MOVi-D: 10–20 static objects that settle first, then 1–3 dynamic ones thrown in."""
 
+    schema = movi_schema.MOVI_D
+
     min_num_objects = Option(10, "fewest static objects", low=0, high=100)
     max_num_objects = Option(20, "most static objects", low=0, high=100)
     min_num_dynamic = Option(1, "fewest dynamic objects", low=1, high=20)
@@ -288,6 +297,8 @@ class MoviE(MoviD, name="movi_e"):
     """MOVi-E: as D with the camera moving on a straight line, looking at the origin (or, with
     camera=panning, at a point that moves on a line too)."""
 
+    schema = movi_schema.MOVI_E
+
     max_camera_movement = Option(4.0, "largest camera path length (m)", low=0.0)
     camera = Option("linear", "linear: look at the origin; panning: the look-at point moves on "
                     "a line through the centre region too", choices=("linear", "panning"))
@@ -312,6 +323,8 @@ class MoviE(MoviD, name="movi_e"):
 
 class MoviF(MoviE, name="movi_f"):
     """MOVi-F: as E with motion blur U(0, max_motion_blur) frames, 512² by default."""
+
+    schema = movi_schema.MOVI_F
 
     resolution = Option((512, 512), MoviBase.resolution.help, type=MoviBase.resolution.type)
     max_motion_blur = Option(2.0, "largest shutter length (frames)", low=0.0, high=10.0)

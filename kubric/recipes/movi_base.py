@@ -29,6 +29,7 @@ import tempfile
 import numpy as np
 
 import kubric as kb
+from kubric.io.scene_writer import write_scene
 from kubric.pipeline import Option, OptionError, Recipe, resolution
 
 DYNAMIC_SPAWN_REGION = ((-5.0, -5.0, 1.0), (5.0, 5.0, 5.0))
@@ -65,7 +66,12 @@ def place_without_overlap(obj, simulator, region, rng, max_trials: int = 1000) -
 
 
 class MoviBase(Recipe):
-    """Common options and steps of the MOVi recipes (not registered itself)."""
+    """Common options and steps of the MOVi recipes (not registered itself).
+
+    ``schema``: the variant's output contract (:mod:`kubric.recipes.movi_schema`).
+    """
+
+    schema = None
 
     resolution = Option((256, 256), "(width, height) in pixels: N or WxH", type=resolution)
     frame_start = Option(1, "first rendered frame", low=0)
@@ -243,13 +249,11 @@ class MoviBase(Recipe):
         layers["segmentation"] = kb.adjust_segmentation_idxs(layers["segmentation"],
                                                              scene.assets, visible)
         kb.compute_bboxes(layers["segmentation"], visible)
-        kb.write_image_dict(layers, out_dir)
         meta = kb.get_scene_metadata(scene, seed=int(seed), num_instances=len(visible),
                                      background=background, renderer=render_settings)
-        kb.write_json(data={"flags": self.flags(seed), "metadata": meta,
-                            "camera": kb.get_camera_info(scene.camera),
-                            "instances": kb.get_instance_info(scene, visible)},
-                      filename=out_dir / "metadata.json")
-        kb.write_json(data={"collisions": kb.process_collisions(collisions, scene, visible)},
-                      filename=out_dir / "events.json")
+        metadata = {"flags": self.flags(seed), "metadata": meta,
+                    "camera": kb.get_camera_info(scene.camera),
+                    "instances": kb.get_instance_info(scene, visible)}
+        events = {"collisions": kb.process_collisions(collisions, scene, visible)}
+        write_scene(self.schema, out_dir, layers, metadata, events)  # checked against the schema
         return visible

@@ -1,0 +1,46 @@
+"""``kubric datasets info DATASET_DIR``: splits, counts, shards, features with shapes, size."""
+
+from __future__ import annotations
+
+import pathlib
+
+from kubric.datasets.layout import read_info
+from kubric.datasets.source import schema_from_json
+from kubric.io.schema import shape_text
+
+
+def _size(num_bytes: int) -> str:
+    for unit in ("B", "KiB", "MiB", "GiB"):
+        if num_bytes < 1024 or unit == "GiB":
+            return f"{num_bytes:.1f} {unit}" if unit != "B" else f"{num_bytes} B"
+        num_bytes /= 1024
+    return ""
+
+
+def dataset_info(dataset_dir) -> str:
+    """The text ``kubric datasets info`` prints."""
+    path = pathlib.Path(dataset_dir)
+    info = read_info(path)
+    schema = schema_from_json(info["schema_json"])
+    dims = dict(info["dims"])
+    size = sum(p.stat().st_size for p in path.iterdir() if p.is_file())
+    lines = [f"dataset {info['name']} at {path}",
+             f"  schema {schema.name} (version {schema.version}), format version "
+             f"{info['format_version']}, kubric {info.get('kubric_version')}",
+             f"  frames T={dims['T']}, resolution H×W={dims['H']}×{dims['W']}, size on disk "
+             f"{_size(size)}",
+             "  splits:"]
+    for split, count in info["counts"].items():
+        shards = info["shard_lengths"].get(split, [])
+        lines.append(f"    {split:<12} {count:>7} examples in {len(shards)} shards "
+                     f"(fraction {info['splits'][split]:g})")
+    if info.get("incomplete_skipped"):
+        lines.append(f"  incomplete scenes skipped when packing: {info['incomplete_skipped']}")
+    lines.append(f"  features ({len(schema.features)}):")
+    width = max(len(f.name) for f in schema.features)
+    for f in schema.features:
+        shape = shape_text(f, dims)
+        dtype = f"class label[{len(f.names)}]" if f.names else f.dtype
+        lines.append(f"    {f.name:<{width}}  {dtype:<15} {shape:<20} {f.encoding:<11} "
+                     f"{f.unit}")
+    return "\n".join(lines)

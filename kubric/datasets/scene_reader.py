@@ -1,0 +1,241 @@
+"""One scene directory → one example: a flat dict ``{feature name: numpy value}`` per schema.
+
+Values are what the packed dataset stores (before serialisation): integer layers exactly as in
+the scene's files (uint8 RGB and labels, the raw uint16 samples of flow / normal / object
+coordinates PNGs), float (TIFF) layers declared uint16 quantised with their ``range:`` feature,
+per-instance / per-event features stacked along N / K (ragged ``V`` features as lists), text as
+``str`` and class labels as indices into the feature's ``names``. Any problem is a
+:class:`SceneError` naming the scene and the feature.
+"""
+
+from __future__ import annotations
+
+import functools
+import pathlib
+from collections.abc import Mapping
+
+import numpy as np
+
+from kubric.io import json_io, layers
+from kubric.io.scene_writer import EVENTS_FILE, METADATA_FILE, lookup
+from kubric.io.schema import Feature, Schema, SchemaError
+from kubric.pipeline.worker import SUCCESS, is_complete
+
+UINT16_MAX = 65535
+
+
+class SceneError(ValueError):
+    """A scene directory that cannot become an example (corrupt or off-contract)."""
+
+
+def _hex_to_rgb(value) -> np.ndarray:
+    text = str(value).lstrip("#")
+    if len(text) != 6:
+        raise ValueError(f"{value!r} is not a '#rrggbb' colour")
+    return np.array([int(text[i:i + 2], 16) / 255.0 for i in (0, 2, 4)], dtype=np.float32)
+
+
+def _convert(name: str, value):
+    if name == "hex_to_rgb":
+        return _hex_to_rgb(value)
+    if name == "floor":
+        return np.floor(np.asarray(value, dtype=np.float64)).astype(np.int64)
+    if name == "negative_to_uint16_max":
+        arr = np.asarray(value, dtype=np.int64)
+        return np.where(arr < 0, UINT16_MAX, arr)
+    return value
+
+
+def quantise(values: np.ndarray, lo: float, hi: float) -> np.ndarray:
+    """``round((v - lo) / (hi - lo) · 65535)`` as uint16 (zeros when hi == lo)."""
+    if hi <= lo:
+        return np.zeros(values.shape, dtype=np.uint16)
+    scaled = (values.astype(np.float64) - lo) * (UINT16_MAX / (hi - lo))
+    return np.rint(np.clip(scaled, 0, UINT16_MAX)).astype(np.uint16)
+
+
+def dequantise(q: np.ndarray, value_range) -> np.ndarray:
+    """The inverse of :func:`quantise` (float32): ``q / 65535 · (max − min) + min``."""
+    lo, hi = (float(v) for v in np.asarray(value_range).reshape(2))
+    return (q.astype(np.float64) / UINT16_MAX * (hi - lo) + lo).astype(np.float32)
+
+
+def _cast(feature: Feature, value, dims: Mapping[str, int], what: str):
+    """One element's value (an instance's, an event's, or the scene's) checked and cast."""
+    if feature.dtype == "str":
+        if isinstance(value, bytes):
+            value = value.decode("utf-8")
+        return str(value)
+    if feature.encoding == "class_label":
+        if value not in feature.names:
+            raise SchemaError(f"{what}: {value!r} is not one of {feature.names}")
+        return np.int64(feature.names.index(value))
+    arr = np.asarray(value)
+    if arr.dtype == object:
+        raise SchemaError(f"{what}: ragged value")
+    target = np.dtype(feature.dtype)
+    if target.kind in "ui" and arr.size:
+        if arr.dtype.kind == "f" and not np.all(np.isfinite(arr)):
+            raise SchemaError(f"{what}: NaN / inf in an integer feature")
+        info = np.iinfo(target)
+        if arr.min() < info.min or arr.max() > info.max:
+            raise SchemaError(f"{what}: values [{arr.min()}, {arr.max()}] do not fit {target}")
+    if arr.dtype.kind == "f" and target.kind in "ui" and arr.size:
+        if not np.array_equal(arr, np.round(arr)):
+            raise SchemaError(f"{what}: non-integer values for dtype {target}")
+    arr = arr.astype(target)
+    expected = feature.concrete_shape(dims)
+    if len(expected) != arr.ndim or any(e is not None and e != s
+                                        for e, s in zip(expected, arr.shape, strict=False)):
+        if not (arr.size == 0 and expected and expected[0] is None):
+            raise SchemaError(f"{what}: shape {arr.shape} does not match {feature.shape} = "
+                              f"{expected}")
+    return arr[()] if arr.ndim == 0 else arr
+
+
+class SceneReader:
+    """Reads the features of ``schema`` from one scene directory (files read once, lazily)."""
+
+    def __init__(self, scene_dir, schema: Schema):
+        self.scene_dir = pathlib.Path(scene_dir)
+        self.schema = schema
+        self._layers: dict[str, np.ndarray] = {}
+
+    def _json(self, name: str):
+        path = self.scene_dir / name
+        if not path.is_file():
+            raise SceneError(f"{str(self.scene_dir)!r}: missing {name}")
+        return json_io.read_json(path)
+
+    @functools.cached_property
+    def metadata(self) -> dict:
+        return self._json(METADATA_FILE)
+
+    @functools.cached_property
+    def events(self) -> dict:
+        path = self.scene_dir / EVENTS_FILE
+        return json_io.read_json(path) if path.is_file() else {"collisions": []}
+
+    @functools.cached_property
+    def data_ranges(self) -> dict:
+        path = self.scene_dir / layers.DATA_RANGES_FILE
+        return json_io.read_json(path) if path.is_file() else {}
+
+    @functools.cached_property
+    def dims(self) -> dict[str, int]:
+        meta = self.metadata.get("metadata", {})
+        try:
+            width, height = (int(v) for v in meta["resolution"])
+            frames = int(meta["num_frames"])
+        except (KeyError, TypeError, ValueError):
+            raise SceneError(f"{str(self.scene_dir)!r}: metadata.json lacks metadata.resolution "
+                             "/ metadata.num_frames") from None
+        return {"T": frames, "H": height, "W": width}
+
+    def layer(self, name: str) -> np.ndarray:
+        """A layer's stored samples (raw), checked against T, H, W (read once)."""
+        if name in self._layers:
+            return self._layers[name]
+        try:
+            arr = layers.read_layer(self.scene_dir, name, formats=self.schema.layers, raw=True)
+        except (OSError, ValueError) as err:
+            raise SceneError(f"{str(self.scene_dir)!r}: layer {name!r}: {err}") from None
+        dims = self.dims
+        if arr.shape[:3] != (dims["T"], dims["H"], dims["W"]):
+            raise SceneError(f"{str(self.scene_dir)!r}: layer {name!r} has (T, H, W) "
+                             f"{arr.shape[:3]}, metadata says {(dims['T'], dims['H'], dims['W'])}")
+        self._layers[name] = arr
+        return arr
+
+    def layer_range(self, name: str) -> np.ndarray:
+        """[min, max] of a layer: ``data_ranges.json`` for scaled layers, the finite samples
+        otherwise (the range its uint16 quantisation uses)."""
+        fmt = self.schema.layer_formats[name]
+        if fmt.kind == "scaled":
+            entry = self.data_ranges.get(name)
+            if entry is None:
+                raise SceneError(f"{str(self.scene_dir)!r}: data_ranges.json has no {name!r}")
+            return np.array([entry["min"], entry["max"]], dtype=np.float32)
+        arr = self.layer(name)
+        finite = arr[np.isfinite(arr)]
+        if finite.size != arr.size:
+            raise SceneError(f"{str(self.scene_dir)!r}: layer {name!r} has NaN / inf samples")
+        return np.array([finite.min(), finite.max()], dtype=np.float32)
+
+    def _layer_feature(self, f: Feature) -> np.ndarray:
+        arg = f.source_arg
+        name, _, channels = arg.partition("[")
+        arr = self.layer(name)
+        if channels:
+            stop = int(channels.rstrip("]").lstrip(":"))
+            arr = arr[..., :stop]
+        target = np.dtype(f.dtype)
+        if arr.dtype.kind == "f" and target == np.uint16:
+            lo, hi = (float(v) for v in self.layer_range(name))
+            arr = quantise(arr, lo, hi)
+        elif arr.dtype != target:
+            if arr.dtype.kind in "ui" and target.kind in "ui" and arr.size and \
+                    arr.max() > np.iinfo(target).max:
+                raise SceneError(f"{str(self.scene_dir)!r}: layer {name!r} holds values up to "
+                                 f"{arr.max()}, feature {f.name!r} is {target}")
+            arr = arr.astype(target)
+        return _cast(f, arr, self.dims, f"{str(self.scene_dir)!r} feature {f.name!r}")
+
+    def _elements(self, kind: str) -> list:
+        if kind == "instance":
+            return list(self.metadata.get("instances", []))
+        return list(self.events.get("collisions", []))
+
+    def feature(self, f: Feature):
+        what = f"{str(self.scene_dir)!r} feature {f.name!r}"
+        kind, arg = f.source_kind, f.source_arg
+        if kind == "scene_name":
+            return self.scene_dir.name
+        if kind == "layer":
+            return self._layer_feature(f)
+        if kind == "range":
+            return self.layer_range(arg)
+        if kind == "npz":
+            file, _, key = arg.partition(":")
+            path = self.scene_dir / file
+            try:
+                with np.load(path) as archive:
+                    value = archive[key]
+            except (OSError, KeyError, ValueError) as err:
+                raise SceneError(f"{what}: cannot read {key!r} from {file}: {err}") from None
+            return _cast(f, value, self.dims, what)
+        if kind in ("meta", "camera"):
+            tree = self.metadata.get("metadata" if kind == "meta" else "camera", {})
+            value = _convert(f.convert, lookup(tree, arg, what))
+            return _cast(f, value, self.dims, what)
+        values = [_cast(f, _convert(f.convert, lookup(el, arg, f"{what} [{i}]")), self.dims,
+                        f"{what} [{i}]") for i, el in enumerate(self._elements(kind))]
+        if f.dtype == "str" or (f.shape and f.shape[0] == "V"):
+            return values
+        if not values:
+            shape = tuple(d if isinstance(d, int) else self.dims.get(d, 0) for d in f.shape)
+            dtype = np.int64 if f.encoding == "class_label" else np.dtype(f.dtype)
+            return np.zeros((0, *shape), dtype=dtype)
+        return np.stack(values)
+
+    def example(self, names=None) -> dict:
+        """``{feature name: value}`` for ``names`` (default: every feature of the schema)."""
+        out = {}
+        for f in self.schema.features:
+            if names is None or f.name in names:
+                try:
+                    out[f.name] = self.feature(f)
+                except SchemaError as err:
+                    raise SceneError(str(err)) from None
+        return out
+
+
+def read_scene_example(scene_dir, schema: Schema, names=None) -> dict:
+    """The example of one complete scene directory (see module doc)."""
+    if not is_complete(scene_dir):
+        raise SceneError(f"{str(scene_dir)!r} is incomplete (no {SUCCESS})")
+    return SceneReader(scene_dir, schema).example(names)
+
+
+__all__ = ["SceneError", "SceneReader", "dequantise", "is_complete", "quantise",
+           "read_scene_example"]

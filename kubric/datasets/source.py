@@ -1,0 +1,188 @@
+"""Random access to a packed dataset as numpy dicts, without TensorFlow.
+
+``load(DATASET_DIR, split, task=None, **options)`` returns a :class:`DataSource`: ``len``,
+``source[i]`` and ``source.__getitems__([i, j, ...])`` (what Grain and PyTorch's samplers use).
+It reads the split's ArrayRecord shards, parses only the top-level features its task needs
+(TFDS's numpy parser) and decodes them with the dataset's own TFDS feature connectors.
+
+An example (task ``None``) is the nested dict TFDS gives (``ex["metadata"]["depth_range"]``,
+``ex["instances"]["positions"]``), made regular: per-frame features are arrays (T, H, W, C),
+per-instance features are arrays with N first (ragged ``bboxes`` / ``bbox_frames``: a list of N
+arrays), text is ``str``. A source is picklable (readers reopen lazily in each process), so it
+works in ``DataLoader(num_workers=...)`` and Grain worker processes.
+"""
+
+from __future__ import annotations
+
+import pathlib
+from collections.abc import Sequence
+
+import numpy as np
+
+from kubric.datasets import layout
+from kubric.datasets.layout import DatasetError
+from kubric.io.layers import LayerFormat
+from kubric.io.schema import Feature, Schema
+
+
+def schema_to_json(schema: Schema) -> dict:
+    return {"name": schema.name, "version": schema.version, "description": schema.description,
+            "features": [{k: (list(v) if isinstance(v, tuple) else v)
+                          for k, v in vars(f).items()} for f in schema.features],
+            "layers": {k: vars(v) for k, v in schema.layers.items()}}
+
+
+def schema_from_json(data: dict) -> Schema:
+    features = tuple(Feature(**{k: (tuple(v) if isinstance(v, list) else v)
+                                for k, v in f.items()}) for f in data["features"])
+    layers = {k: LayerFormat(**v) for k, v in data.get("layers", {}).items()}
+    return Schema(data["name"], features, layers, data.get("description", ""),
+                  data.get("version", "1.0.0"))
+
+
+def _regular(f: Feature, value, dims: dict):
+    """A TFDS-decoded value of feature ``f`` in the regular form (module doc)."""
+    if f.dtype == "str":
+        as_str = lambda v: v.decode("utf-8") if isinstance(v, bytes) else str(v)
+        return [as_str(v) for v in value] if f.sequence else as_str(value)
+    dtype = np.int64 if f.encoding == "class_label" else np.dtype(f.dtype)
+    if f.shape and f.shape[0] == "V":
+        rest = tuple(d for d in f.shape[1:])
+        fix = lambda v: np.asarray(v, dtype=dtype).reshape((-1, *rest))
+        return [fix(v) for v in value] if f.sequence else fix(value)
+    if f.sequence or f.encoding in ("png", "zlib"):
+        if isinstance(value, np.ndarray):
+            return value.astype(dtype, copy=False)
+        if len(value) == 0:
+            shape = tuple(d if isinstance(d, int) else dims.get(d, 0) for d in f.shape)
+            return np.zeros((0, *shape), dtype=dtype)
+        return np.stack([np.asarray(v, dtype=dtype) for v in value])
+    return np.asarray(value, dtype=dtype)[()] if not f.shape else np.asarray(value, dtype=dtype)
+
+
+class DataSource:
+    """A map-style source of one split (see module doc). Build with :func:`load`."""
+
+    def __init__(self, dataset_dir, split: str, task=None, **task_options):
+        from kubric.datasets.tasks import get_task
+        self.dataset_dir = pathlib.Path(dataset_dir)
+        self.info = layout.read_info(self.dataset_dir)
+        if split not in self.info["counts"] or not self.info["counts"][split]:
+            have = [s for s, n in self.info["counts"].items() if n]
+            raise DatasetError(f"{str(self.dataset_dir)!r} has no split {split!r} (splits: "
+                               f"{', '.join(have)})")
+        self.split = split
+        self.schema = schema_from_json(self.info["schema_json"])
+        self.dims = dict(self.info["dims"])
+        self.task = get_task(task)
+        self.task_options = self.task.check_options(task_options)
+        top = {f.name.split("/", 1)[0] for f in self.schema.features}
+        missing = [k for k in self.task.features or () if k not in top]
+        if missing:
+            raise DatasetError(f"task {self.task.name!r} needs features {missing}, which "
+                               f"{str(self.dataset_dir)!r} does not have")
+        self.scenes: list[str] = list(self.info["scenes"][split])
+        self._frames = self.task.per_frame and int(self.dims["T"])
+        self._reader = None
+        self._features = None
+        self._parser = None
+        self._last = None
+
+    # ---------------------------------------------------------------- pickling
+    def __getstate__(self):
+        state = dict(self.__dict__)
+        state.update(_reader=None, _features=None, _parser=None, _last=None)
+        return state
+
+    # ---------------------------------------------------------------- lazy openers
+    def shard_paths(self) -> list[str]:
+        name, count = self.info["name"], len(self.info["shard_lengths"][self.split])
+        return [str(self.dataset_dir / layout.shard_name(name, self.split, i, count))
+                for i in range(count)]
+
+    def _open(self):
+        if self._reader is None:
+            import tensorflow_datasets as tfds
+            from array_record.python.array_record_data_source import ArrayRecordDataSource
+            from tensorflow_datasets.core import utils
+            self._features = tfds.features.FeatureConnector.from_config(str(self.dataset_dir))
+            keys = self.task.features or tuple(self._features.keys())
+            specs = {k: self._features.get_serialized_info()[k] for k in keys}
+            self._parser = (specs, utils.flatten_nest_dict(specs), keys)
+            # "path[0:n]" gives each shard's record count, so no reader is opened until a read
+            lengths = self.info["shard_lengths"][self.split]
+            self._reader = ArrayRecordDataSource(
+                [f"{p}[0:{n}]" for p, n in zip(self.shard_paths(), lengths, strict=True)])
+        return self._reader
+
+    # ---------------------------------------------------------------- access
+    def __len__(self) -> int:
+        return len(self.scenes) * (self._frames or 1)
+
+    def _locate(self, index) -> tuple[int, int | None]:
+        n = len(self)
+        i = int(index)
+        if i < 0:
+            i += n
+        if not 0 <= i < n:
+            raise IndexError(f"index {index} out of range for {n} examples")
+        return (i // self._frames, i % self._frames) if self._frames else (i, None)
+
+    def decode(self, data: bytes) -> dict:
+        """Serialised example → regular nested numpy dict of the task's features."""
+        from tensorflow_datasets.core import example_parser, utils
+        from tensorflow_datasets.proto import tf_example_pb2
+
+        from kubric.datasets.tfds_io import flatten, unflatten
+        self._open()
+        specs, flat_specs, keys = self._parser
+        proto = tf_example_pb2.Example.FromString(data)
+        if len(keys) < len(self._features.keys()):  # parse only the task's features
+            feature_map = proto.features.feature
+            for key in [k for k in feature_map if k.split("/", 1)[0] not in keys]:
+                del feature_map[key]
+        parsed = utils.pack_as_nest_dict(
+            example_parser._features_to_numpy(proto.features, flat_specs), specs)
+        decoded = {k: self._features[k].decode_example_np(parsed[k]) for k in keys}
+        flat = flatten(decoded)
+        by_name = {f.name: f for f in self.schema.features}
+        out = {}
+        for name, value in flat.items():
+            f = by_name.get(name)
+            out[name] = _regular(f, value, self.dims) if f is not None else value
+        return unflatten(out)
+
+    def _scene_example(self, scene: int, record: bytes | None = None) -> dict:
+        """The decoded example of scene ``scene``; per-frame tasks keep the last one, so reading
+        a scene's frames in order decodes it once."""
+        if self._last is not None and self._last[0] == scene:
+            return self._last[1]
+        example = self.decode(self._open()[scene] if record is None else record)
+        if self._frames:
+            self._last = (scene, example)
+        return example
+
+    def __getitem__(self, index):
+        scene, frame = self._locate(index)
+        return self.task(self._scene_example(scene), frame, self)
+
+    def __getitems__(self, indices: Sequence[int]) -> list:
+        located = [self._locate(i) for i in indices]
+        scenes = sorted({s for s, _ in located})
+        records = dict(zip(scenes, self._open().__getitems__(scenes), strict=True))
+        examples = {s: self._scene_example(s, records[s]) for s in scenes}
+        return [self.task(examples[s], frame, self) for s, frame in located]
+
+    def __iter__(self):
+        for i in range(len(self)):
+            yield self[i]
+
+    def __repr__(self) -> str:
+        return (f"DataSource({str(self.dataset_dir)!r}, split={self.split!r}, "
+                f"task={self.task.name!r}, len={len(self)})")
+
+
+def load(dataset_dir, split: str = "train", task: str | None = None, **task_options) -> DataSource:
+    """A :class:`DataSource` over ``split`` of a packed dataset; ``task`` (see
+    :mod:`kubric.datasets.tasks`) picks the features and transforms each example."""
+    return DataSource(dataset_dir, split, task, **task_options)
