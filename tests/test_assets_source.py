@@ -236,3 +236,38 @@ def test_safe_extract_keeps_nested_files(tmp_path):
     out = safe_extract(archive, tmp_path / "out", asset_id="ok")
     assert (out / "a" / "b" / "c.txt").read_bytes() == b"deep"
     assert np.array_equal(sorted(os.listdir(out)), ["a", "d.txt"])
+
+
+def test_categories_filter_and_split_per_category(tmp_path):
+    import numpy as np
+
+    root = tmp_path / "src"
+    root.mkdir()
+    assets = {}
+    for i in range(30):
+        entry = _entry(f"m{i:02d}")
+        entry["metadata"] = {"category": ["mug", "shoe", "toy"][i % 3]}
+        if i % 5 == 0:
+            entry["metadata"]["categories"] = [entry["metadata"]["category"], "kitchen"]
+        assets[entry["id"]] = entry
+    (root / "manifest.json").write_text(json.dumps({"name": "C", "assets": assets}))
+    source = AssetSource(root)
+    assert source.categories == ["kitchen", "mug", "shoe", "toy"]
+    assert source.asset_ids_in("kitchen") == [f"m{i:02d}" for i in range(0, 30, 5)]
+    # the held-out ids: RandomState(42).choice(sorted ids, 3) over the whole source, then filtered
+    held = set(np.random.RandomState(42).choice(sorted(assets), 3, replace=False).tolist())
+    mugs = [f"m{i:02d}" for i in range(0, 30, 3)]
+    assert source.asset_ids("mug", split="test") == sorted(held & set(mugs))
+    assert source.asset_ids(["mug"], split="train") == sorted(set(mugs) - held)
+    assert source.asset_ids(["mug", "toy"]) == sorted(a for a in assets
+                                                    if int(a[1:]) % 3 in (0, 2))
+    train, test = source.get_test_split(category="shoe")
+    shoes = [f"m{i:02d}" for i in range(1, 30, 3)]
+    assert test == [np.random.RandomState(42).choice(shoes, 1, replace=False)[0]]
+    assert sorted(train + test) == shoes
+    with pytest.raises(KeyError, match=r"no categories \['hat'\]; categories: \['kitchen'"):
+        source.asset_ids("hat")
+    with pytest.raises(KeyError, match="no asset in category 'hat'"):
+        source.get_test_split(category="hat")
+    with pytest.raises(ValueError, match="split must be"):
+        source.asset_ids(split="val")

@@ -9,6 +9,9 @@ functions that need them. The source format is described in ``docs/assets.md``.
   :func:`~kubric.assets.utils.get_clevr_lights`.
 - :func:`ensure_kubasic`, :func:`ensure_hdri_source`, :func:`ensure_pybullet_collection` — the
   sources this project builds on the user's machine, built into the cache on first use.
+- Collection readers (offline build tools, ``kubric assets gso|shapenet|polyhaven``):
+  ``kubric.assets.gso``, ``kubric.assets.shapenet``, ``kubric.assets.polyhaven`` (downloads
+  through ``kubric.assets.download``); multi-link URDFs: ``kubric.assets.articulated``.
 """
 
 from kubric.assets.archive import (

@@ -86,6 +86,53 @@ def _check_member(member: tarfile.TarInfo, asset_id: str, max_member_bytes: int)
     return rel
 
 
+def _staged(target: Path, fill) -> Path:
+    """Run ``fill(staging)`` in a temporary sibling of ``target``, then rename it into place (if
+    another process finished first, its copy is kept); nothing is left behind on failure."""
+    target.parent.mkdir(parents=True, exist_ok=True)
+    staging = Path(tempfile.mkdtemp(prefix=f".{target.name}.", dir=target.parent))
+    try:
+        fill(staging)
+        try:
+            os.rename(staging, target)
+        except OSError:
+            if not target.is_dir():
+                raise
+            shutil.rmtree(staging)
+    except BaseException:
+        shutil.rmtree(staging, ignore_errors=True)
+        raise
+    return target
+
+
+def _write_checked(checked, staging: Path, asset_id: str, archive_path: Path, open_member,
+                   max_total_bytes: int) -> None:
+    """Write checked members ``(info, name, rel, is_dir, size)`` under ``staging``;
+    ``open_member(info)`` returns a readable file object."""
+    import zipfile
+
+    total = sum(size for *_, size in checked)
+    if total > max_total_bytes:
+        raise UnsafeArchiveError(f"asset {asset_id!r}: archive members add up to {total} "
+                                 f"bytes, more than the limit of {max_total_bytes}")
+    root = staging.resolve()
+    for info, name, rel, is_dir, _ in checked:
+        dest = (staging / rel).resolve()
+        if dest != root and root not in dest.parents:
+            raise UnsafeArchiveError(f"asset {asset_id!r}: archive member {name!r} "
+                                     "resolves outside the extraction directory")
+        if is_dir:
+            dest.mkdir(parents=True, exist_ok=True)
+            continue
+        dest.parent.mkdir(parents=True, exist_ok=True)
+        try:
+            with open_member(info) as src, open(dest, "wb") as fh:
+                shutil.copyfileobj(src, fh)
+        except (tarfile.TarError, zipfile.BadZipFile, OSError, EOFError, zlib.error) as err:
+            raise CorruptArchiveError(f"asset {asset_id!r}: archive {str(archive_path)!r} is "
+                                      f"corrupt or truncated (member {name!r}): {err}") from None
+
+
 def safe_extract(archive_path: str | os.PathLike, target_dir: str | os.PathLike, asset_id: str,
                  max_member_bytes: int = MAX_MEMBER_BYTES,
                  max_total_bytes: int = MAX_TOTAL_BYTES) -> Path:
@@ -95,7 +142,6 @@ def safe_extract(archive_path: str | os.PathLike, target_dir: str | os.PathLike,
     refused. Returns the target directory.
     """
     archive_path = Path(archive_path)
-    target = Path(target_dir)
     if not archive_path.is_file():
         raise CorruptArchiveError(f"asset {asset_id!r}: archive {str(archive_path)!r} is missing")
     try:
@@ -103,45 +149,56 @@ def safe_extract(archive_path: str | os.PathLike, target_dir: str | os.PathLike,
     except (tarfile.TarError, OSError, EOFError, zlib.error) as err:
         raise CorruptArchiveError(f"asset {asset_id!r}: cannot read archive "
                                   f"{str(archive_path)!r}: {err}") from None
-    target.parent.mkdir(parents=True, exist_ok=True)
-    staging = Path(tempfile.mkdtemp(prefix=f".{target.name}.", dir=target.parent))
-    try:
+
+    def fill(staging: Path) -> None:
         with tar:
             try:
                 members = tar.getmembers()
             except (tarfile.TarError, OSError, EOFError, zlib.error) as err:
                 raise CorruptArchiveError(f"asset {asset_id!r}: archive {str(archive_path)!r} is "
                                           f"corrupt or truncated: {err}") from None
-            checked = [(m, _check_member(m, asset_id, max_member_bytes)) for m in members]
-            total = sum(m.size for m, _ in checked)
-            if total > max_total_bytes:
-                raise UnsafeArchiveError(f"asset {asset_id!r}: archive members add up to {total} "
-                                         f"bytes, more than the limit of {max_total_bytes}")
-            root = staging.resolve()
-            for member, rel in checked:
-                dest = (staging / rel).resolve()
-                if dest != root and root not in dest.parents:
-                    raise UnsafeArchiveError(f"asset {asset_id!r}: archive member {member.name!r} "
-                                             "resolves outside the extraction directory")
-                if member.isdir():
-                    dest.mkdir(parents=True, exist_ok=True)
-                    continue
-                dest.parent.mkdir(parents=True, exist_ok=True)
-                try:
-                    src = tar.extractfile(member)
-                    with src, open(dest, "wb") as fh:
-                        shutil.copyfileobj(src, fh)
-                except (tarfile.TarError, OSError, EOFError, zlib.error) as err:
-                    raise CorruptArchiveError(f"asset {asset_id!r}: archive "
-                                              f"{str(archive_path)!r} is corrupt or truncated "
-                                              f"(member {member.name!r}): {err}") from None
-        try:
-            os.rename(staging, target)
-        except OSError:
-            if not target.is_dir():
-                raise
-            shutil.rmtree(staging)  # another process finished first: keep theirs
-    except BaseException:
-        shutil.rmtree(staging, ignore_errors=True)
-        raise
-    return target
+            checked = [(m, m.name, _check_member(m, asset_id, max_member_bytes), m.isdir(),
+                        m.size) for m in members]
+            _write_checked(checked, staging, asset_id, archive_path, tar.extractfile,
+                           max_total_bytes)
+
+    return _staged(Path(target_dir), fill)
+
+
+def safe_extract_zip(zip_path: str | os.PathLike, target_dir: str | os.PathLike, asset_id: str,
+                     max_member_bytes: int = MAX_MEMBER_BYTES,
+                     max_total_bytes: int = MAX_TOTAL_BYTES) -> Path:
+    """Extract a ``.zip`` (e.g. one Google Scanned Objects model) with the checks of
+    :func:`safe_extract`: absolute paths, ``..``, symbolic links and special files (the Unix mode
+    in a member's external attributes), absurd sizes and corrupt archives are refused before
+    anything is written; the target appears only when complete."""
+    import stat
+    import zipfile
+
+    zip_path = Path(zip_path)
+    if not zip_path.is_file():
+        raise CorruptArchiveError(f"asset {asset_id!r}: archive {str(zip_path)!r} is missing")
+    try:
+        zf = zipfile.ZipFile(zip_path)
+    except (zipfile.BadZipFile, OSError) as err:
+        raise CorruptArchiveError(f"asset {asset_id!r}: cannot read zip {str(zip_path)!r}: "
+                                  f"{err}") from None
+
+    def fill(staging: Path) -> None:
+        with zf:
+            checked = []
+            for info in zf.infolist():
+                as_tar = tarfile.TarInfo(info.filename)
+                ftype = stat.S_IFMT(info.external_attr >> 16)  # 0: no Unix mode recorded
+                if ftype == stat.S_IFLNK:
+                    as_tar.type = tarfile.SYMTYPE
+                elif ftype not in (0, stat.S_IFREG, stat.S_IFDIR):
+                    as_tar.type = tarfile.FIFOTYPE
+                elif info.is_dir():
+                    as_tar.type = tarfile.DIRTYPE
+                as_tar.size = info.file_size
+                rel = _check_member(as_tar, asset_id, max_member_bytes)
+                checked.append((info, info.filename, rel, info.is_dir(), info.file_size))
+            _write_checked(checked, staging, asset_id, zip_path, zf.open, max_total_bytes)
+
+    return _staged(Path(target_dir), fill)

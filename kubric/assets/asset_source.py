@@ -169,27 +169,59 @@ class AssetSource:
 
     @property
     def categories(self) -> list[str]:
-        """Sorted distinct ``metadata.category`` values (assets without one are left out)."""
-        return sorted({str(e["metadata"]["category"]) for e in self.db.values()
-                       if e["metadata"].get("category")})
+        """Sorted distinct categories: ``metadata.category`` and the entries of
+        ``metadata.categories`` (collections such as GSO list several)."""
+        return sorted({c for e in self.db.values() for c in _categories_of(e)})
 
     def asset_ids_in(self, category: str) -> list[str]:
-        """Sorted ids of the assets whose ``metadata.category`` is ``category``."""
-        return sorted(k for k, e in self.db.items() if e["metadata"].get("category") == category)
+        """Sorted ids of the assets whose ``metadata.category`` is ``category`` or whose
+        ``metadata.categories`` list holds it."""
+        return sorted(k for k, e in self.db.items() if category in _categories_of(e))
 
-    def get_test_split(self, fraction: float = 0.1, seed: int = 42) -> tuple[list[str], list[str]]:
+    def get_test_split(self, fraction: float = 0.1, seed: int = 42,
+                       category: str | None = None) -> tuple[list[str], list[str]]:
         """(train ids, held-out ids): ``round(fraction * n)`` of the sorted ids chosen by ``seed``.
 
-        Deterministic for a given manifest, fraction and seed; both lists are sorted.
+        Deterministic for a given manifest, fraction and seed; both lists are sorted. With
+        ``category`` the split is made among that category's assets only (an unknown category
+        is a ``KeyError`` naming the known ones).
         """
         if not 0.0 <= float(fraction) <= 1.0:
             raise ValueError(f"AssetSource.get_test_split: fraction must be in [0, 1], "
                              f"got {fraction!r}")
-        ids = self.all_asset_ids
+        if category is None:
+            ids = self.all_asset_ids
+        else:
+            ids = self.asset_ids_in(category)
+            if not ids:
+                raise KeyError(f"AssetSource {self.name!r} has no asset in category "
+                               f"{category!r}; categories: {self.categories}")
         n_test = int(round(float(fraction) * len(ids)))
         rng = np.random.RandomState(seed)
         held = set(rng.choice(ids, size=n_test, replace=False).tolist()) if n_test else set()
         return [i for i in ids if i not in held], sorted(held)
+
+    def asset_ids(self, categories: Iterable[str] | None = None, split: str | None = None,
+                  fraction: float = 0.1, seed: int = 42) -> list[str]:
+        """Sorted ids in any of ``categories`` (default: all), of ``split`` ``"train"`` or
+        ``"test"`` (default: both). The split is made over the whole source (as MOVi-C–F hold
+        out 10 % of all sorted ids with a fixed seed), then filtered, so the held-out assets of a
+        category are the same whichever categories are asked for."""
+        if split not in (None, "train", "test"):
+            raise ValueError(f"AssetSource.asset_ids: split must be 'train', 'test' or None, "
+                             f"got {split!r}")
+        ids = self.all_asset_ids
+        if split is not None:
+            train, test = self.get_test_split(fraction, seed)
+            ids = test if split == "test" else train
+        if categories is not None:
+            wanted = {categories} if isinstance(categories, str) else set(categories)
+            unknown = sorted(wanted - set(self.categories))
+            if unknown:
+                raise KeyError(f"AssetSource {self.name!r} has no categories {unknown}; "
+                               f"categories: {self.categories}")
+            ids = [i for i in ids if wanted & _categories_of(self.db[i])]
+        return ids
 
     def _entry(self, asset_id: str) -> dict:
         try:
@@ -303,6 +335,15 @@ class AssetSource:
         """Yield ``(id, entry)`` for ``asset_ids`` (default: all, sorted)."""
         for asset_id in (self.all_asset_ids if asset_ids is None else asset_ids):
             yield asset_id, self._entry(asset_id)
+
+
+def _categories_of(entry: dict) -> set[str]:
+    meta = entry["metadata"]
+    cats = {str(meta["category"])} if meta.get("category") else set()
+    extra = meta.get("categories")
+    if isinstance(extra, (list, tuple)):
+        cats.update(str(c) for c in extra if c)
+    return cats
 
 
 def _flock(fd: int, shared: bool, wait: bool = True) -> bool:

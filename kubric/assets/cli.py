@@ -1,7 +1,9 @@
 """``kubric assets ...``: build asset sources on this machine.
 
 Sub-commands: ``kubasic --out DIR``; ``convert SRC_DIR --out DIR --name NAME [--workers N]``;
-``hdri SRC_DIR --out DIR``; ``pybullet --out DIR [--limit N]``; ``list SOURCE``; ``cache``.
+``hdri SRC_DIR --out DIR``; ``pybullet --out DIR [--limit N]``; ``gso SRC --out DIR
+[--download]``; ``polyhaven --out DIR [--resolution 2k]``; ``shapenet SRC --out DIR
+[--synsets ...]``; ``list SOURCE``; ``cache``.
 """
 
 from __future__ import annotations
@@ -44,6 +46,35 @@ def _pybullet(args) -> int:
     t0 = time.perf_counter()
     report = build_pybullet_collection(args.out, limit=args.limit, workers=args.workers)
     return _print_report(report, time.perf_counter() - t0)
+
+
+def _gso(args) -> int:
+    from kubric.assets.gso import build_gso
+
+    t0 = time.perf_counter()
+    report = build_gso(args.src, args.out, catalogue=args.catalogue, workers=args.workers,
+                       limit=args.limit, download=args.download, base_url=args.base_url)
+    return _print_report(report, time.perf_counter() - t0)
+
+
+def _polyhaven(args) -> int:
+    from kubric.assets.polyhaven import build_polyhaven
+
+    t0 = time.perf_counter()
+    report = build_polyhaven(args.out, resolution=args.resolution, fmt=args.format,
+                             limit=args.limit, base_url=args.base_url)
+    return _print_report(report, time.perf_counter() - t0)
+
+
+def _shapenet(args) -> int:
+    from kubric.assets.shapenet import build_shapenet
+
+    t0 = time.perf_counter()
+    report = build_shapenet(args.src, args.out, synsets=args.synsets, workers=args.workers,
+                            limit_per_synset=args.limit_per_synset)
+    code = _print_report(report, time.perf_counter() - t0)
+    print("  repairs: " + ", ".join(f"{k} {v}" for k, v in report["repairs"].items()))
+    return code
 
 
 def _hdri(args) -> int:
@@ -109,6 +140,44 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--limit", type=int, default=None, help="number of random_urdfs (default all)")
     p.add_argument("--workers", type=int, default=None, help="processes (default: all cores)")
     p.set_defaults(func=_pybullet)
+
+    from kubric.assets import gso
+
+    p = sub.add_parser("gso", help="Google Scanned Objects (zips or folders) → source")
+    p.add_argument("src", help="folder of GSO zips / unpacked models (with --download: where "
+                               "the listing and zips are saved; resumable)")
+    p.add_argument("--out", required=True, help="output folder")
+    p.add_argument("--catalogue", default=None,
+                   help=f"saved Fuel model listing (JSON; default SRC/{gso.CATALOGUE_NAME})")
+    p.add_argument("--download", action="store_true",
+                   help="first download the listing and the zips through the Fuel API")
+    p.add_argument("--base-url", default=gso.FUEL_URL, help="Fuel server (default %(default)s)")
+    p.add_argument("--limit", type=int, default=None, help="only the first N models (sorted)")
+    p.add_argument("--workers", type=int, default=None, help="processes (default: all cores)")
+    p.set_defaults(func=_gso)
+
+    from kubric.assets import polyhaven
+
+    p = sub.add_parser("polyhaven", help="download Poly Haven HDRIs (CC0) → HDRI source")
+    p.add_argument("--out", required=True, help="output folder (re-running resumes)")
+    p.add_argument("--resolution", default="2k", choices=polyhaven.RESOLUTIONS,
+                   help="file resolution (default %(default)s)")
+    p.add_argument("--format", default="hdr", choices=polyhaven.FORMATS,
+                   help="file format (default %(default)s)")
+    p.add_argument("--limit", type=int, default=None, help="only the first N HDRIs (sorted ids)")
+    p.add_argument("--base-url", default=polyhaven.API_URL,
+                   help="API server (default %(default)s)")
+    p.set_defaults(func=_polyhaven)
+
+    p = sub.add_parser("shapenet", help="ShapeNetCore v2 (SYNSET/MODEL/models/...) → source")
+    p.add_argument("src", help="ShapeNetCore.v2 folder (with taxonomy.json)")
+    p.add_argument("--out", required=True, help="output folder")
+    p.add_argument("--synsets", nargs="+", default=None, metavar="SYNSET",
+                   help="only these synset ids (e.g. 02691156 03001627)")
+    p.add_argument("--limit-per-synset", type=int, default=None,
+                   help="only the first N models (sorted) of each synset")
+    p.add_argument("--workers", type=int, default=None, help="processes (default: all cores)")
+    p.set_defaults(func=_shapenet)
 
     p = sub.add_parser("hdri", help="environment maps (.hdr/.exr) → Texture source")
     p.add_argument("src_dir", nargs="?", default=None,

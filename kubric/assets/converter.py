@@ -63,6 +63,8 @@ class ConvertJob:
 
     ``color``: fallback RGBA (or RGB) in [0, 1] for a mesh without a material or texture of its
     own; ``color_from`` names where it came from (the ``metadata["appearance"]`` value).
+    ``repair``: a module-level function ``mesh -> (mesh, counts)`` applied after loading (e.g.
+    :func:`kubric.assets.shapenet.repair_mesh`); ``counts`` is stored as ``metadata["repairs"]``.
     """
 
     asset_id: str
@@ -74,6 +76,7 @@ class ConvertJob:
     decomposition: str = "auto"
     color: tuple | None = None
     color_from: str = "urdf_color"
+    repair: object = None
 
 
 def as_rgba(value, what: str) -> tuple[float, float, float, float]:
@@ -137,6 +140,8 @@ def load_visual(path: str, up: str = "z", scale=1.0, color=None,
     import trimesh
 
     suffix = Path(path).suffix.lower()
+    if suffix == ".obj":
+        _check_obj_vertices(path)
     fallback = None if color is None else as_rgba(color, f"color of {path}")
     resolver = trimesh.resolvers.FilePathResolver(path, allow_anywhere=True)  # "../x.png" maps
     loaded = trimesh.load(path, process=True, resolver=resolver)
@@ -154,6 +159,24 @@ def load_visual(path: str, up: str = "z", scale=1.0, color=None,
     if np.min(mesh.extents) <= 0:
         raise ValueError(f"degenerate (flat) mesh with extents {mesh.extents.tolist()}")
     return mesh, look
+
+
+def _check_obj_vertices(path: str) -> None:
+    """Refuse an OBJ with non-finite vertex coordinates (trimesh would silently drop them)."""
+    import math
+
+    with open(path, errors="replace") as fh:
+        count = 0
+        for line in fh:
+            if not line.startswith("v "):
+                continue
+            count += 1
+            low = line.lower()
+            if "nan" in low or "inf" in low:
+                coords = line.split()[1:4]
+                if not all(math.isfinite(float(c)) for c in coords):
+                    raise ValueError(f"non-finite vertex coordinates in vertex {count}: "
+                                     f"{' '.join(coords)}")
 
 
 def load_mesh(path: str, up: str = "z", scale=1.0, color=None):
@@ -343,6 +366,9 @@ def convert_one(job: ConvertJob, out_dir: str | os.PathLike) -> dict:
     from kubric.assets.writer import Collision, package_object
 
     mesh, look = load_visual(job.mesh_path, job.up, job.scale, job.color, job.color_from)
+    repairs = None
+    if job.repair is not None:
+        mesh, repairs = job.repair(mesh)
     closed, watertight = physics.make_watertight(mesh)
     hulls, method = physics.decompose(closed if watertight else mesh, job.decomposition)
     metadata = dict(job.metadata)
@@ -350,6 +376,8 @@ def convert_one(job: ConvertJob, out_dir: str | os.PathLike) -> dict:
     metadata.update({"source_file": Path(job.mesh_path).name, "watertight": watertight,
                      "mass_from": "watertight mesh" if watertight else "convex hulls",
                      "converter_version": CONVERTER_VERSION})
+    if repairs is not None:
+        metadata["repairs"] = repairs
     return package_object(job.asset_id, mesh, out_dir,
                           collision=Collision("hulls", hulls=hulls, method=method),
                           license=job.license, metadata=metadata,
@@ -376,13 +404,14 @@ def _job_worker(args):
 
 def convert_jobs(jobs: list[ConvertJob], out_dir: str | os.PathLike, name: str,
                  version: str = "1.0", workers: int | None = None,
-                 progress: bool = True) -> dict:
+                 progress: bool = True, skipped: list | None = None) -> dict:
     """Convert ``jobs`` into the source ``out_dir`` and write its manifest and report.
 
     Archives already there are reused when they hold this asset and were written by this
     :data:`CONVERTER_VERSION`; the others are converted again (each replaced atomically), and the
     manifest is written last. Returns the report: ``{"name", "total", "converted", "reused",
     "skipped": [{"id", "source", "reason"}]}`` (also written to ``conversion_report.json``).
+    ``skipped``: failures found before conversion (e.g. an unsafe zip), added to the report.
     """
     from kubric.assets.writer import dumps, write_manifest
 
@@ -397,7 +426,7 @@ def convert_jobs(jobs: list[ConvertJob], out_dir: str | os.PathLike, name: str,
         else:
             todo.append(job)
     reused = len(entries)
-    skipped = []
+    skipped = list(skipped or [])
     by_id = {j.asset_id: j for j in jobs}
     workers = max(1, workers or os.cpu_count() or 1)
     args = [(job, str(out)) for job in todo]
@@ -421,7 +450,8 @@ def convert_jobs(jobs: list[ConvertJob], out_dir: str | os.PathLike, name: str,
         if pool is not None:
             pool.shutdown()
     write_manifest(out / "manifest.json", name, version, entries)
-    report = {"name": name, "total": len(jobs), "converted": len(entries) - reused,
+    report = {"name": name, "total": len(entries) + len(skipped),
+              "converted": len(entries) - reused,
               "reused": reused, "skipped": sorted(skipped, key=lambda s: s["id"])}
     (out / REPORT_NAME).write_text(dumps(report))
     return report

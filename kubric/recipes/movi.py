@@ -57,6 +57,18 @@ def add_clevr_lights(scene, rng, jitter: float = 1.0) -> list:
     return lights
 
 
+def category_list(value) -> tuple[str, ...]:
+    """Option converter: ``"Shoe,Toys"`` or a sequence of names → a tuple of category names."""
+    items = value.split(",") if isinstance(value, str) else list(value)
+    names = tuple(str(v).strip() for v in items if str(v).strip())
+    if not names:
+        raise ValueError("expected one or more category names separated by commas")
+    return names
+
+
+category_list.allowed = "category names separated by commas, e.g. Shoe,Toys"
+
+
 def _choice(rng, items):
     items = list(items)
     return items[rng.randint(len(items))]
@@ -162,6 +174,9 @@ class MoviC(MoviBase, name="movi_c"):
                               "pybullet_data's random_urdfs (none = all 1000)", type=int, low=0)
     split = Option("train", "asset / background split (10% of the sorted ids are held out)",
                    choices=("train", "test"))
+    object_categories = Option(None, "only objects of these categories (comma-separated, as "
+                               "in the source's metadata, e.g. Shoe,Toys; none = all); the 10% "
+                               "split is made over the whole source first", type=category_list)
     floor_shadows = Option(True, "the HDRI floor receives the objects' shadows "
                            "(FlatMaterial.catch_shadows); false = unlit floor, faster")
 
@@ -174,8 +189,12 @@ class MoviC(MoviBase, name="movi_c"):
         sources["hdri"] = _existing_source(self.hdri_source, "hdri_source") \
             if self.hdri_source is not None else assets.ensure_hdri_source()
         for key in ("objects", "hdri"):
-            train, test = sources[key].get_test_split(fraction=0.1)
-            ids = test if self.split == "test" else train
+            categories = self.object_categories if key == "objects" else None
+            try:
+                ids = sources[key].asset_ids(categories, split=self.split, fraction=0.1)
+            except KeyError as err:
+                raise OptionError(f"{self.name}: option object_categories: {err.args[0]}") \
+                    from None
             if not ids:
                 raise OptionError(f"{self.name}: the {key} source has no {self.split} assets")
             sources[key + "_ids"] = ids

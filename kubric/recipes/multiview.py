@@ -1,4 +1,11 @@
 """The multi-view recipes (importing this registers them): ``klevr`` and ``toybox``
 (:mod:`kubric.recipes.klevr`), sharing :mod:`kubric.recipes.multiview_base`."""
 
-from kubric.recipes import klevr, multiview_hdri, robust_nerf, texture_nerf  # noqa: F401
+from kubric.recipes import (  # noqa: F401
+    complex_brdf,
+    klevr,
+    multiview_hdri,
+    robust_nerf,
+    svr,
+    texture_nerf,
+)

@@ -259,6 +259,11 @@ class MultiviewBase(Recipe):
         self.add_floor(scene, sources, kb.FlatMaterial(color=ground, indirect_visibility=False))
         return hdri_id
 
+    def renderer_options(self) -> dict:
+        """Extra keyword arguments of :class:`kubric.renderer.Blender` (also recorded in
+        ``metadata.renderer``). Default: none."""
+        return {}
+
     def extra_outputs(self, scene, layers, instances, out_dir, meta) -> dict:
         """Write the recipe's own layers / files; return ``{key: template}`` added to every
         frame entry of the transforms files. Default: none."""
@@ -291,10 +296,11 @@ class MultiviewBase(Recipe):
             self.animate(scene, rng, splits, sources)
             renderer = kb.renderer.Blender(scene, self.scratch / "render",
                                            samples_per_pixel=self.samples,
-                                           use_denoising=self.denoise)
+                                           use_denoising=self.denoise, **self.renderer_options())
             layers = renderer.render(return_layers=RENDERED_LAYERS)
         render_settings = {"samples_per_pixel": self.samples, "engine": "CYCLES",
-                           "view_transform": "Standard", "denoising": self.denoise}
+                           "view_transform": "Standard", "denoising": self.denoise,
+                           **self.renderer_options()}
         self.write_outputs(scene, layers, seed, out_dir, background, render_settings, splits)
 
     def write_outputs(self, scene, layers, seed, out_dir, background, render_settings,

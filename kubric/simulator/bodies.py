@@ -139,6 +139,12 @@ def shape_key(obj) -> tuple | None:
                     "supported: Cube, Sphere, FileBasedObject")
 
 
+def has_joints(urdf_path: str) -> bool:
+    """Whether a URDF file declares any ``<joint>`` (a multi-link, articulated model)."""
+    with open(urdf_path, errors="replace") as fh:
+        return "<joint" in fh.read()
+
+
 def _urdf_path(obj) -> str:
     path = pathlib.Path(obj.simulation_filename).expanduser()
     if path.suffix.lower() != ".urdf":
@@ -183,14 +189,21 @@ def create_body(obj, key: tuple, shapes: ShapeCache) -> Body:
                                       physicsClientId=client)
     else:
         _, path, scale, fixed = key
+        articulated = has_joints(path)
         try:
+            # a multi-link URDF keeps its joints only in reduced coordinates (PyBullet merges
+            # the links of a maximal-coordinate body into its base)
             body.uid = pb.loadURDF(path, useFixedBase=fixed, globalScaling=scale,
-                                   useMaximalCoordinates=True, physicsClientId=client)
+                                   useMaximalCoordinates=not articulated,
+                                   physicsClientId=client)
         except pb.error as err:
             raise ValueError(f"{obj.uid}: PyBullet could not load simulation_filename "
                              f"{path!r} ({err})") from None
         joints = pb.getNumJoints(body.uid, physicsClientId=client)
         body.links = (-1, *range(joints))
+        for joint in range(joints):  # passive joints: PyBullet's default motors hold them
+            pb.setJointMotorControl2(body.uid, joint, pb.VELOCITY_CONTROL, force=0.0,
+                                     physicsClientId=client)
         if not fixed:
             _set_total_mass(body, float(obj.mass), client)
     # The body was created at the origin without rotation, so its base (= inertial) pose now is

@@ -27,6 +27,7 @@ import logging
 import pathlib
 import weakref
 
+import numpy as np
 import pybullet as pb
 
 from kubric.core.assets import Asset
@@ -132,6 +133,7 @@ class PyBullet(TableView):
         self._shapes = kb_bodies.ShapeCache(self.client)
         self._assets_by_body: dict[int, PhysicalObject] = {}
         self._keyed_frames: dict[PhysicalObject, set[int]] = {}
+        self._links: dict[PhysicalObject, dict[int, PhysicalObject]] = {}  # attach_links
         super().__init__(scene)
 
     # ------------------------------------------------------------------ lifetime
@@ -204,6 +206,33 @@ class PyBullet(TableView):
             raise ValueError(f"{getattr(obj, 'uid', obj)!r} has no body in this simulator "
                              "(is it a simulated PhysicalObject added to the simulated scene?)")
         return body
+
+    def attach_links(self, base, links: dict) -> None:
+        """Pose ``links`` (``{URDF link name: unsimulated object}``) from the links of ``base``'s
+        multi-link URDF body at every frame that :meth:`run` records (the link's URDF frame:
+        position, quaternion, and that point's velocity and angular velocity)."""
+        body = self._body_of(base)
+        names = {pb.getJointInfo(body.uid, j, physicsClientId=self.client)[12].decode(): j
+                 for j in range(pb.getNumJoints(body.uid, physicsClientId=self.client))}
+        unknown = sorted(set(links) - set(names))
+        if unknown:
+            raise ValueError(f"{base.uid}: its URDF has no links {unknown}; links: "
+                             f"{sorted(names)}")
+        self._links[base] = {names[k]: obj for k, obj in links.items()}
+
+    def _read_link(self, body: Body, index: int):
+        st = pb.getLinkState(body.uid, index, computeLinkVelocity=1,
+                             computeForwardKinematics=1, physicsClientId=self.client)
+        com, pos, orn, vel, ang = st[0], st[4], st[5], st[6], st[7]
+        vel = np.asarray(vel) + np.cross(ang, np.asarray(pos) - np.asarray(com))
+        return (tuple(float(v) for v in pos), kb_bodies.xyzw_to_wxyz(orn),
+                tuple(float(v) for v in vel), tuple(float(v) for v in ang))
+
+    def _read_all(self, simulated, states) -> None:
+        for obj, body in simulated:
+            states.setdefault(obj, []).append(self._read_state(obj, body))
+            for index, link_obj in self._links.get(obj, {}).items():
+                states.setdefault(link_obj, []).append(self._read_link(body, index))
 
     def _read_state(self, obj, body: Body):
         pos, orn = pb.getBasePositionAndOrientation(body.uid, physicsClientId=self.client)
@@ -296,7 +325,8 @@ class PyBullet(TableView):
         for obj, body in simulated:  # the model is the truth at the start of a run
             self._apply_state(obj, body)
 
-        states = {obj: [self._read_state(obj, body)] for obj, body in simulated}
+        states: dict = {}
+        self._read_all(simulated, states)
         events: list[dict] = []
         n_steps = (frame_end - frame_start) * steps_per_frame
         for step in range(1, n_steps + 1):
@@ -307,8 +337,7 @@ class PyBullet(TableView):
                     points, self._assets_by_body, frame_start + step / steps_per_frame, step,
                     min_contact_force))
             if step % steps_per_frame == 0:
-                for obj, body in simulated:
-                    states[obj].append(self._read_state(obj, body))
+                self._read_all(simulated, states)
 
         if merge_contacts:
             events = kb_contacts.merge_events(events, steps_per_frame)
