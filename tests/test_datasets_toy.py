@@ -21,8 +21,8 @@ TOY = register_schema(Schema("test_toy_layers", (
     Feature("albedo", "uint16", ("T", "H", "W", 3), "layer:albedo", "png",
             doc="the toy layer: reflectance in [0, 1] · 65535"),
     Feature("instances/weight", "float32", (), "instance:weight", unit="kg"),
-    Feature("target_points", "float32", ("P", "T", 2), "npz:tracks.npz:target_points",
-            doc="a per-scene file the recipe writes (the point-tracks hook)"),
+    Feature("target_points", "float32", ("P", "T", 2), "npz:toy_points.npz:target_points",
+            doc="a per-scene file the recipe writes (like tracks.npz)"),
 ), layers={"albedo": LayerFormat("albedo_{:05d}.png", 3, "unit")}))
 
 
@@ -42,7 +42,7 @@ class ToyLayers(Recipe, name="test_toy_layers"):
 
     def generate(self, seed, out_dir):
         rgba, albedo, weights, tracks = toy_layers(seed)
-        np.savez(out_dir / "tracks.npz", target_points=tracks)
+        np.savez(out_dir / "toy_points.npz", target_points=tracks)
         metadata = {"flags": self.flags(seed),
                     "metadata": {"resolution": [W, H], "num_frames": T, "seed": seed},
                     "instances": [{"weight": w} for w in weights]}
