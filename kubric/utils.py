@@ -23,6 +23,7 @@ from kubric.annotations.metadata import (
     get_scene_metadata,
     process_collisions,
 )
+from kubric.core.resolution import parse_resolution
 from kubric.core.scene import Scene
 
 logger = logging.getLogger("kubric")
@@ -31,35 +32,10 @@ logger = logging.getLogger("kubric")
 _active_output_dir: pathlib.Path | None = None
 
 
-def parse_resolution(value) -> tuple[int, int]:
-    """``256`` / ``"256"`` → (256, 256); ``"320x240"`` / ``(320, 240)`` → (320, 240) as
-    (width, height). Raises ValueError naming the value otherwise."""
-    if isinstance(value, (tuple, list)) and len(value) == 2:
-        w, h = value
-    elif isinstance(value, (int, np.integer)) and not isinstance(value, bool):
-        w = h = value
-    elif isinstance(value, str):
-        parts = value.lower().replace(",", "x").split("x")
-        if len(parts) == 1:
-            parts = parts * 2
-        if len(parts) != 2:
-            raise ValueError(f"resolution must be N or WxH, got {value!r}")
-        try:
-            w, h = (int(p) for p in parts)
-        except ValueError:
-            raise ValueError(f"resolution must be N or WxH with integers, got {value!r}") from None
-    else:
-        raise ValueError(f"resolution must be N or WxH, got {value!r}")
-    if isinstance(w, bool) or isinstance(h, bool) or int(w) < 1 or int(h) < 1 \
-            or int(w) != w or int(h) != h:
-        raise ValueError(f"resolution must be positive integers (width, height), got {value!r}")
-    return int(w), int(h)
-
-
 class ArgumentParser(argparse.ArgumentParser):
     """``argparse.ArgumentParser`` with upstream Kubric's common worker flags:
     ``--frame_rate`` (24), ``--step_rate`` (240), ``--frame_start`` (1), ``--frame_end`` (24),
-    ``--logging_level`` (INFO), ``--seed`` (None = draw one), ``--resolution`` (N or WxH, 512),
+    ``--logging_level`` (INFO), ``--seed`` (None = draw one), ``--resolution`` (N, WxH or W,H; 512),
     ``--scratch_dir`` (None = a fresh temporary directory), ``--job-dir`` (output)."""
 
     def __init__(self, *args, **kwargs):
@@ -130,9 +106,7 @@ def setup(flags):
     log_my_flags(flags)
     rng = np.random.RandomState(seed=flags.seed)
     randomness.bind_worker_rng(rng)  # upstream calls that omit rng= use this seeded one
-    scene = Scene(frame_start=flags.frame_start, frame_end=flags.frame_end,
-                  frame_rate=flags.frame_rate, step_rate=flags.step_rate,
-                  resolution=parse_resolution(flags.resolution))
+    scene = Scene.from_flags(flags)
     scene.metadata["seed"] = int(flags.seed)
     scratch_dir, output_dir = setup_directories(flags)
     _active_output_dir = output_dir

@@ -171,7 +171,7 @@ def test_scene_defaults_and_validation():
         scene.step_rate = 250
     scene.set_rates(25, 250)
     assert (scene.frame_rate, scene.step_rate) == (25, 250)
-    with pytest.raises(ValueError, match="resolution must be two positive integers"):
+    with pytest.raises(ValueError, match=r"Scene.resolution must be N or WxH .*got \(-3, 10\)"):
         kb.Scene(resolution=(-3, 10))
     with pytest.raises(ValueError, match="frame_end"):
         kb.Scene(frame_start=10, frame_end=5)
@@ -303,14 +303,15 @@ def test_keyframe_delete_notifies_and_names_missing_frames():
 
 
 @pytest.mark.parametrize("resolution, expected", [(64, (64, 64)), ("320x240", (320, 240)),
-                                                  ("48", (48, 48)), ((30, 20), (30, 20))])
+                                                  ("48", (48, 48)), ((30, 20), (30, 20)),
+                                                  ("320,240", (320, 240))])
 def test_scene_from_flags_like_upstream_scripts(resolution, expected):
     from types import SimpleNamespace
     flags = SimpleNamespace(frame_start=1, frame_end=12, frame_rate=12, step_rate=240,
                             resolution=resolution)
     scene = kb.Scene.from_flags(flags)
     assert scene.resolution == expected and scene.frame_end == 12 and scene.frame_rate == 12
-    with pytest.raises(ValueError, match="resolution must look like 256 or 320x240, got 'big'"):
+    with pytest.raises(ValueError, match="resolution must be N or WxH .*, got 'big'"):
         kb.Scene.from_flags(SimpleNamespace(**{**vars(flags), "resolution": "big"}))
 
 

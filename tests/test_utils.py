@@ -16,8 +16,47 @@ def test_argument_parser_defaults_and_resolution():
     assert flags.resolution == (320, 240) and flags.seed == 0 and flags.job_dir == "x"
     with pytest.raises(SystemExit):
         parser.parse_args(["--resolution", "-3"])
-    with pytest.raises(ValueError, match="resolution"):
-        parse_resolution("12x")
+    with pytest.raises(SystemExit):
+        parser.parse_args(["--resolution", "12x"])
+
+
+@pytest.mark.parametrize("value, expected", [
+    (256, (256, 256)), (np.int64(64), (64, 64)), (32.0, (32, 32)), ("48", (48, 48)),
+    (" 48 ", (48, 48)), ("320x240", (320, 240)), ("320X240", (320, 240)),
+    ("320×240", (320, 240)), ("320,240", (320, 240)), ("320 x 240", (320, 240)),
+    ("320, 240", (320, 240)), ((320, 240), (320, 240)), ([320, 240], (320, 240)),
+    (np.array([320.0, 240.0]), (320, 240)), ((np.uint16(3), 2), (3, 2)),
+])
+def test_every_resolution_spelling_parses_the_same_everywhere(value, expected):
+    """One parser: the function, the worker flags, Scene, Scene.from_flags and recipe options."""
+    from types import SimpleNamespace
+
+    from kubric.pipeline import resolution as option_resolution
+    got = parse_resolution(value)
+    assert got == expected and all(type(v) is int for v in got)
+    assert kb.Scene(resolution=value).resolution == expected
+    flags = SimpleNamespace(frame_start=1, frame_end=2, frame_rate=24, step_rate=240,
+                            resolution=value)
+    assert kb.Scene.from_flags(flags).resolution == expected
+    assert option_resolution(value) == expected
+    if isinstance(value, str):
+        assert kb.ArgumentParser().parse_args(["--resolution", value]).resolution == expected
+
+
+@pytest.mark.parametrize("value", [
+    0, -3, 2.5, True, float("nan"), float("inf"), "", " ", "x", "12x", "x12", "1x2x3", "0x5",
+    "-3", "+3", "3.5x2", "big", "320;240", "３２０", (1,), (1, 2, 3), (0, 5), (True, 2),
+    ("320", "240"), None, {"w": 1},
+])
+def test_bad_resolutions_raise_one_line_naming_value_and_spellings(value):
+    with pytest.raises(ValueError) as err:
+        parse_resolution(value)
+    message = str(err.value)
+    assert "\n" not in message and repr(value) in message
+    assert message.startswith("resolution must be N or WxH with positive integers (e.g. 256, "
+                              "320x240, 320,240 or (320, 240))")
+    with pytest.raises(ValueError, match=r"^Scene.resolution must be N or WxH"):
+        kb.Scene(resolution=value)
 
 
 def test_setup_seed_zero_is_zero_and_done_marks_output(tmp_path):

@@ -10,18 +10,11 @@ from kubric.core.cameras import Camera, UndefinedCamera
 from kubric.core.color import Color, get_color
 from kubric.core.materials import Texture
 from kubric.core.objects import Object3D, PhysicalObject
+from kubric.core.resolution import parse_resolution
 
 
 def _as_resolution(value, owner, name):
-    try:
-        w, h = value
-    except (TypeError, ValueError):
-        raise ValueError(f"Scene.{name} must be (width, height), got {value!r}") from None
-    for v in (w, h):
-        if isinstance(v, bool) or not float(v).is_integer() or int(v) < 1:
-            raise ValueError(f"Scene.{name} must be two positive integers (width, height), "
-                             f"got {value!r}")
-    return int(w), int(h)
+    return parse_resolution(value, f"Scene.{name}")
 
 
 def _as_rate(other: str):
@@ -67,7 +60,7 @@ class Scene(kt.HasProperties):
       frame_start, frame_end: inclusive frame range (default 1..48).
       frame_rate: frames per second (24). step_rate: physics steps per second (240), a multiple of
         frame_rate; the physics time step is 1/step_rate.
-      resolution: (width, height) in pixels (512, 512).
+      resolution: (width, height) in pixels (512, 512); also accepts 256, "320x240", "320,240".
       gravity: (3,) m/s² (0, 0, −10).
       camera: the active camera (adding a camera to the scene makes it active).
       ambient_illumination: Color, or a Texture (HDRI) lighting the scene from all directions.
@@ -99,20 +92,11 @@ class Scene(kt.HasProperties):
     @classmethod
     def from_flags(cls, flags) -> Scene:
         """A scene from parsed worker flags (``frame_start``, ``frame_end``, ``frame_rate``,
-        ``step_rate``, ``resolution``), as upstream scripts call it. ``resolution`` may be an int
-        (square), ``"WxH"``, ``"N"`` or a (width, height) pair."""
-        res = flags.resolution
-        if isinstance(res, str):
-            parts = res.lower().split("x")
-            try:
-                res = tuple(int(p) for p in parts)
-            except ValueError:
-                raise ValueError(f"resolution must look like 256 or 320x240, got {res!r}") from None
-        if isinstance(res, (int, float)) or (isinstance(res, tuple) and len(res) == 1):
-            side = res[0] if isinstance(res, tuple) else res
-            res = (side, side)
+        ``step_rate``, ``resolution``), as upstream scripts call it. ``resolution`` takes every
+        spelling of :func:`kubric.core.resolution.parse_resolution` (256, "320x240", (320, 240))."""
         return cls(frame_start=flags.frame_start, frame_end=flags.frame_end,
-                   frame_rate=flags.frame_rate, step_rate=flags.step_rate, resolution=res)
+                   frame_rate=flags.frame_rate, step_rate=flags.step_rate,
+                   resolution=flags.resolution)
 
     # ------------------------------------------------------------------ settings
     def set_rates(self, frame_rate: int, step_rate: int) -> None:

@@ -17,6 +17,9 @@ import pathlib
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
+from kubric.core.resolution import ALLOWED as RESOLUTIONS_ALLOWED
+from kubric.core.resolution import parse_resolution
+
 _TRUE = {"1", "true", "yes", "on"}
 _FALSE = {"0", "false", "no", "off"}
 
@@ -69,12 +72,15 @@ _CONVERTERS: dict[Any, Callable[[Any], Any]] = {
 
 
 def resolution(value) -> tuple[int, int]:
-    """Converter for (width, height): ``256``, ``"256"``, ``"320x240"`` or ``(320, 240)``."""
-    from kubric.utils import parse_resolution
-    return parse_resolution(value)
+    """Converter for (width, height): every spelling of
+    :func:`kubric.core.resolution.parse_resolution` (``256``, ``"320x240"``, ``"320,240"``, ...)."""
+    try:
+        return parse_resolution(value)
+    except ValueError:  # Option.convert names the option, the value and what is allowed
+        raise ValueError("not a resolution") from None
 
 
-resolution.allowed = "N or WxH with positive integers, e.g. 256 or 320x240"
+resolution.allowed = RESOLUTIONS_ALLOWED
 
 
 def float_range(value) -> tuple[float, float]:
