@@ -1,6 +1,7 @@
 """`kubric inspect` on a synthetic scene directory written with kubric.file_io."""
 
 import numpy as np
+import pytest
 from PIL import Image
 
 from kubric import file_io
@@ -15,6 +16,7 @@ def _scene_dir(tmp_path, t=3, h=8, w=10):
     depth[:, 2:6, 3:7] = 5.0
     seg = np.zeros((t, h, w, 1), np.uint32)
     seg[:, 2:6, 3:7] = 1
+    seg[:, 6:8, 0:5, 0] = np.arange(2, 7)  # labels 2..6
     normal = np.zeros((t, h, w, 3), np.float32)
     normal[..., 2] = 1.0
     layers = {"rgba": rng.integers(0, 255, (t, h, w, 4), dtype=np.uint8), "depth": depth,
@@ -44,6 +46,12 @@ def test_inspect_summary_and_contact_sheet(tmp_path, capsys):
     assert depth_col[3, 4].max() == 255 and depth_col[0, 0].max() == 0
     seg_col = sheet[:8, 10:20]
     assert seg_col[3, 4].max() > 0 and seg_col[0, 0].max() == 0
+    # one palette: every label has the colour its segmentation PNG stores for it
+    labels, palette = file_io.read_palette_png(d / "segmentation_00000.png", return_palette=True)
+    assert labels.max() == 6
+    np.testing.assert_array_equal(seg_col, palette[labels[..., 0]])
+    assert len({tuple(c) for c in palette[:7]}) == 7
+
     gif = tmp_path / "anim.gif"
     inspect_scene(d, gif)
     img = Image.open(gif)
@@ -63,3 +71,12 @@ def test_flow_colours_encode_direction():
     rgb = colourise("forward_flow", flow)
     assert tuple(rgb[0, 0, 0]) == (255, 0, 0)
     assert rgb[0, 0, 1, 1] == 255 and rgb[0, 0, 1, 2] == 0  # yellow-green
+
+
+def test_label_palette_extends_the_png_palette_beyond_255_labels():
+    from kubric.io.palette import label_palette
+    big = label_palette(70000)  # 16-bit label PNGs have no palette; sheets still colour them
+    np.testing.assert_array_equal(big[:256], file_io.default_palette())
+    assert big.shape == (70000, 3) and big.dtype == np.uint8 and big[1:].max(axis=1).min() > 0
+    with pytest.raises(ValueError, match="positive number of labels, got 0"):
+        label_palette(0)

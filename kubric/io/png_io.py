@@ -25,8 +25,6 @@ PNGs, which Pillow reads (it keeps the indices and the palette).
 
 from __future__ import annotations
 
-import colorsys
-import functools
 import io
 import struct
 import zlib
@@ -34,6 +32,7 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
+from kubric.io.palette import label_palette
 from kubric.io.paths import PathLike, as_path, atomic_write_bytes, read_bytes
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
@@ -186,23 +185,11 @@ def write_png(data: np.ndarray, filename: PathLike) -> None:
     atomic_write_bytes(encode_png(pad_to_png_channels(samples)), filename)
 
 
-@functools.lru_cache(maxsize=1)
-def _default_palette() -> np.ndarray:
-    colors = [(0, 0, 0)]
-    for k in range(1, 256):
-        hue = (k * 0.6180339887498949) % 1.0
-        sat = (0.95, 0.7, 0.5)[(k // 3) % 3]
-        val = (1.0, 0.75)[k % 2]
-        colors.append(tuple(round(255 * c) for c in colorsys.hsv_to_rgb(hue, sat, val)))
-    palette = np.array(colors, dtype=np.uint8)
-    palette.setflags(write=False)
-    return palette
-
-
 def default_palette() -> np.ndarray:
     """The fixed 256-entry segmentation palette, (256, 3) uint8: label 0 (background) is black,
-    labels 1..255 get well-separated hues (golden-ratio steps). Same for every frame and scene."""
-    return _default_palette().copy()
+    labels 1..255 get well-separated hues (see :mod:`kubric.io.palette`, which contact sheets use
+    too). Same for every frame and scene."""
+    return label_palette(256)
 
 
 def _check_palette(palette, max_label: int, what: str) -> np.ndarray:

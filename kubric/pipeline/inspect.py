@@ -1,9 +1,10 @@
 """``kubric inspect SCENE_DIR``: a text summary of a scene directory and a contact sheet.
 
 The contact sheet shows, for up to ``max_rows`` evenly spaced frames (rows), the layers RGB,
-segmentation (one colour per label), depth (near = bright, background black), forward flow
-(hue = direction, saturation = magnitude relative to the largest) and normals ((n + 1) / 2) side
-by side. A ``.gif`` path writes an animation instead: one image per frame with the same columns.
+segmentation (in the colours of the segmentation PNGs, :mod:`kubric.io.palette`), depth (near =
+bright, background black), forward flow (hue = direction, saturation = magnitude relative to the
+largest) and normals ((n + 1) / 2) side by side. A ``.gif`` path writes an animation instead:
+one image per frame with the same columns.
 When the scene has ``tracks.npz``, the RGB column shows up to ``MAX_DRAWN_TRACKS`` point tracks
 (:func:`draw_tracks`): a coloured trail over the last ``TRAIL_FRAMES`` frames (segments between
 visible positions), a filled disc where
@@ -12,23 +13,15 @@ the point is visible and a hollow ring where it is occluded (nothing outside the
 
 from __future__ import annotations
 
-import colorsys
 import pathlib
 
 import numpy as np
 
+from kubric.io.palette import label_palette
+
 COLUMNS = ("rgba", "segmentation", "depth", "forward_flow", "normal")
 MAX_DRAWN_TRACKS = 64
 TRAIL_FRAMES = 8
-
-
-def _palette(n: int) -> np.ndarray:
-    """(n, 3) uint8 colours; label 0 black, then distinct hues."""
-    colours = [(0, 0, 0)]
-    for k in range(1, n):
-        h = (k * 0.618033988749895) % 1.0
-        colours.append(tuple(int(255 * c) for c in colorsys.hsv_to_rgb(h, 0.75, 0.95)))
-    return np.asarray(colours, dtype=np.uint8)
 
 
 def hsv_to_rgb(h, s, v) -> np.ndarray:
@@ -50,7 +43,7 @@ def colourise(name: str, layer: np.ndarray, background_depth: float | None = Non
         return (rgb * alpha).astype(np.uint8)
     if name == "segmentation":
         labels = layer[..., 0].astype(np.int64)
-        return _palette(int(labels.max()) + 1)[labels]
+        return label_palette(int(labels.max()) + 1)[labels]
     if name == "depth":
         d = layer[..., 0].astype(np.float64)
         hit = d < (background_depth if background_depth is not None else np.inf) * 0.999
@@ -71,8 +64,8 @@ def colourise(name: str, layer: np.ndarray, background_depth: float | None = Non
 
 
 def track_colours(n: int) -> np.ndarray:
-    """(n, 3) uint8 colour of each drawn track (distinct hues)."""
-    return _palette(n + 1)[1:]
+    """(n, 3) uint8 colour of each drawn track: the label palette without black."""
+    return label_palette(n + 1)[1:]
 
 
 def marker_radius(width: int) -> float:
