@@ -25,6 +25,7 @@ from kubric.annotations.metadata import (
 )
 from kubric.core.resolution import parse_resolution
 from kubric.core.scene import Scene
+from kubric.pipeline.worker import write_success
 
 logger = logging.getLogger("kubric")
 
@@ -115,14 +116,14 @@ def setup(flags):
 
 def done(output_dir=None) -> pathlib.Path | None:
     """Mark the run complete: write ``_SUCCESS`` into ``output_dir`` (default: the one of the last
-    :func:`setup`). Returns the marker's path (None when there is no output directory)."""
+    :func:`setup`) with the same writer as the scene worker. Returns the marker's path (None when
+    there is no output directory)."""
     global _active_output_dir
     target = pathlib.Path(output_dir) if output_dir is not None else _active_output_dir
     logger.info("done")
     if target is None:
         return None
-    marker = target / "_SUCCESS"
-    marker.write_text("")
+    marker = write_success(target)
     _active_output_dir = None
     return marker
 

@@ -98,6 +98,30 @@ def test_run_scene_is_atomic_skips_and_redoes(tmp_path):
         scene_name(-1)
 
 
+def test_success_is_written_before_the_rename_so_the_final_name_appears_complete(tmp_path,
+                                                                                   monkeypatch):
+    """The rename of the work directory is the single step that publishes a scene: at that
+    instant the work directory already holds _SUCCESS (and no temporary marker), and a crash of
+    the rename leaves no final-named directory at all."""
+    from kubric.pipeline import worker
+    seen = []
+    real_rename = os.rename
+
+    def rename(src, dst):
+        seen.append(sorted(p.name for p in pathlib.Path(src).iterdir()))
+        if len(seen) == 2:
+            raise OSError("rename fails on purpose")
+        real_rename(src, dst)
+
+    monkeypatch.setattr(worker.os, "rename", rename)
+    res = run_scene(get_recipe(FAKE)(), 11, tmp_path)
+    assert "_SUCCESS" in seen[0] and not [n for n in seen[0] if n.endswith(".tmp")]
+    assert json.loads((res.path / "_SUCCESS").read_text())["seed"] == 11
+    with pytest.raises(OSError, match="on purpose"):
+        run_scene(get_recipe(FAKE)(), 12, tmp_path)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["scene_00000011"]
+
+
 @pytest.mark.skipif(not pathlib.Path("/proc/self/stat").exists(), reason="needs procfs")
 def test_work_dir_of_an_unreaped_exited_worker_is_stale(tmp_path):
     # a worker of a SIGKILLed runner can stay a zombie (exited, never reaped) in containers

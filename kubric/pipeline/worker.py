@@ -5,10 +5,11 @@ Layout under the output root ``DIR``:
 * ``DIR/scene_{seed:08d}/`` — a scene; complete only when it contains ``_SUCCESS``;
 * ``DIR/.scene_{seed:08d}.incomplete-{pid}/`` — work in progress of process ``pid``.
 
-:func:`run_scene` writes into the work directory, renames it to the final name when the recipe
-returns, and then writes ``_SUCCESS`` (last). A complete scene is never touched again (skipped);
-an incomplete final directory, or a work directory whose process is gone, is removed and the
-scene redone. A reader that only trusts ``_SUCCESS`` therefore never sees partial data.
+:func:`run_scene` writes into the work directory, writes ``_SUCCESS`` there when the recipe
+returns (last, with :func:`write_success`), and then renames the work directory to the final name
+— one atomic step, so the final name appears complete or not at all. A complete scene is never
+touched again (skipped); an incomplete final directory (a leftover of an older layout or a manual
+copy), or a work directory whose process is gone, is removed and the scene redone.
 """
 
 from __future__ import annotations
@@ -34,6 +35,17 @@ def scene_name(seed: int) -> str:
 def is_complete(scene_dir: pathlib.Path) -> bool:
     """True when ``scene_dir`` holds ``_SUCCESS``."""
     return (pathlib.Path(scene_dir) / SUCCESS).is_file()
+
+
+def write_success(directory, **info) -> pathlib.Path:
+    """Mark ``directory`` complete: write ``_SUCCESS`` (JSON of ``info``, e.g. recipe, seed,
+    seconds) atomically — a temporary file renamed into place. The one writer of the marker
+    (:func:`run_scene` and ``kb.done``). Returns the marker's path."""
+    marker = pathlib.Path(directory) / SUCCESS
+    tmp = marker.with_name(f".{SUCCESS}.{os.getpid()}.tmp")
+    tmp.write_text(json.dumps(info) + "\n")
+    os.replace(tmp, marker)
+    return marker
 
 
 def _pid_alive(pid: int) -> bool:
@@ -106,15 +118,12 @@ def run_scene(recipe, seed: int, out_root) -> SceneResult:
         if is_complete(final):  # another process finished the same seed meanwhile
             shutil.rmtree(work, ignore_errors=True)
             return SceneResult(seed, final, "skipped", time.time() - start)
+        seconds = time.time() - start
+        write_success(work, recipe=recipe.name, seed=int(seed), seconds=round(seconds, 3))
         if final.exists():  # an incomplete leftover (no _SUCCESS)
             shutil.rmtree(final)
         os.rename(work, final)
     except BaseException:
         shutil.rmtree(work, ignore_errors=True)
         raise
-    seconds = time.time() - start
-    marker = final / (SUCCESS + ".tmp")
-    marker.write_text(json.dumps({"recipe": recipe.name, "seed": int(seed),
-                                  "seconds": round(seconds, 3)}) + "\n")
-    os.replace(marker, final / SUCCESS)
     return SceneResult(seed, final, "done", seconds)
