@@ -7,6 +7,7 @@ import subprocess
 import sys
 import time
 
+import numpy as np
 import pytest
 
 from kubric.pipeline import Option, OptionError, Recipe, get_recipe, recipe, recipe_spec
@@ -193,3 +194,25 @@ def test_movi_bad_options_fail_before_rendering(tmp_path):
     for name in ("movi_a", "movi_b", "movi_c", "movi_d", "movi_e", "movi_f"):
         assert f"\n{name}: " in "\n" + proc.stdout
     assert "max_motion_blur" in proc.stdout and "max_camera_movement" in proc.stdout
+
+
+@pytest.mark.parametrize("name", ["movi_a", "movi_b", "movi_c", "movi_d", "movi_e", "movi_f"])
+def test_movi_cameras_follow_upstream_settings(name):
+    """Every MOVi camera is upstream's 35 mm lens on a 32 mm sensor; A sits at CLEVR's position
+    + U[0,1)³, B–D in the shell r ∈ [7, 9], E/F move inside the shell [8, 12] by at most 4 m."""
+    import kubric as kb
+    for seed in range(5):
+        scene = kb.Scene(frame_end=6)
+        get_recipe(name)().build_camera(scene, np.random.RandomState(seed))
+        cam = scene.camera
+        assert (cam.focal_length, cam.sensor_width) == (35.0, 32.0)
+        path = cam.get_values_over_time("position", range(0, 8)).astype(np.float64)
+        r = np.linalg.norm(path, axis=1)
+        if name == "movi_a":
+            offset = path[0] - (7.48113, -6.50764, 5.34367)
+            assert np.all((offset >= 0) & (offset < 1)) and np.ptp(r) == 0
+        elif name in ("movi_b", "movi_c", "movi_d"):
+            assert 7 <= r[0] <= 9 and path[0, 2] >= 0.1 and np.ptp(r) == 0
+        else:
+            assert np.all((r >= 8 - 1e-5) & (r <= 12 + 1e-5)) and np.all(path[:, 2] > 0.1)
+            assert np.linalg.norm(path[-1] - path[0]) <= 4.0 + 1e-5

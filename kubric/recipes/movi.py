@@ -32,10 +32,13 @@ from kubric.pipeline import Option, OptionError, float_range
 from kubric.randomness import CLEVR_COLORS, CLEVR_SHAPES, CLEVR_SIZES
 from kubric.recipes import movi_schema
 from kubric.recipes.movi_base import (
+    CAMERA_MIN_HEIGHT,
     DYNAMIC_SPAWN_REGION,
+    MOVING_CAMERA_SHELL,
     STATIC_SPAWN_REGION,
     MoviBase,
     _existing_source,
+    new_camera,
     place_without_overlap,
 )
 
@@ -131,7 +134,7 @@ class MoviA(_ClevrLike, name="movi_a"):
         return floor.hexstr
 
     def build_camera(self, scene, rng):
-        camera = kb.PerspectiveCamera(name="camera", focal_length=35.0, sensor_width=32.0)
+        camera = new_camera()
         camera.position = np.asarray(CLEVR_CAMERA_POSITION) + rng.rand(3)
         camera.look_at((0.0, 0.0, 0.0))
         scene.camera = camera
@@ -265,16 +268,16 @@ class MoviD(MoviC, name="movi_d"):
 
 def linear_camera_path(rng, inner: float, outer: float, max_length: float):
     """(start, end): start uniform in the half-sphere shell, end = start + a random direction ×
-    U(0, max_length), resampled until the end also lies in the shell above z = 0.1."""
+    U(0, max_length), resampled until the end also lies in the shell above CAMERA_MIN_HEIGHT."""
     length = float(rng.uniform(0.0, max_length))
     while True:
-        start = kb.sample_point_in_half_sphere_shell(inner, outer, 0.1, rng=rng)
+        start = kb.sample_point_in_half_sphere_shell(inner, outer, CAMERA_MIN_HEIGHT, rng=rng)
         direction = rng.rand(3) - 0.5
         norm = np.linalg.norm(direction)
         if norm < 1e-9:
             continue
         end = start + direction / norm * length
-        if inner <= np.linalg.norm(end) <= outer and end[2] > 0.1:
+        if inner <= np.linalg.norm(end) <= outer and end[2] > CAMERA_MIN_HEIGHT:
             return start, end
 
 
@@ -304,9 +307,9 @@ class MoviE(MoviD, name="movi_e"):
                     "a line through the centre region too", choices=("linear", "panning"))
 
     def build_camera(self, scene, rng):
-        camera = kb.PerspectiveCamera(name="camera", focal_length=35.0, sensor_width=32.0)
+        camera = new_camera()
         scene.camera = camera
-        start, end = linear_camera_path(rng, 8.0, 12.0, self.max_camera_movement)
+        start, end = linear_camera_path(rng, *MOVING_CAMERA_SHELL, self.max_camera_movement)
         look_start = look_end = np.zeros(3)
         if self.camera == "panning":
             look_start, look_end = panning_look_at_path(rng)

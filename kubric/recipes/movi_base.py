@@ -36,8 +36,18 @@ DYNAMIC_SPAWN_REGION = ((-5.0, -5.0, 1.0), (5.0, 5.0, 5.0))
 STATIC_SPAWN_REGION = ((-7.0, -7.0, 0.0), (7.0, 7.0, 10.0))
 VELOCITY_RANGE = ((-4.0, -4.0, 0.0), (4.0, 4.0, 0.0))
 FLOOR_FRICTION, FLOOR_RESTITUTION = 0.3, 0.5
+#: every MOVi camera: focal length and sensor width (mm), as upstream's MOVi workers.
 CAMERA_FOCAL_LENGTH, CAMERA_SENSOR_WIDTH = 35.0, 32.0
+#: (inner, outer) radius (m) of the half-sphere shell of a random camera (MOVi-B–D) and of a moving
+#: camera's path (MOVi-E/F); a camera is at least CAMERA_MIN_HEIGHT (m) above the floor.
+CAMERA_SHELL, MOVING_CAMERA_SHELL, CAMERA_MIN_HEIGHT = (7.0, 9.0), (8.0, 12.0), 0.1
 logger = logging.getLogger(__name__)
+
+
+def new_camera():
+    """The MOVi camera (CAMERA_FOCAL_LENGTH, CAMERA_SENSOR_WIDTH), not yet placed."""
+    return kb.PerspectiveCamera(name="camera", focal_length=CAMERA_FOCAL_LENGTH,
+                                sensor_width=CAMERA_SENSOR_WIDTH)
 
 
 def _existing_source(path, what: str):
@@ -159,10 +169,11 @@ class MoviBase(Recipe):
         """Add the objects (placed without overlap, with their initial velocities)."""
 
     def build_camera(self, scene, rng) -> None:
-        """Default: random position in the half-sphere shell r ∈ [7, 9], looking at the origin."""
-        camera = kb.PerspectiveCamera(name="camera", focal_length=CAMERA_FOCAL_LENGTH,
-                                      sensor_width=CAMERA_SENSOR_WIDTH)
-        camera.position = kb.sample_point_in_half_sphere_shell(7.0, 9.0, 0.1, rng=rng)
+        """Default: random position in the half-sphere shell r ∈ CAMERA_SHELL ([7, 9]), looking at
+        the origin."""
+        camera = new_camera()
+        camera.position = kb.sample_point_in_half_sphere_shell(*CAMERA_SHELL, CAMERA_MIN_HEIGHT,
+                                                               rng=rng)
         camera.look_at((0.0, 0.0, 0.0))
         scene.camera = camera
 
