@@ -36,7 +36,6 @@ def build(catch: bool, size: int, samples: int):
     from kubric.assets import ensure_kubasic
     from kubric.renderer.blender import Blender
 
-    kb.reset_uid_counters()
     rng = np.random.RandomState(0)
     scene = kb.Scene(resolution=(size, size), frame_start=1, frame_end=1)
     hdri = kb.Texture(filename=str(HDRI), mapping="environment")

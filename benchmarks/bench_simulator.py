@@ -16,7 +16,6 @@ REGION = ((-4, -4, 0), (4, 4, 3))
 
 
 def measure(n_objects: int, step_rate: int, seed: int = 0) -> dict:
-    kb.reset_uid_counters()
     rng = np.random.RandomState(seed)
     t0 = time.perf_counter()
     scene = kb.Scene(frame_start=0, frame_end=48)

@@ -2,15 +2,12 @@
 
 import pytest
 
-from kubric.core.assets import reset_uid_counters
 from kubric.randomness import unbind_worker_rng
 
 
 @pytest.fixture(autouse=True)
 def _fresh_process_state():
     """Every test sees uids and the worker rng as in a fresh process (no run-order dependence)."""
-    reset_uid_counters()
     unbind_worker_rng()
     yield
-    reset_uid_counters()
     unbind_worker_rng()

@@ -30,12 +30,49 @@ class RecordingView(View):
         self.calls.append(("keyframe_delete", asset, name, frame))
 
 
-def test_uids_follow_blender_naming_and_can_be_reset():
+def test_uids_are_numbered_per_scene_in_joining_order():
     a, b, c = kb.Cube(), kb.Cube(), kb.Cube(name="floor")
-    assert (a.uid, b.uid, c.uid) == ("Cube", "Cube.001", "floor")
-    kb.reset_uid_counters()
-    assert kb.Cube().uid == "Cube"
+    assert a.uid == b.uid == "Cube" and a != b and len({a, b}) == 2  # in no scene: the name
+    scene = kb.Scene()
+    scene.add([b, a, c])
+    assert (b.uid, a.uid, c.uid) == ("Cube", "Cube.001", "floor")
     assert kb.UndefinedMaterial().uid == kb.UndefinedMaterial().uid == "UndefinedMaterial"
+    # materials that come along are numbered too
+    mats = [kb.PhysicalObject(material=kb.FlatMaterial()) for _ in range(2)]
+    scene.add(mats)
+    assert [m.uid for m in mats] == ["PhysicalObject", "PhysicalObject.001"]
+    assert [m.material.uid for m in mats] == ["FlatMaterial", "FlatMaterial.001"]
+    # another scene counts afresh: nothing global, nothing to reset
+    other = kb.Scene()
+    d = kb.Cube()
+    other += d
+    assert d.uid == "Cube" and d != b
+    # an asset keeps the uid of its first scene; a clash in a later scene names the uid
+    other += a
+    assert a.uid == "Cube.001" and a in other.assets
+    e = kb.Cube()
+    other += e
+    assert e.uid == "Cube.002"
+    with pytest.raises(ValueError, match="this scene already has another asset with uid 'Cube'"):
+        other += b
+    # a removed asset's number is not given again
+    scene.remove(a)
+    f = kb.Cube()
+    scene += f
+    assert f.uid == "Cube.002" and a.uid == "Cube.001"
+
+
+def test_a_scene_built_twice_has_the_same_uids():
+    def build():
+        scene = kb.Scene(camera=kb.PerspectiveCamera())
+        scene += [kb.Sphere(), kb.Cube(), kb.Sphere(name="ball"), kb.Sphere()]
+        scene += kb.DirectionalLight()
+        return [x.uid for x in scene.assets]
+
+    first = build()
+    kb.Cube(), kb.Sphere()  # assets made in between change nothing
+    assert build() == first == ["PerspectiveCamera", "Sphere", "Cube", "ball", "Sphere.001",
+                                "DirectionalLight"]
 
 
 def test_unknown_keyword_is_rejected_naming_it():

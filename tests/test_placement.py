@@ -128,7 +128,6 @@ def test_move_until_no_overlap_gives_up_with_clear_error():
 
 def test_move_until_no_overlap_is_seeded():
     def place(seed):
-        kb.reset_uid_counters()
         scene = kb.Scene()
         objs = [kb.Cube(scale=0.3) for _ in range(4)]
         scene.add(objs)

@@ -236,7 +236,6 @@ def test_segmentation_normals_object_coordinates_by_ray_cast():
 
 def test_annotations_identical_at_1_and_64_spp():
     def render(spp):
-        kb.reset_uid_counters()
         scene = kb.Scene(resolution=(24, 20), frame_start=1, frame_end=2)
         scene += kb.PerspectiveCamera(position=(2, -4, 3), look_at=(0, 0, 0))
         s = kb.Sphere(scale=0.8, material=kb.PrincipledBSDFMaterial(color=(0.2, 0.5, 0.9)))

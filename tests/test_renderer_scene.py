@@ -209,7 +209,6 @@ def test_texture_on_uv_and_environment_dome(tmp_path):
     rgba = renderer.render(return_layers=("rgba",))["rgba"][0]
     blues = (rgba[..., 2] > 150) & (rgba[..., 0] < 50) & (rgba[..., 1] < 50)
     assert blues.sum() >= (reds | greens).sum() and not (rgba[..., :2] > 150).any()
-    kb.reset_uid_counters()
     scene = _scene()
     env = kb.Texture(filename=str(HDRI_DIR / "city.exr"), mapping="environment")
     scene += kb.Sphere(scale=30, material=kb.FlatMaterial(color=env))
@@ -413,7 +412,6 @@ def test_environment_ground_projection(tmp_path):
     w = 32
     renders = {}
     for h in (height, 0.0):
-        kb.reset_uid_counters()
         scene = kb.Scene(resolution=(w, w), frame_start=1, frame_end=1)
         tex = kb.Texture(filename=str(tmp_path / "env.png"), mapping="environment",
                          projection_height=h)

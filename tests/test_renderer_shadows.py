@@ -38,7 +38,6 @@ def _to_linear(rgba):
 
 
 def _floor_scene(ambient, floor_color, catch):
-    kb.reset_uid_counters()
     scene = kb.Scene(resolution=(64, 64), frame_start=1, frame_end=1)
     scene += kb.PerspectiveCamera(position=(0, 0, 10), look_at=(0, 0, 0))
     scene.ambient_illumination = ambient

@@ -174,7 +174,6 @@ def test_bouncy_ball_bounces_back_and_collision_is_reported():
 
 def test_contacts_are_merged_per_frame_and_raw_contacts_are_available():
     def run(**kwargs):
-        kb.reset_uid_counters()
         scene = kb.Scene(frame_start=0, frame_end=24)
         floor = kb.Cube(scale=(3, 3, 0.5), position=(0, 0, -0.5), static=True)
         box = kb.Cube(scale=0.2, position=(0, 0, 0.2001))  # resting: 4 contact points per step
@@ -188,8 +187,9 @@ def test_contacts_are_merged_per_frame_and_raw_contacts_are_available():
     frames = [c["frame"] for c in merged]
     assert len(frames) == len({int(np.ceil(f)) for f in frames})  # one event per frame
     assert len(merged) >= 23
-    for event in merged:
-        assert event in raw
+    by_uid = [{**c, "instances": tuple(a.uid for a in c["instances"])} for c in raw]
+    for event in merged:  # the two runs' scenes hold different assets with the same uids
+        assert {**event, "instances": tuple(a.uid for a in event["instances"])} in by_uid
         same = [c for c in raw if np.ceil(c["frame"]) == np.ceil(event["frame"])]
         assert event["force"] == max(c["force"] for c in same)
     total = sum(c["force"] for c in raw if 12 < c["frame"] <= 13) / 10  # per step

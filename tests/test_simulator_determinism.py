@@ -18,7 +18,6 @@ REGION = ((-1.5, -1.5, 0.0), (1.5, 1.5, 2.0))
 
 def build_scene(seed: int, gravity=(0.0, 0.0, -10.0)):
     """A floor and 10 random cubes/spheres placed without overlap, with random velocities."""
-    kb.reset_uid_counters()
     rng = np.random.RandomState(seed)
     scene = kb.Scene(frame_start=0, frame_end=24, gravity=gravity)
     floor = kb.Cube(name="floor", scale=(4, 4, 0.5), position=(0, 0, -0.5), static=True)

@@ -1,7 +1,7 @@
 """The scene model: plain Python + numpy, no rendering or physics engine imported here."""
 
 from kubric.core import camera_geometry
-from kubric.core.assets import Asset, UndefinedAsset, reset_uid_counters
+from kubric.core.assets import Asset, UndefinedAsset
 from kubric.core.cameras import Camera, OrthographicCamera, PerspectiveCamera, UndefinedCamera
 from kubric.core.color import Color, get_color
 from kubric.core.lights import (
@@ -25,7 +25,7 @@ from kubric.core.scene import Scene
 from kubric.core.views import TableView, View
 
 __all__ = [
-    "Asset", "UndefinedAsset", "reset_uid_counters", "Camera", "OrthographicCamera",
+    "Asset", "UndefinedAsset", "Camera", "OrthographicCamera",
     "PerspectiveCamera", "UndefinedCamera", "Color", "get_color", "DirectionalLight", "Light",
     "PointLight", "RectAreaLight", "SpotLight", "UndefinedLight", "FlatMaterial", "Material",
     "PrincipledBSDFMaterial", "Texture", "UndefinedMaterial", "Cube", "FileBasedObject",

@@ -1,6 +1,7 @@
 """The base of everything that can be placed in a scene: :class:`Asset`.
 
-An asset has a unique ``uid`` (``name``, ``name.001``, ``name.002``, ... per process, like Blender),
+An asset has a ``uid`` (``name``, ``name.001``, ``name.002``, ... like Blender), unique in its scene:
+the scene numbers it when it joins (see :mod:`kubric.core.uids`; before that the uid is the name),
 validated properties (see :mod:`kubric.core.traits`), keyframes, and a link to the views (simulator,
 renderer) of every scene it belongs to. Assigning a property notifies each of those views once via
 ``view.on_change(asset, name, value)``; ``keyframe_insert`` notifies via
@@ -16,7 +17,6 @@ Renderer views must key Blender with linear interpolation so Blender's motion ma
 from __future__ import annotations
 
 import contextlib
-import threading
 from collections import defaultdict
 from collections.abc import Iterator, Sequence
 from typing import Any
@@ -26,23 +26,6 @@ import numpy as np
 from kubric.core import traits as kt
 from kubric.core.quaternion import Quaternion
 
-_uid_lock = threading.Lock()
-_uid_counts: dict[str, int] = defaultdict(int)
-
-
-def next_uid(name: str) -> str:
-    """The next unique id for ``name``: ``name``, then ``name.001``, ``name.002``, ..."""
-    with _uid_lock:
-        count = _uid_counts[name]
-        _uid_counts[name] += 1
-    return name if count == 0 else f"{name}.{count:03d}"
-
-
-def reset_uid_counters() -> None:
-    """Forget all issued uids (for tests and for building several scenes in one process)."""
-    with _uid_lock:
-        _uid_counts.clear()
-
 
 class Asset(kt.HasProperties):
     """Base class of objects, lights, cameras and materials.
@@ -51,7 +34,8 @@ class Asset(kt.HasProperties):
     ``TypeError`` naming it. ``name`` (default: the class name) is the basis of ``uid``.
 
     Attributes:
-      uid: unique id, read-only.
+      uid: read-only id, unique in the asset's scene: given by the first scene the asset joins
+        (``name``, ``name.001``, ... in joining order); the name while in no scene.
       keyframes: ``{property: {frame: value}}``.
       linked_objects: ``{view: backend object}``, filled by views.
       scenes: the scenes this asset was added to.
@@ -64,14 +48,11 @@ class Asset(kt.HasProperties):
         if name is not None and (not isinstance(name, str) or not name):
             raise TypeError(f"{type(self).__name__}.name must be a non-empty string, got {name!r}")
         self._name = name or type(self).__name__
-        self._uid = self._make_uid()
+        self._uid: str | None = None  # set by the first scene the asset joins
         self.linked_objects: dict[Any, Any] = {}
         self.scenes: list = []
         self.keyframes: dict[str, dict[int, Any]] = defaultdict(dict)
         self._init_properties(kwargs)
-
-    def _make_uid(self) -> str:
-        return next_uid(self._name)
 
     @property
     def name(self) -> str:
@@ -79,7 +60,7 @@ class Asset(kt.HasProperties):
 
     @property
     def uid(self) -> str:
-        return self._uid
+        return self._name if self._uid is None else self._uid
 
     @property
     def active_scene(self):
@@ -200,20 +181,22 @@ class Asset(kt.HasProperties):
             self._values.update(saved)
 
     # ------------------------------------------------------------------ identity
+    # Identity, not uid: uids are unique per scene only (two scenes may each hold a "Cube"), and
+    # an asset's uid is given when it joins its first scene.
     def __hash__(self) -> int:
-        return hash(self._uid)
+        return object.__hash__(self)
 
     def __eq__(self, other) -> bool:
         if not isinstance(other, Asset):
             return NotImplemented
-        return self._uid == other._uid
+        return self is other
 
     def __repr__(self) -> str:
         """Upstream Kubric's form, on one line: ``<uid name=... prop=value ...>`` with the name
         and every property sorted by name (arrays shown as lists)."""
         fields = [("name", self._name), *self._values.items()]
         shown = sorted(f"{key}={_short_repr(value)}" for key, value in fields)
-        return f"<{self._uid} {' '.join(shown)}>"
+        return f"<{self.uid} {' '.join(shown)}>"
 
 
 def _short_repr(value) -> str:
@@ -225,7 +208,5 @@ def _short_repr(value) -> str:
 
 
 class UndefinedAsset(Asset):
-    """Marker for "not set" (e.g. :class:`UndefinedMaterial`); its uid is always its name."""
-
-    def _make_uid(self) -> str:
-        return self._name
+    """Marker for "not set" (e.g. :class:`UndefinedMaterial`); never joins a scene, so its uid is
+    always its name."""

@@ -11,6 +11,7 @@ from kubric.core.color import Color, get_color
 from kubric.core.materials import Texture
 from kubric.core.objects import Object3D, PhysicalObject
 from kubric.core.resolution import parse_resolution
+from kubric.core.uids import SceneUids
 
 
 def _as_resolution(value, owner, name):
@@ -82,6 +83,7 @@ class Scene(kt.HasProperties):
 
     def __init__(self, **kwargs):
         self._assets: list[Asset] = []
+        self._uids = SceneUids()  # this scene's uid counters (kubric.core.uids)
         self._views: list = []
         self.linked_objects: dict = {}
         self.metadata: dict = {}
@@ -141,7 +143,8 @@ class Scene(kt.HasProperties):
 
     def add(self, asset: Asset | Iterable[Asset]) -> None:
         """Add an asset (or several). Adding one twice is a no-op; its material comes along; a
-        camera becomes the active camera."""
+        camera becomes the active camera. An asset in no scene yet gets its uid here (see
+        :mod:`kubric.core.uids`)."""
         if isinstance(asset, (list, tuple, set)):
             for a in asset:
                 self.add(a)
@@ -150,6 +153,7 @@ class Scene(kt.HasProperties):
             raise TypeError(f"only assets can be added to a scene, got {asset!r}")
         if isinstance(asset, UndefinedAsset) or asset in self._assets:
             return
+        self._uids.claim(asset)
         self._assets.append(asset)
         asset.scenes.append(self)
         if isinstance(asset, PhysicalObject):
@@ -167,6 +171,7 @@ class Scene(kt.HasProperties):
         if asset not in self._assets:
             raise ValueError(f"{getattr(asset, 'uid', asset)!r} is not part of this scene")
         self._assets.remove(asset)
+        self._uids.release(asset)
         asset.scenes.remove(self)
         for view in self._views:
             view.remove(asset)

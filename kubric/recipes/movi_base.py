@@ -214,7 +214,6 @@ class MoviBase(Recipe):
         return background, blur
 
     def generate(self, seed: int, out_dir: pathlib.Path) -> None:
-        kb.reset_uid_counters()
         rng = np.random.RandomState(seed)
         sources = self.open_sources()
         scene = self.make_scene()
