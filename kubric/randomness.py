@@ -1,13 +1,17 @@
 """Random scene sampling. Every function takes an ``rng`` (``numpy.random.RandomState`` or
 ``numpy.random.Generator``); nothing here creates a random generator, so one seed fixes a scene.
 
-Upstream scripts sometimes omit ``rng``. For them, ``rng=None`` means *the worker's rng*: the one
-:func:`kubric.utils.setup` seeded from ``--seed`` (and recorded in the metadata). Without a prior
-``kb.setup(flags)``, ``rng=None`` is a ``TypeError`` — there is no hidden, unseeded default.
+Upstream scripts sometimes omit ``rng``. For them, ``rng=None`` means *the worker's rng*: the
+:class:`WorkerRandomState` that :func:`kubric.utils.setup` returned, seeded from ``--seed`` (and
+recorded in the metadata), for as long as the caller holds it — this module keeps only a weak
+reference, so the binding ends with its owner (a test that called ``kb.setup`` leaves nothing behind
+once it returns; nothing needs resetting). With no live worker rng, ``rng=None`` is a ``TypeError``
+— there is no hidden, unseeded default.
 """
 
 from __future__ import annotations
 
+import weakref
 from collections.abc import Callable, Sequence
 from typing import Any
 
@@ -30,26 +34,39 @@ CLEVR_SIZES = {"small": 0.7, "large": 1.4}
 CLEVR_SHAPES = ("cube", "cylinder", "sphere")
 
 
-_worker_rng: list = []  # the rng bound by kubric.utils.setup (at most one)
+class WorkerRandomState(np.random.RandomState):
+    """The rng :func:`kubric.utils.setup` returns: a ``numpy.random.RandomState`` (same stream
+    for the same seed) that also carries the run's ``output_dir`` (where ``kb.done`` marks the run
+    complete). While it is alive and bound, sampling functions called with ``rng=None`` use it."""
+
+    output_dir = None
 
 
-def bind_worker_rng(rng) -> None:
-    """Make ``rng`` the one used where a caller passes ``rng=None`` (called by ``kb.setup``)."""
-    if not isinstance(rng, (np.random.RandomState, np.random.Generator)):
-        raise TypeError(f"bind_worker_rng needs a numpy RandomState or Generator, got {rng!r}")
-    _worker_rng[:] = [rng]
+_worker_ref: weakref.ref | None = None  # weak: the binding lives exactly as long as its owner
 
 
-def unbind_worker_rng() -> None:
-    _worker_rng.clear()
+def bind_worker_rng(rng: WorkerRandomState) -> None:
+    """Make ``rng`` the one used where a caller passes ``rng=None`` (called by ``kb.setup``),
+    for as long as something else holds ``rng``."""
+    global _worker_ref
+    if not isinstance(rng, WorkerRandomState):
+        raise TypeError(f"bind_worker_rng needs a kubric.randomness.WorkerRandomState, got {rng!r}")
+    _worker_ref = weakref.ref(rng)
+
+
+def worker_rng() -> WorkerRandomState | None:
+    """The bound worker rng if its owner still holds it, else None."""
+    return _worker_ref() if _worker_ref is not None else None
 
 
 def _require_rng(rng, where: str):
     if rng is None:
-        if _worker_rng:
-            return _worker_rng[0]
+        bound = worker_rng()
+        if bound is not None:
+            return bound
         raise TypeError(f"{where} needs rng=numpy.random.RandomState(seed) (or call "
-                        "kb.setup(flags) first, which seeds the worker's rng from --seed)")
+                        "kb.setup(flags) first and keep the rng it returns, which is seeded "
+                        "from --seed)")
     if not isinstance(rng, (np.random.RandomState, np.random.Generator)):
         raise TypeError(f"{where} needs rng=numpy.random.RandomState(...) or "
                         f"numpy.random.default_rng(...), got {rng!r}")

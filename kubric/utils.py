@@ -29,10 +29,6 @@ from kubric.pipeline.worker import write_success
 
 logger = logging.getLogger("kubric")
 
-#: output directory of the last :func:`setup` call; :func:`done` marks it complete.
-_active_output_dir: pathlib.Path | None = None
-
-
 class ArgumentParser(argparse.ArgumentParser):
     """``argparse.ArgumentParser`` with upstream Kubric's common worker flags:
     ``--frame_rate`` (24), ``--step_rate`` (240), ``--frame_start`` (1), ``--frame_end`` (24),
@@ -96,35 +92,36 @@ def setup(flags):
     """Upstream's worker preamble: logging, flags, seed, scene and directories.
 
     Returns ``(scene, rng, output_dir, scratch_dir)``: ``rng`` is a
-    ``numpy.random.RandomState(seed)``, also used by sampling functions called without ``rng``
-    (see :mod:`kubric.randomness`); ``scene`` has the flags' frame range, rates and
-    resolution, and ``scene.metadata["seed"]``.
+    :class:`kubric.randomness.WorkerRandomState` (a ``numpy.random.RandomState(seed)``), also
+    used by sampling functions called without ``rng`` and by :func:`done` for as long as the
+    caller keeps it; ``scene`` has the flags' frame range, rates and resolution, and
+    ``scene.metadata["seed"]``.
     """
-    global _active_output_dir
     setup_logging(getattr(flags, "logging_level", "INFO"))
     if getattr(flags, "seed", None) is None:
         flags.seed = draw_seed()
     log_my_flags(flags)
-    rng = np.random.RandomState(seed=flags.seed)
-    randomness.bind_worker_rng(rng)  # upstream calls that omit rng= use this seeded one
+    rng = randomness.WorkerRandomState(seed=flags.seed)
     scene = Scene.from_flags(flags)
     scene.metadata["seed"] = int(flags.seed)
     scratch_dir, output_dir = setup_directories(flags)
-    _active_output_dir = output_dir
+    rng.output_dir = output_dir
+    randomness.bind_worker_rng(rng)  # upstream calls that omit rng= use this seeded one
     return scene, rng, output_dir, scratch_dir
 
 
 def done(output_dir=None) -> pathlib.Path | None:
-    """Mark the run complete: write ``_SUCCESS`` into ``output_dir`` (default: the one of the last
-    :func:`setup`) with the same writer as the scene worker. Returns the marker's path (None when
-    there is no output directory)."""
-    global _active_output_dir
-    target = pathlib.Path(output_dir) if output_dir is not None else _active_output_dir
+    """Mark the run complete: write ``_SUCCESS`` into ``output_dir`` (default: the one of the
+    :func:`setup` whose rng is still held) with the same writer as the scene worker. Returns the
+    marker's path (None when there is no output directory)."""
+    worker = randomness.worker_rng()
+    target = output_dir if output_dir is not None else getattr(worker, "output_dir", None)
     logger.info("done")
     if target is None:
         return None
-    marker = write_success(target)
-    _active_output_dir = None
+    marker = write_success(pathlib.Path(target))
+    if worker is not None and output_dir is None:
+        worker.output_dir = None
     return marker
 
 

@@ -15,7 +15,7 @@ import pytest
 import kubric as kb
 from kubric.assets.asset_source import AssetSource
 from kubric.assets.writer import Collision, package_object
-from kubric.randomness import bind_worker_rng
+from kubric.randomness import WorkerRandomState, bind_worker_rng
 
 BASE = {"sun": (11.6608, -6.62799, 25.8232), "lamp_back": (-1.1685, 2.64602, 5.81574),
         "lamp_key": (6.44671, -2.90517, 4.2584), "lamp_fill": (-4.67112, -4.0136, 3.01122)}
@@ -62,7 +62,8 @@ def test_clevr_lights_values_and_jitter():
 def test_clevr_lights_rng_none_rule():
     with pytest.raises(TypeError, match="get_clevr_lights.*rng"):
         kb.assets.utils.get_clevr_lights()
-    bind_worker_rng(np.random.RandomState(3))  # what kb.setup(flags) does
+    rng = WorkerRandomState(3)
+    bind_worker_rng(rng)  # what kb.setup(flags) does
     lights = kb.assets.utils.get_clevr_lights(light_jitter=1.0)
     want = np.add(BASE["sun"], np.random.RandomState(3).rand(3))
     np.testing.assert_allclose(lights[0].position, want, atol=1e-5)

@@ -31,6 +31,26 @@ def test_omitted_rng_needs_setup_and_then_uses_the_seeded_worker_rng(tmp_path):
     assert first == expected  # the seed fixes what rng-less calls return
 
 
+def test_the_worker_rng_binding_ends_with_its_owner(tmp_path):
+    """No reset between tests: once the rng kb.setup returned is dropped, rng=None is an error
+    again and kb.done has no output directory to mark."""
+    def upstream_script(job_dir):
+        scene, rng, output_dir, _ = kb.setup(kb.ArgumentParser().parse_args(
+            ["--seed", "3", "--job-dir", str(job_dir)]))
+        sample = kb.random_hue_color()
+        assert sample == kb.random_hue_color(rng=np.random.RandomState(3))
+        assert randomness.worker_rng() is rng and rng.output_dir == output_dir
+        return sample
+
+    upstream_script(tmp_path / "a")
+    assert randomness.worker_rng() is None
+    with pytest.raises(TypeError, match="keep the rng it returns"):
+        kb.random_hue_color()
+    assert kb.done() is None and not (tmp_path / "a" / "_SUCCESS").exists()
+    with pytest.raises(TypeError, match="needs a kubric.randomness.WorkerRandomState"):
+        randomness.bind_worker_rng(np.random.RandomState(0))
+
+
 def test_same_seed_same_samples_and_rng_required():
     a = [kb.random_hue_color(rng=np.random.RandomState(3)) for _ in range(2)]
     assert a[0] == a[1]
