@@ -5,7 +5,7 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: install test demo bench lint docs clean slurm browser
+.PHONY: install test test-fast demo bench lint docs clean slurm browser
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -31,6 +31,11 @@ browser:  # Debian's chromium + chromedriver for the `kubric view` browser tests
 	  SUDO=$$( [ "$$(id -u)" = 0 ] || echo sudo ); \
 	  $$SUDO apt-get update && $$SUDO apt-get install -y chromium chromium-driver; \
 	fi
+
+# Everything but the tests marked `blender` (renders); bpy is blocked so a missing marker fails.
+test-fast: $(STAMP)
+	@start=$$(date +%s); $(BIN)/python -m pytest -q --no-blender; rc=$$?; \
+	echo "make test-fast: $$(( $$(date +%s) - start )) s wall"; exit $$rc
 
 demo: $(STAMP)
 	$(BIN)/python -m kubric.demo

@@ -6,7 +6,7 @@ import json
 
 import numpy as np
 import pytest
-from test_assets_checks import assert_rests_on_floor, blender_import_bounds, drop_test
+from asset_checks import assert_rests_on_floor, blender_import_bounds, drop_test
 
 from kubric.assets import AssetSource
 from kubric.assets.converter import convert_collection, discover_jobs

@@ -1,16 +1,15 @@
-"""`import kubric` stays light: no engine, fast."""
+"""`import kubric` stays light: no engine (its time is measured by benchmarks/bench_import.py)."""
 
 import subprocess
 import sys
 
 
-def test_import_kubric_loads_no_engine_and_is_fast():
-    code = ("import time; t = time.perf_counter(); import kubric as kb, sys; "
-            "dt = time.perf_counter() - t; "
-            "assert 'bpy' not in sys.modules and 'pybullet' not in sys.modules, 'engine imported'; "
-            "assert 'trimesh' not in sys.modules; print(dt)")
+def test_import_kubric_loads_no_engine():
+    code = ("import kubric as kb, sys; "
+            "heavy = {'bpy', 'pybullet', 'trimesh', 'torch', 'tensorflow'} & set(sys.modules); "
+            "print(sorted(heavy))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
-    assert float(out.stdout.strip()) < 0.5
+    assert out.stdout.strip() == "[]"
 
 
 def test_lazy_names_resolve():

@@ -31,6 +31,7 @@ def test_helloworld_example(tmp_path):
 FIGURE3 = EXAMPLE.parent / "figure3.py"
 
 
+@pytest.mark.blender  # main() builds its Blender renderer before placing objects
 def test_figure3_printed_region_cannot_hold_kubasic_shapes(tmp_path):
     """The printed listing's spawn region is 2 × 2 × 1 m above the floor: eight unit-sized KuBasic
     shapes do not fit, and placement must stop with the clear error rather than overlap or hang."""

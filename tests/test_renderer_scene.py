@@ -369,6 +369,7 @@ def test_removed_asset_disappears_from_render():
     assert seg.shape == (24, 32, 1) and (seg == 2).sum() > 50  # the sphere is asset 2 now
 
 
+@pytest.mark.blender
 def test_deleted_model_keyframes_leave_blender_too():
     import bpy
 
