@@ -32,8 +32,9 @@ import numpy as np
 #: Depth / z written where a pixel-centre ray hits nothing (metres).
 BACKGROUND_DEPTH = 10000.0
 
-# Blender camera frame → OpenCV camera frame.
+# Blender camera frame → OpenCV camera frame (read-only: a shared constant, not state).
 CAMERA_TO_OPENCV = np.diag([1.0, -1.0, -1.0])
+CAMERA_TO_OPENCV.setflags(write=False)
 
 
 def _resolution(camera, resolution=None) -> tuple[int, int]:
