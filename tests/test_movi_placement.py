@@ -14,7 +14,6 @@ from kubric.recipes.movi_base import DYNAMIC_SPAWN_REGION
 
 
 def _populated(recipe, sources, seed):
-    kb.reset_uid_counters()
     scene = recipe.make_scene()
     simulator = kb.simulator.PyBullet(scene)
     try:
