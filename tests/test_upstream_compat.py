@@ -53,9 +53,11 @@ def test_unknown_constructor_argument_is_a_key_error_and_a_type_error():
 
 
 def test_asset_repr_is_uid_then_sorted_properties_on_one_line():
-    kb.Cube(name="box")
+    scene = kb.Scene()
+    scene += kb.Cube(name="box")
     mat = kb.FlatMaterial(name="paint")
     box = kb.Cube(name="box", position=(1, 2, 3), material=mat)
+    scene += box  # uids are numbered by the scene
     text = repr(box)
     assert text.startswith("<box.001 ") and text.endswith(">") and "\n" not in text
     fields = text[len("<box.001 "):-1].split(" ")
