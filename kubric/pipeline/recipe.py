@@ -152,14 +152,18 @@ def get_recipe(spec: str) -> type[Recipe]:
 
 
 def load_builtin() -> Mapping[str, type[Recipe]]:
-    """Import the built-in recipe modules; returns the registry."""
+    """Import the built-in recipe modules; returns the built-in recipes by name — only those:
+    recipes that other code registered in this process (a test, a user's module) are not listed,
+    so what is documented or listed never depends on what ran before."""
     for module in BUILTIN_MODULES:
         try:
             importlib.import_module(module)
         except ModuleNotFoundError as err:
             if err.name != module:
                 raise
-    return REGISTRY
+    return {name: cls for name, cls in REGISTRY.items()
+            if any(cls.__module__ == m or cls.__module__.startswith(m + ".")
+                   for m in BUILTIN_MODULES)}
 
 
 def recipe_spec(cls: type[Recipe]) -> str:
