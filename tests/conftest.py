@@ -15,6 +15,7 @@
 import os
 import pathlib
 import runpy
+import sys
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 NO_BPY = pathlib.Path(__file__).resolve().parent / "no_bpy"  # its sitecustomize forbids bpy
@@ -39,7 +40,10 @@ def pytest_configure(config):
     _set_env("BLENDER_USER_RESOURCES", str(home / "blender"))
     if config.getoption("--no-blender"):
         from kubric.assets import ensure_kubasic
-        ensure_kubasic()  # before bpy is blocked; built on the first run only
+        if not (base / "test-assets" / "KuBasic").is_dir():
+            print(f"building KuBasic into {base / 'test-assets'} (first run only, about a "
+                  "minute)", file=sys.stderr, flush=True)
+        ensure_kubasic()  # before bpy is blocked
         _set_env("PYTHONPATH", os.pathsep.join(filter(None, [str(NO_BPY),
                                                              os.environ.get("PYTHONPATH")])))
         runpy.run_path(str(NO_BPY / "sitecustomize.py"))  # this process
