@@ -40,8 +40,8 @@ from kubric.annotations import nerf_export
 from kubric.core import camera_geometry as geo
 from kubric.pipeline import Option, OptionError, Recipe, float_range, resolution
 from kubric.recipes.movi_base import _existing_source as open_source
+from kubric.recipes.movi_base import new_camera
 
-CAMERA_FOCAL_LENGTH, CAMERA_SENSOR_WIDTH = 35.0, 32.0
 #: layers every multi-view scene writes (no flow: the views are not a motion sequence)
 RENDERED_LAYERS = ("rgba", "depth", "segmentation", "normal", "object_coordinates")
 #: per-view file names added to every frame entry of the transforms files
@@ -271,8 +271,7 @@ class MultiviewBase(Recipe):
 
     # ------------------------------------------------------------------ the pipeline
     def key_camera(self, scene, positions) -> None:
-        camera = kb.PerspectiveCamera(name="camera", focal_length=CAMERA_FOCAL_LENGTH,
-                                      sensor_width=CAMERA_SENSOR_WIDTH)
+        camera = new_camera()  # MOVi's lens and sensor
         scene.camera = camera
         for frame, position in zip(scene.frames, positions, strict=True):
             camera.position = position
@@ -281,7 +280,6 @@ class MultiviewBase(Recipe):
             camera.keyframe_insert("quaternion", frame)
 
     def generate(self, seed: int, out_dir: pathlib.Path) -> None:
-        kb.reset_uid_counters()
         rng = np.random.RandomState(seed)
         sources = self.open_sources()
         scene = kb.Scene(resolution=self.resolution, frame_start=0,
