@@ -32,9 +32,10 @@ browser:  # Debian's chromium + chromedriver for the `kubric view` browser tests
 	  $$SUDO apt-get update && $$SUDO apt-get install -y chromium chromium-driver; \
 	fi
 
-# Everything but the tests marked `blender` (renders); bpy is blocked so a missing marker fails.
+# Everything but the tests marked `blender` (renders) or `slow` (servers, clusters, fault runs);
+# bpy is blocked so a render test without the marker fails. `make test` runs them all.
 test-fast: $(STAMP)
-	@start=$$(date +%s); $(BIN)/python -m pytest -q --no-blender; rc=$$?; \
+	@start=$$(date +%s); $(BIN)/python -m pytest -q --no-blender -m "not slow"; rc=$$?; \
 	echo "make test-fast: $$(( $$(date +%s) - start )) s wall"; exit $$rc
 
 demo: $(STAMP)

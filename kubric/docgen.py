@@ -140,11 +140,11 @@ def undocumented_scene_fields(scene_dir, page: pathlib.Path | None = None) -> li
 
 
 def features_markdown() -> str:
-    """``docs/features.md``: every registered recipe schema (the features of a packed example
+    """``docs/features.md``: every built-in recipe schema (the features of a packed example
     and where each comes from in a scene directory)."""
-    from kubric.io.schema import REGISTRY, dims_markdown, get_schema, schema_markdown
+    from kubric.io.schema import builtin_schemas, dims_markdown, schema_markdown
 
-    get_schema("movi_a")  # imports the built-in schema modules
+    schemas = builtin_schemas()
     out = [GENERATED_NOTE, "", "# Packed dataset features", "",
            "`kubric pack` turns scene directories into examples whose features follow the "
            "recipe's schema (`kubric.io.schema`), declared once and read by the scene writer, "
@@ -152,17 +152,16 @@ def features_markdown() -> str:
            "dtypes of upstream's published MOVi datasets; additions are new names. How to pack "
            "and load: [datasets](datasets.md). `kubric datasets schema NAME` prints one table.",
            "", "Named dimensions:", "", dims_markdown().rstrip(), ""]
-    for name in sorted(REGISTRY):
-        out += [schema_markdown(REGISTRY[name]).rstrip(), ""]
+    for name in sorted(schemas):
+        out += [schema_markdown(schemas[name]).rstrip(), ""]
     return "\n".join(out).rstrip() + "\n"
 
 
 def undocumented_features() -> list[str]:
-    """``schema.feature`` names of registered schemas whose doc is empty."""
-    from kubric.io.schema import REGISTRY, get_schema
+    """``schema.feature`` names of built-in schemas whose doc is empty."""
+    from kubric.io.schema import builtin_schemas
 
-    get_schema("movi_a")
-    return [f"{name}.{f.name}" for name, schema in sorted(REGISTRY.items())
+    return [f"{name}.{f.name}" for name, schema in sorted(builtin_schemas().items())
             for f in schema.features if not f.doc.strip()]
 
 

@@ -208,6 +208,19 @@ def register_schema(schema: Schema) -> Schema:
     return schema
 
 
+def builtin_schemas() -> dict[str, Schema]:
+    """The schemas the built-in schema modules declare, by name — not those other code (a test,
+    a user's module) registered in this process, so generated docs never depend on what ran
+    before."""
+    found: dict[str, Schema] = {}
+    for module in BUILTIN_SCHEMA_MODULES:
+        for value in vars(importlib.import_module(module)).values():
+            for item in (value.values() if isinstance(value, dict) else (value,)):
+                if isinstance(item, Schema) and REGISTRY.get(item.name) is item:
+                    found[item.name] = item
+    return found
+
+
 def get_schema(name: str) -> Schema:
     """The schema of recipe ``name``: a registered schema, or the ``schema`` attribute of the
     recipe :func:`kubric.pipeline.get_recipe` finds for ``name`` (``module:Class`` too).
@@ -266,5 +279,6 @@ def dims_markdown() -> str:
 
 
 __all__ = ["CONVERSIONS", "DIMS", "Feature", "LAYERS", "LayerFormat", "REGISTRY", "Schema",
+           "builtin_schemas",
            "SchemaError", "SEQUENCES", "dims_markdown", "get_schema", "register_schema",
            "schema_markdown"]
