@@ -6,8 +6,8 @@ import json
 
 import numpy as np
 import pytest
+from asset_checks import assert_rests_on_floor, blender_import_bounds, drop_test
 from collection_fixtures import box_obj, mtl_text, two_colour_png
-from test_assets_checks import assert_rests_on_floor, blender_import_bounds, drop_test
 
 from kubric.assets import AssetSource
 from kubric.assets.shapenet import LICENSE, build_shapenet, repair_mesh

@@ -7,7 +7,8 @@
   saturation = magnitude / ``max_flow`` (the largest magnitude of the frame unless given),
   beyond ``max_flow`` the colour darkens.
 * ``normal``: (n + 1) / 2 as RGB; ``object_coordinates`` and ``uv``: the values as RGB.
-* ``segmentation``: the label palette of ``kubric inspect`` (0 black, then distinct hues);
+* ``segmentation``: the label palette (:mod:`kubric.io.palette`: the colours of segmentation
+  PNGs and ``kubric inspect``; 0 black, then distinct hues);
   :func:`outline` draws only the label boundaries, transparent elsewhere, for the overlay.
 """
 
@@ -16,8 +17,8 @@ from __future__ import annotations
 import numpy as np
 
 from kubric.core.camera_geometry import BACKGROUND_DEPTH
+from kubric.io.palette import label_palette  # the colours of segmentation PNGs and sheets
 from kubric.io.png_io import encode_png
-from kubric.pipeline.inspect import _palette as inspect_palette
 
 #: colour-map anchors (sRGB 0..1) at evenly spaced positions, viridis-like
 DEPTH_ANCHORS = np.array([[0.267, 0.005, 0.329], [0.283, 0.141, 0.458], [0.254, 0.265, 0.530],
@@ -28,12 +29,6 @@ DEPTH_ANCHORS = np.array([[0.267, 0.005, 0.329], [0.283, 0.141, 0.458], [0.254, 
 WHEEL_SEGMENTS = ((15, (255, 0, 0), (255, 255, 0)), (6, (255, 255, 0), (0, 255, 0)),
                   (4, (0, 255, 0), (0, 255, 255)), (11, (0, 255, 255), (0, 0, 255)),
                   (13, (0, 0, 255), (255, 0, 255)), (6, (255, 0, 255), (255, 0, 0)))
-LABEL_COLOURS = 4096
-
-
-def label_palette(n: int = LABEL_COLOURS) -> np.ndarray:
-    """(n, 3) uint8: label k's colour (0 black) — the palette of ``kubric inspect``."""
-    return inspect_palette(n)
 
 
 def colour_wheel() -> np.ndarray:
