@@ -26,6 +26,8 @@ from kubric.io.json_io import dumps_json, read_json
 from kubric.io.layers import read_frame
 from kubric.viewer import render
 
+pytestmark = pytest.mark.blender  # the fixture renders a MOVi-A scene with `kubric worker`
+
 ROOT = pathlib.Path(__file__).resolve().parent.parent
 SCENE = "scene_00000002"
 OPTIONS = ["resolution=40", "frame_end=3", "samples=2", "denoise=false", "tracks=24",
