@@ -101,6 +101,13 @@ def assert_nothing_partial_looks_complete(out):
             assert (scene / "metadata.json").exists()
 
 
+def _gone_or_zombie(pid: int) -> bool:
+    try:  # the process may vanish between any two looks at /proc
+        return pathlib.Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] == "Z"
+    except FileNotFoundError:
+        return True
+
+
 def test_worker_killed_mid_render_and_client_killed_then_rerun(cluster, reference, tmp_path):
     address, procs, _ = cluster
     nannies = {p.pid for p in procs[1:]}
@@ -114,9 +121,7 @@ def test_worker_killed_mid_render_and_client_killed_then_rerun(cluster, referenc
         dask_worker = ppid(pid)
         assert ppid(dask_worker) in nannies  # the Dask worker process under a `dask worker` nanny
         os.kill(dask_worker, signal.SIGKILL)
-        _wait(lambda: not pathlib.Path(f"/proc/{pid}").exists() or
-              open(f"/proc/{pid}/stat").read().rsplit(")", 1)[1].split()[0] == "Z", 30,
-              "the orphaned scene process to die with its worker")
+        _wait(lambda: _gone_or_zombie(pid), 30, "the orphaned scene process to die with its worker")
         stdout = client.communicate(timeout=400)[0]
     finally:
         client.kill()
