@@ -15,7 +15,7 @@ from asset_checks import (
 )
 
 from kubric.assets import AssetSource
-from kubric.assets.kubasic import SHAPES, build_kubasic, ensure_kubasic
+from kubric.assets.kubasic import SHAPES, VERSION, build_kubasic, ensure_kubasic
 
 EXPECTED = {"cone", "cube", "cylinder", "gear", "sphere", "sponge", "spot", "suzanne", "teapot",
             "torus", "torus_knot", "dome"}
@@ -36,6 +36,8 @@ def test_kubasic_builds_all_shapes(kubasic):
 
 def test_kubasic_physical_properties(kubasic):
     source = kubasic
+    manifest = json.loads(source.manifest_path.read_text())
+    assert manifest["version"] == VERSION and "unit-sized" in manifest["description"]
     cube = source.db["cube"]
     assert cube["kwargs"]["mass"] == pytest.approx(1.0, rel=1e-9)  # unit cube, density 1
     np.testing.assert_allclose(cube["kwargs"]["bounds"], [[-.5, -.5, -.5], [.5, .5, .5]], atol=1e-9)

@@ -29,9 +29,13 @@ from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 NAME = "KuBasic"
-VERSION = "2.0"  # 1.1: the dome got a textured material; 2.0: shapes unit-sized (were ±1 m)
+VERSION = "2.1"  # 1.1: textured dome; 2.0: shapes unit-sized (were ±1 m); 2.1: manifest description
 #: factor from the shapes' design size (cube ±1) to KuBasic's unit size (cube ±0.5)
 SHAPE_SCALE = 0.5
+#: the manifest's ``description``
+DESCRIPTION = ("KuBasic: 11 unit-sized shapes (each fits a 1 m cube; the cube spans ±0.5 m, as "
+               "upstream's) and the dome (a 40 m floor and backdrop). Metres, z up, meshes centred "
+               "on their centre of mass, density 1.")
 #: the dome's placeholder texture: DOME_TEXTURE_SIZE² pixels of this sRGB grey (0–255)
 DOME_TEXTURE_SIZE = 4
 DOME_TEXTURE_GREY = 200
@@ -146,7 +150,7 @@ def build_kubasic(out_dir: str | os.PathLike, workers: int | None = None,
     finally:
         if workers > 1:
             pool.shutdown()
-    return write_manifest(out / "manifest.json", NAME, VERSION, entries)
+    return write_manifest(out / "manifest.json", NAME, VERSION, entries, description=DESCRIPTION)
 
 
 def _discard_if_stale(target: Path) -> None:

@@ -49,11 +49,15 @@ def dumps(obj) -> str:
     return json.dumps(clean_number(obj), indent=2, sort_keys=True) + "\n"
 
 
-def write_manifest(path: str | os.PathLike, name: str, version: str, entries: dict) -> Path:
-    """Write ``manifest.json`` atomically (entries sorted by id)."""
+def write_manifest(path: str | os.PathLike, name: str, version: str, entries: dict,
+                   description: str = "") -> Path:
+    """Write ``manifest.json`` atomically (entries sorted by id); ``description`` (optional)
+    states what the source is, e.g. its units."""
     path = Path(path)
-    text = dumps({"name": name, "version": version,
-                  "assets": {k: entries[k] for k in sorted(entries)}})
+    head = {"name": name, "version": version}
+    if description:
+        head["description"] = description
+    text = dumps({**head, "assets": {k: entries[k] for k in sorted(entries)}})
     tmp = path.with_name(path.name + ".tmp")
     tmp.write_text(text)
     os.replace(tmp, path)
