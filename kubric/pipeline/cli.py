@@ -3,11 +3,15 @@
 from __future__ import annotations
 
 import ctypes
+import math
 import os
 import signal
 import sys
 
 from kubric.pipeline.options import OptionError
+
+#: the largest seed: numpy's RandomState (and so every recipe's rng) takes seeds < 2**32
+MAX_SEED = 2**32 - 1
 
 
 def _error(command: str, message) -> int:
@@ -41,15 +45,21 @@ def cmd_worker(args) -> int:
     _die_with_parent()
     signal.signal(signal.SIGTERM, _terminate)
     seed = args.seed if args.seed is not None else args.first_seed + args.index
-    if seed < 0:
-        return _error("worker", f"seed must be ≥ 0, got {seed}")
+    if not 0 <= seed <= MAX_SEED:
+        return _error("worker", f"seed must be in 0..{MAX_SEED} (2**32 - 1), got {seed}")
     try:
         recipe = get_recipe(args.recipe).from_assignments(args.set)
     except OptionError as err:
         return _error("worker", err)
-    if storage.is_url(args.out):
+    try:
+        out = storage.normalise(args.out)
+        if not storage.is_url(out):
+            storage.check_writable(out)
+    except storage.StorageError as err:
+        return _error("worker", err)
+    if storage.is_url(out):
         from kubric.pipeline.remote import run_scene_remote
-        result = run_scene_remote(recipe, seed, storage.normalise(args.out),
+        result = run_scene_remote(recipe, seed, out,
                                   echo=lambda line: print(line, flush=True))
     else:
         result = run_scene(recipe, seed, args.out)
@@ -106,12 +116,16 @@ def cmd_generate(args) -> int:
         return _error("generate", f"--scenes must be ≥ 1, got {args.scenes}")
     if args.first_seed < 0:
         return _error("generate", f"--first-seed must be ≥ 0, got {args.first_seed}")
+    if args.first_seed + args.scenes - 1 > MAX_SEED:
+        return _error("generate", f"--first-seed {args.first_seed} + --scenes {args.scenes}: the "
+                      f"last seed {args.first_seed + args.scenes - 1} is above {MAX_SEED} "
+                      f"(2**32 - 1, the largest seed)")
     if args.workers is not None and args.workers < 1:
         return _error("generate", f"--workers must be ≥ 1, got {args.workers}")
     if args.retries < 0:
         return _error("generate", f"--retries must be ≥ 0, got {args.retries}")
-    if args.timeout is not None and args.timeout <= 0:
-        return _error("generate", f"--timeout must be > 0, got {args.timeout}")
+    if args.timeout is not None and not (math.isfinite(args.timeout) and args.timeout > 0):
+        return _error("generate", f"--timeout must be a finite number of seconds > 0, got {args.timeout}")
     misplaced = _misplaced_flag(args)
     if misplaced:
         return _error("generate", misplaced)
