@@ -1,0 +1,92 @@
+"""The one top-level error handler of the ``kubric`` command (issue 16): an ordinary mistake gives
+one line ``kubric <command>: error: ...`` on stderr, exit 2 (usage) or 1 (failure), no traceback
+unless ``--debug``, and nothing written."""
+
+import os
+import pathlib
+import subprocess
+import sys
+
+import pytest
+
+
+def kubric(*args, cwd, env=None):
+    environ = dict(os.environ)
+    environ.pop("KUBRIC_DEBUG", None)
+    environ.update(env or {})
+    return subprocess.run([sys.executable, "-m", "kubric", *args], cwd=cwd, capture_output=True,
+                          text=True, timeout=300, env=environ)
+
+
+def listing(root: pathlib.Path) -> set[str]:
+    return {str(p.relative_to(root)) for p in root.rglob("*")}
+
+
+def assert_one_line(r, command, code, *needles):
+    lines = r.stderr.strip().splitlines()
+    assert r.returncode == code, (r.returncode, r.stderr)
+    assert "Traceback" not in r.stderr, r.stderr
+    assert len(lines) == 1 and lines[0].startswith(f"kubric {command}: error: "), r.stderr
+    for needle in needles:
+        assert needle in lines[0], (needle, lines[0])
+
+
+@pytest.fixture
+def place(tmp_path):
+    (tmp_path / "afile").write_text("not a directory\n")
+    hdri = tmp_path / "hdris"
+    hdri.mkdir()
+    (hdri / "sky.hdr").write_text("just some text, named .hdr\n")
+    meshes = tmp_path / "meshes"
+    meshes.mkdir()
+    (meshes / "cube.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\n"
+                                     "f 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n")
+    (meshes / "cube.json").write_text('{"category": "box",')  # truncated sidecar
+    return tmp_path
+
+
+TINY = ["--set", "resolution=8", "--set", "frame_end=2", "--set", "samples=1"]
+
+
+@pytest.mark.parametrize("args,command,code,needles", [
+    (["worker", "movi_a", "--seed", "0", "--out", "afile"], "worker", 2, ["afile", "not a directory"]),
+    (["worker", "movi_a", "--seed", "0", "--out", "afile/sub"], "worker", 2, ["afile"]),
+    (["worker", "movi_a", "--seed", "0", "--out", ""], "worker", 2, ["empty"]),
+    (["generate", "movi_a", "--scenes", "1", "--out", ""], "generate", 2, ["empty"]),
+    (["generate", "movi_a", "--scenes", "1", "--out", "afile"], "generate", 2, ["afile"]),
+    (["worker", "movi_a", "--seed", "0", *TINY, "--out", "/proc/kubric-out"], "worker", 1,
+     ["/proc/kubric-out"]),
+    (["assets", "hdri", "hdris", "--license", "CC0", "--out", "h"], "assets", 1,
+     ["sky.hdr", "not a valid .hdr image"]),
+    (["assets", "hdri", "nowhere", "--license", "CC0", "--out", "h"], "assets", 1, ["nowhere"]),
+    (["assets", "convert", "meshes", "--name", "m", "--license", "CC0", "--out", "m"], "assets", 1,
+     ["cube.json", "not valid JSON"]),
+    (["assets", "list", "nowhere"], "assets", 1, ["nowhere"]),
+    (["assets", "list", "afile"], "assets", 1, ["afile"]),
+    (["inspect", "nowhere"], "inspect", 2, ["nowhere"]),
+])
+def test_ordinary_mistakes_give_one_line(place, args, command, code, needles):
+    before = listing(place)
+    r = kubric(*args, cwd=place)
+    assert_one_line(r, command, code, *needles)
+    assert listing(place) == before  # nothing written, not even an empty output folder
+
+
+def test_debug_flag_shows_the_traceback(place):
+    args = ["assets", "convert", "meshes", "--name", "m", "--license", "CC0", "--out", "m"]
+    for r in (kubric("--debug", *args, cwd=place), kubric(*args, cwd=place,
+                                                           env={"KUBRIC_DEBUG": "1"})):
+        assert r.returncode == 1
+        assert "Traceback" in r.stderr and "ValueError" in r.stderr
+        assert r.stderr.strip().splitlines()[-1].startswith("kubric assets: error: sidecar")
+
+
+def test_exit_codes_classify_errors():
+    from kubric.cli import error_line, exit_code
+    from kubric.pipeline.options import OptionError
+    assert exit_code(OptionError("x")) == 2
+    assert exit_code(FileNotFoundError(2, "No such file or directory", "a")) == 1
+    assert exit_code(OSError(28, "No space left on device")) == 1
+    assert exit_code(KeyError("bug")) is None  # a bug keeps its traceback
+    assert error_line(PermissionError(13, "Permission denied", "/x")) == "/x: Permission denied"
+    assert error_line(ValueError("two\nlines")) == "two lines"
