@@ -211,7 +211,7 @@ def cmd_inspect(args) -> int:
             report = inspect_url(args.scene_dir, args.sheet)
         else:
             report = inspect_scene(args.scene_dir, args.sheet)
-    except (FileNotFoundError, ValueError) as err:
+    except FileNotFoundError as err:  # no such scene: a usage error; bad data raises on (exit 1)
         return _error("inspect", err)
     print(report)
     return 0
@@ -277,7 +277,8 @@ def add_parser(subparsers) -> None:
     p = subparsers.add_parser("inspect", help="summarise a scene directory, write a contact sheet")
     p.add_argument("scene_dir", help="a scene directory or its URL (s3://.../scene_00000000)")
     p.add_argument("--sheet", default=None, help="contact sheet path (default: "
-                   "SCENE_DIR/contact_sheet.png; .gif for an animation)")
+                   "./SCENE_contact_sheet.png in the current directory, never inside the scene; "
+                   ".gif for an animation)")
     p.set_defaults(func=cmd_inspect)
 
 
