@@ -34,16 +34,13 @@ def _die_with_parent() -> None:
         sys.exit(143)
 
 
-def _terminate(signum, _frame):
-    raise SystemExit(128 + signum)
-
-
 def cmd_worker(args) -> int:
     from kubric.io import storage
+    from kubric.pipeline.cleanup import handle_termination, private_tmpdir
     from kubric.pipeline.recipe import get_recipe
     from kubric.pipeline.worker import run_scene
     _die_with_parent()
-    signal.signal(signal.SIGTERM, _terminate)
+    handle_termination()  # SIGTERM like SIGINT: unwind, remove the work directory
     seed = args.seed if args.seed is not None else args.first_seed + args.index
     if not 0 <= seed <= MAX_SEED:
         return _error("worker", f"seed must be in 0..{MAX_SEED} (2**32 - 1), got {seed}")
@@ -57,6 +54,7 @@ def cmd_worker(args) -> int:
             storage.check_writable(out)
     except storage.StorageError as err:
         return _error("worker", err)
+    private_tmpdir()  # Blender's session folders and every temporary file go with this process
     if storage.is_url(out):
         from kubric.pipeline.remote import run_scene_remote
         result = run_scene_remote(recipe, seed, out,
@@ -140,6 +138,9 @@ def cmd_generate(args) -> int:
         if args.print_job_script:
             print(slurm_job_script(cluster_options))
             return 0
+    from kubric.pipeline.cleanup import handle_termination, private_tmpdir
+    handle_termination()  # until the runner installs its own (stop, end the workers, clean up)
+    private_tmpdir()  # the workers' temporary folders nest in it: all go when this process ends
     try:
         cls = get_recipe(args.recipe)
         cls.from_assignments(args.set).prepare()
