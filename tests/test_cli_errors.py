@@ -90,3 +90,23 @@ def test_exit_codes_classify_errors():
     assert exit_code(KeyError("bug")) is None  # a bug keeps its traceback
     assert error_line(PermissionError(13, "Permission denied", "/x")) == "/x: Permission denied"
     assert error_line(ValueError("two\nlines")) == "two lines"
+
+
+BAD_INPUT_RECIPE = """
+from kubric.pipeline import Recipe
+
+
+class BadInput(Recipe, name="bad_input_test"):
+    def generate(self, seed, out_dir):
+        raise ValueError(f"scene {seed}: an input file is bad")
+"""
+
+
+def test_runner_logs_keep_the_traceback(tmp_path):
+    (tmp_path / "bad_input.py").write_text(BAD_INPUT_RECIPE)
+    r = kubric("generate", "bad_input.py:BadInput", "--scenes", "1", "--retries", "0",
+               "--no-progress", "--out", "out", cwd=tmp_path)
+    assert r.returncode != 0
+    log = (tmp_path / "out" / "logs" / "scene_00000000.log").read_text()
+    assert "Traceback" in log and "ValueError: scene 0: an input file is bad" in log
+    assert "kubric worker: error: scene 0: an input file is bad" in log

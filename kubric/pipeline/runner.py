@@ -290,7 +290,8 @@ class LocalRunner(Runner):
             return proc
 
     def _attempt(self, seed: int, attempt: int) -> bool:
-        env = dict(os.environ, **{PARENT_ENV: str(os.getpid())})
+        # KUBRIC_DEBUG: the traceback of a failure goes into the scene's log
+        env = dict(os.environ, **{PARENT_ENV: str(os.getpid()), "KUBRIC_DEBUG": "1"})
         try:
             rc = run_logged(self.command(seed), self.logs.path(seed), attempt, self.timeout, env,
                             start=self._start)
