@@ -110,3 +110,17 @@ def test_runner_logs_keep_the_traceback(tmp_path):
     log = (tmp_path / "out" / "logs" / "scene_00000000.log").read_text()
     assert "Traceback" in log and "ValueError: scene 0: an input file is bad" in log
     assert "kubric worker: error: scene 0: an input file is bad" in log
+
+
+def test_failure_reason_names_a_timeout_not_the_logs_first_line(tmp_path):
+    from kubric.pipeline.runner import RunSummary
+    log = tmp_path / "scene_00000000.log"
+    log.write_text("=== attempt 1 at 2026-01-01 00:00:00: kubric worker\n"
+                   "ValueError: first attempt failed\n=== exit status 1\n"
+                   "=== attempt 2 at 2026-01-01 00:00:09: kubric worker\n"
+                   "pybullet build time: Jan 29 2025 23:17:20\n"
+                   "=== timed out after 5.0 s\n=== exit status -9\n")
+    summary = RunSummary(requested=1, failed={0: log})
+    assert "FAILED scene_00000000: timed out after 5.0 s (--timeout)" in summary.format("out")
+    log.write_text("=== attempt 1 at 2026-01-01 00:00:00: kubric worker\n=== exit status -9\n")
+    assert "FAILED scene_00000000: exit status -9" in summary.format("out")

@@ -71,12 +71,22 @@ class RunSummary:
 
 
 def _last_line(log: pathlib.Path) -> str:
+    """Why the last attempt in ``log`` failed: its timeout, else its last line of output, else
+    its exit status."""
     try:
-        lines = [ln.strip() for ln in log.read_text(errors="replace").splitlines()
-                 if ln.strip() and not ln.startswith("=== ")]
+        lines = [ln.strip() for ln in log.read_text(errors="replace").splitlines() if ln.strip()]
     except OSError:
         return "no log"
-    return lines[-1][:200] if lines else "empty log"
+    starts = [i for i, ln in enumerate(lines) if ln.startswith("=== attempt ")]
+    last = lines[starts[-1] + 1:] if starts else lines
+    markers = [ln[4:] for ln in last if ln.startswith("=== ")]
+    timed_out = [m for m in markers if m.startswith("timed out")]
+    if timed_out:
+        return f"{timed_out[0]} (--timeout)"
+    output = [ln for ln in last if not ln.startswith("=== ")]
+    if output:
+        return output[-1][:200]
+    return markers[-1] if markers else "empty log"
 
 
 def worker_command(recipe_spec: str, seed: int, out_root, assignments: Sequence[str]) -> list[str]:
