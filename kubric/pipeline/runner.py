@@ -266,9 +266,15 @@ class Runner:
             if bar:
                 bar.close()
         summary.interrupted = self._stop.is_set()
-        if summary.interrupted and not self.remote:
-            time.sleep(0.2)
-            remove_stale(pathlib.Path(self.out_root))
+        if summary.interrupted:
+            if not self.remote:
+                time.sleep(0.2)
+                remove_stale(pathlib.Path(self.out_root))
+            # a worker stopped after its rename finished its scene: count what is on disk
+            for seed in todo:
+                if seed not in summary.done and self.scene_complete(seed):
+                    summary.done.append(seed)
+                    summary.failed.pop(seed, None)
         summary.seconds = time.time() - start
         return summary
 
