@@ -124,3 +124,37 @@ def test_failure_reason_names_a_timeout_not_the_logs_first_line(tmp_path):
     assert "FAILED scene_00000000: timed out after 5.0 s (--timeout)" in summary.format("out")
     log.write_text("=== attempt 1 at 2026-01-01 00:00:00: kubric worker\n=== exit status -9\n")
     assert "FAILED scene_00000000: exit status -9" in summary.format("out")
+
+
+@pytest.fixture
+def tiny_disk(tmp_path):
+    """A 64 KiB tmpfs (needs mount rights: root in a container); skipped where not allowed."""
+    mnt = tmp_path / "tiny_disk"
+    mnt.mkdir()
+    r = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=64k", "tmpfs", str(mnt)],
+                       capture_output=True, text=True)
+    if r.returncode != 0:
+        pytest.skip(f"cannot mount a tmpfs here: {r.stderr.strip()}")
+    try:
+        yield mnt
+    finally:
+        subprocess.run(["umount", str(mnt)], check=True)
+
+
+def test_full_disk_during_extraction_is_not_called_corrupt(tmp_path, tiny_disk):
+    import tarfile
+
+    from kubric.assets.archive import safe_extract
+    member = tmp_path / "big.bin"
+    member.write_bytes(bytes(1 << 20))  # 1 MiB: does not fit on the 64 KiB disk
+    archive = tmp_path / "a.tar.gz"
+    with tarfile.open(archive, "w:gz") as tar:
+        tar.add(member, arcname="big.bin")
+    with pytest.raises(OSError) as err:
+        safe_extract(archive, tiny_disk / "out", "a")
+    assert err.value.errno == 28 and "corrupt" not in str(err.value)
+    from kubric.cli import error_line, exit_code
+    assert exit_code(err.value) == 1
+    assert error_line(err.value).startswith(str(tiny_disk)) and "No space left" in \
+        error_line(err.value) and "'big.bin'" in error_line(err.value)
+    assert list(tiny_disk.iterdir()) == []  # the staging folder is removed too
