@@ -66,6 +66,8 @@ def error_line(err: BaseException) -> str:
     if isinstance(err, OSError) and err.strerror and err.filename is not None:
         target = f" -> {err.filename2}" if err.filename2 is not None else ""
         message = f"{err.filename}{target}: {err.strerror}"
+    elif isinstance(err, OSError) and err.strerror and str(err).startswith("[Errno"):
+        message = err.strerror  # no path known: the bare reason, without "[Errno N]"
     else:
         message = str(err) or type(err).__name__
     return " ".join(message.split())

@@ -158,3 +158,12 @@ def test_full_disk_during_extraction_is_not_called_corrupt(tmp_path, tiny_disk):
     assert error_line(err.value).startswith(str(tiny_disk)) and "No space left" in \
         error_line(err.value) and "'big.bin'" in error_line(err.value)
     assert list(tiny_disk.iterdir()) == []  # the staging folder is removed too
+
+
+def test_generate_on_a_full_disk_is_one_line(tiny_disk):
+    (tiny_disk / "fill").write_bytes(bytes(64 * 1024))  # the disk is full before the run
+    fake = pathlib.Path(__file__).with_name("fake_recipes.py")
+    r = kubric("generate", f"{fake}:Fake", "--scenes", "2", "--no-progress", "--out",
+               str(tiny_disk / "out"), cwd=tiny_disk.parent)
+    assert_one_line(r, "generate", 1, "No space left on device")
+    assert "Errno" not in r.stderr
