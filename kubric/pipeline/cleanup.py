@@ -67,8 +67,12 @@ def release(path) -> None:
         _owned.pop(pathlib.Path(path), None)
 
 
-def remove_owned() -> None:
-    """Remove every owned folder of this process (the atexit handler)."""
+def remove_owned(ignore_signals: bool = True) -> None:
+    """Remove every owned folder of this process (the atexit handler). The process is ending:
+    a further SIGTERM / SIGINT is ignored rather than allowed to cut the removal short."""
+    if ignore_signals and threading.current_thread() is threading.main_thread():
+        for sig in (signal.SIGTERM, signal.SIGINT):
+            signal.signal(sig, signal.SIG_IGN)
     with _lock:
         mine = [p for p, pid in _owned.items() if pid == os.getpid()]
         for p in mine:

@@ -110,5 +110,6 @@ def run_scene(recipe, seed: int, out_root) -> SceneResult:
         shutil.rmtree(work, ignore_errors=True)
         raise
     finally:
-        release(work)
+        if not work.exists():  # renamed or removed; a removal cut short stays owned (atexit)
+            release(work)
     return SceneResult(seed, final, "done", seconds)
