@@ -1,11 +1,20 @@
 """The ``kubric`` command. Each sub-command lives in its own module, which defines
-``add_parser(subparsers)`` registering a parser whose ``func(args) -> int`` runs it."""
+``add_parser(subparsers)`` registering a parser whose ``func(args) -> int`` runs it.
+
+Errors: :func:`main` is the one top-level handler. An expected error (a bad option, a missing or
+unreadable file, invalid input data, a full disk, ...) prints one line
+``kubric <command>: error: <message>`` on stderr and exits 2 for a usage error (a bad option or
+flag) or 1 for a failure; the traceback is printed only with the global ``--debug`` flag (or
+``KUBRIC_DEBUG=1``). Ctrl-C exits 130 with one line. Anything else is a bug and keeps its traceback.
+"""
 
 from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
+import traceback
 
 #: sub-command modules, in the order ``kubric --help`` lists them.
 SUBCOMMAND_MODULES = (
@@ -21,6 +30,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="kubric", description="Kubric: generate synthetic computer-vision datasets (scene "
         "recipes, local runner, asset sources, scene inspection, packed datasets).")
+    parser.add_argument("--debug", action="store_true", help="print the traceback of an error "
+                        "(default: one line; also KUBRIC_DEBUG=1)")
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name in SUBCOMMAND_MODULES:
         try:
@@ -33,13 +44,64 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+#: (module, class) of usage errors (exit 2): looked up in sys.modules, so nothing is imported here
+USAGE_ERRORS = (("kubric.pipeline.options", "OptionError"),
+                ("kubric.pipeline.dask_runner", "ClusterError"))
+#: (module, class) of expected failures (exit 1) besides OSError and ValueError (bad input data)
+FAILURES = (("kubric.assets.archive", "AssetArchiveError"),
+            ("kubric.assets.download", "DownloadError"),
+            ("kubric.viewer.source", "SceneError"))
+
+
+def _is_instance(err: BaseException, names) -> bool:
+    for module, name in names:
+        cls = getattr(sys.modules.get(module), name, None)
+        if cls is not None and isinstance(err, cls):
+            return True
+    return False
+
+
+def error_line(err: BaseException) -> str:
+    """The one-line message of ``err`` (an OSError's path included)."""
+    if isinstance(err, OSError) and err.strerror and err.filename is not None:
+        target = f" -> {err.filename2}" if err.filename2 is not None else ""
+        message = f"{err.filename}{target}: {err.strerror}"
+    elif isinstance(err, OSError) and err.strerror and str(err).startswith("[Errno"):
+        message = err.strerror  # no path known: the bare reason, without "[Errno N]"
+    else:
+        message = str(err) or type(err).__name__
+    return " ".join(message.split())
+
+
+def exit_code(err: BaseException) -> int | None:
+    """2 for a usage error, 1 for an expected failure, None for a bug (keep the traceback)."""
+    if _is_instance(err, USAGE_ERRORS):
+        return 2
+    if isinstance(err, (OSError, ValueError)) or _is_instance(err, FAILURES):
+        return 1
+    return None
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     if not getattr(args, "func", None):
         parser.print_help()
         return 2
-    return int(args.func(args) or 0)
+    debug = args.debug or os.environ.get("KUBRIC_DEBUG", "") not in ("", "0")
+    try:
+        return int(args.func(args) or 0)
+    except KeyboardInterrupt:
+        print(f"kubric {args.command}: interrupted", file=sys.stderr)
+        return 130
+    except Exception as err:
+        code = exit_code(err)
+        if code is None:
+            raise
+        if debug:
+            traceback.print_exc()
+        print(f"kubric {args.command}: error: {error_line(err)}", file=sys.stderr)
+        return code
 
 
 if __name__ == "__main__":

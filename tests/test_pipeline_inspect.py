@@ -1,5 +1,8 @@
 """`kubric inspect` on a synthetic scene directory written with kubric.file_io."""
 
+import subprocess
+import sys
+
 import numpy as np
 import pytest
 from PIL import Image
@@ -33,13 +36,17 @@ def _scene_dir(tmp_path, t=3, h=8, w=10):
     return d
 
 
-def test_inspect_summary_and_contact_sheet(tmp_path, capsys):
+def test_inspect_summary_and_contact_sheet(tmp_path, capsys, monkeypatch):
     d = _scene_dir(tmp_path)
+    monkeypatch.chdir(tmp_path)
+    written = sorted(p.name for p in d.iterdir())
     text = inspect_scene(d)
+    assert sorted(p.name for p in d.iterdir()) == written  # read-only on the scene
     assert "seed: 3" in text and "instances: 1" in text and "cube red" in text
     assert "camera path length: 5.000 m" in text and "collisions: 1" in text
     assert "depth" in text and "(3, 8, 10, 1)" in text
-    sheet = np.asarray(Image.open(d / "contact_sheet.png"))
+    assert f"contact sheet: {tmp_path / 'scene_00000003_contact_sheet.png'}" in text
+    sheet = np.asarray(Image.open(tmp_path / "scene_00000003_contact_sheet.png"))
     assert sheet.shape == (3 * 8, 5 * 10, 3)
     # depth column: object bright, background black; segmentation column: label coloured
     depth_col = sheet[:8, 20:30]
@@ -80,3 +87,42 @@ def test_label_palette_extends_the_png_palette_beyond_255_labels():
     assert big.shape == (70000, 3) and big.dtype == np.uint8 and big[1:].max(axis=1).min() > 0
     with pytest.raises(ValueError, match="positive number of labels, got 0"):
         label_palette(0)
+
+
+def _kubric(*args, cwd):
+    return subprocess.run([sys.executable, "-m", "kubric", *args], cwd=cwd, capture_output=True,
+                          text=True, timeout=120)
+
+
+def test_inspect_cli_leaves_the_scene_untouched(tmp_path):
+    d = _scene_dir(tmp_path / "data")
+    work = tmp_path / "work"
+    work.mkdir()
+    before = {p.name: p.read_bytes() for p in d.iterdir()}
+    r = _kubric("inspect", str(d), cwd=work)
+    assert r.returncode == 0, r.stderr
+    assert {p.name: p.read_bytes() for p in d.iterdir()} == before
+    assert (work / "scene_00000003_contact_sheet.png").is_file()  # the current directory
+    r = _kubric("inspect", str(d), "--sheet", str(d / "sheet.png"), cwd=work)  # when asked
+    assert r.returncode == 0 and (d / "sheet.png").is_file()
+
+
+@pytest.mark.parametrize("damage,needle", [
+    ("truncated_png", "rgba_00001.png"), ("truncated_tiff", "depth_00001.tiff"),
+    ("empty_png", "normal_00002.png"), ("missing_frame", "segmentation_"),
+])
+def test_inspect_names_a_damaged_frame_in_one_line(tmp_path, damage, needle):
+    d = _scene_dir(tmp_path)
+    if damage == "truncated_png":
+        (d / "rgba_00001.png").write_bytes((d / "rgba_00001.png").read_bytes()[:60])
+    elif damage == "truncated_tiff":
+        (d / "depth_00001.tiff").write_bytes((d / "depth_00001.tiff").read_bytes()[:100])
+    elif damage == "empty_png":
+        (d / "normal_00002.png").write_bytes(b"")
+    else:
+        (d / "segmentation_00001.png").unlink()
+    r = _kubric("inspect", str(d), cwd=tmp_path)
+    lines = r.stderr.strip().splitlines()
+    assert r.returncode == 1 and "Traceback" not in r.stderr, r.stderr
+    assert len(lines) == 1 and lines[0].startswith("kubric inspect: error: ") and needle in lines[0]
+    assert not list(tmp_path.glob("*contact_sheet*"))  # no sheet from a damaged scene

@@ -13,6 +13,7 @@ complete, so a failed extraction never leaves a half-written asset directory beh
 
 from __future__ import annotations
 
+import errno
 import gzip
 import io
 import os
@@ -25,6 +26,10 @@ from pathlib import Path, PurePosixPath
 #: default limits of :func:`safe_extract` (bytes).
 MAX_MEMBER_BYTES = 512 * 1024**2
 MAX_TOTAL_BYTES = 2 * 1024**3
+
+
+#: errors of the destination (full disk, quota, read-only, no permission), not of the archive
+WRITE_ERRNOS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EACCES, errno.EPERM})
 
 
 class AssetArchiveError(RuntimeError):
@@ -128,7 +133,13 @@ def _write_checked(checked, staging: Path, asset_id: str, archive_path: Path, op
         try:
             with open_member(info) as src, open(dest, "wb") as fh:
                 shutil.copyfileobj(src, fh)
-        except (tarfile.TarError, zipfile.BadZipFile, OSError, EOFError, zlib.error) as err:
+        except OSError as err:
+            if err.errno in WRITE_ERRNOS:  # the disk, not the archive: say so, naming the place
+                raise OSError(err.errno, f"{err.strerror} (extracting member {name!r} of asset "
+                              f"{asset_id!r})", str(dest)) from None
+            raise CorruptArchiveError(f"asset {asset_id!r}: archive {str(archive_path)!r} is "
+                                      f"corrupt or truncated (member {name!r}): {err}") from None
+        except (tarfile.TarError, zipfile.BadZipFile, EOFError, zlib.error) as err:
             raise CorruptArchiveError(f"asset {asset_id!r}: archive {str(archive_path)!r} is "
                                       f"corrupt or truncated (member {name!r}): {err}") from None
 

@@ -117,7 +117,13 @@ def discover_jobs(src_dir: str | os.PathLike, license: str, up: str = "z",
         meta, lic, sc, color = {}, license, scale, None
         sidecar = path.with_suffix(".json")
         if sidecar.is_file():
-            info = json.loads(sidecar.read_text())
+            try:
+                info = json.loads(sidecar.read_text())
+            except (UnicodeDecodeError, json.JSONDecodeError) as err:
+                raise ValueError(f"sidecar {str(sidecar)!r} is not valid JSON: {err}") from None
+            if not isinstance(info, dict):
+                raise ValueError(f"sidecar {str(sidecar)!r} must hold a JSON object, got "
+                                 f"{type(info).__name__}")
             meta = {k: info[k] for k in ("category", "description") if k in info}
             lic = info.get("license", license)
             sc = info.get("scale", scale)

@@ -20,23 +20,39 @@ BPY_WORLD_LICENSE = ("CC0-1.0 (Greg Zaal, Poly Haven; shipped with Blender in "
                      "datafiles/studiolights/world)")
 
 
-def _image_size(path: Path):
-    """(width, height) of an EXR (via OpenEXR) or Radiance HDR header; None if unreadable."""
-    try:
-        if path.suffix.lower() == ".exr":
+EXR_MAGIC = b"\x76\x2f\x31\x01"
+
+
+def image_size(path: Path) -> list[int]:
+    """[width, height] of an OpenEXR or Radiance HDR image, read from its header; ValueError
+    naming the file when it is not one (a text file named ``.hdr``, a truncated download)."""
+    bad = f"HDRI {str(path)!r} is not a valid {path.suffix.lower()} image"
+    if path.suffix.lower() == ".exr":
+        with open(path, "rb") as fh:
+            if fh.read(4) != EXR_MAGIC:
+                raise ValueError(f"{bad} (no OpenEXR signature)")
+        try:
             import OpenEXR
             with OpenEXR.File(str(path), header_only=True) as f:
                 (x0, y0), (x1, y1) = f.header()["dataWindow"]
-            return [int(x1 - x0 + 1), int(y1 - y0 + 1)]
-        with open(path, "rb") as fh:
-            for _ in range(64):
-                line = fh.readline().decode("ascii", errors="replace").strip()
-                parts = line.split()
-                if len(parts) == 4 and parts[0] in ("-Y", "+Y") and parts[2] in ("+X", "-X"):
-                    return [int(parts[3]), int(parts[1])]
-    except Exception:  # noqa: BLE001 - the size is informative only
-        return None
-    return None
+        except Exception as err:  # noqa: BLE001 - OpenEXR raises bare RuntimeErrors
+            raise ValueError(f"{bad} ({' '.join(str(err).split())})") from None
+        return [int(x1 - x0 + 1), int(y1 - y0 + 1)]
+    with open(path, "rb") as fh:
+        if not fh.readline().startswith(b"#?"):
+            raise ValueError(f"{bad} (no Radiance '#?' signature)")
+        for _ in range(64):
+            line = fh.readline()
+            if not line:
+                break
+            parts = line.decode("ascii", errors="replace").split()
+            if len(parts) == 4 and parts[0] in ("-Y", "+Y") and parts[2] in ("+X", "-X"):
+                if not (parts[1].isdigit() and parts[3].isdigit()):
+                    break
+                if not fh.read(4):
+                    raise ValueError(f"{bad} (no pixel data after the header)")
+                return [int(parts[3]), int(parts[1])]
+    raise ValueError(f"{bad} (no resolution line in the header)")
 
 
 def build_hdri_source(src_dir: str | os.PathLike, out_dir: str | os.PathLike,
@@ -62,6 +78,7 @@ def build_hdri_source(src_dir: str | os.PathLike, out_dir: str | os.PathLike,
             raise ValueError(f"no licence given for the HDRIs in {str(src)!r}: pass license= "
                              "(--license) or put a license.txt next to the images")
         license = lic_file.read_text().strip().splitlines()[0]
+    sizes = {path: image_size(path) for path in images}  # every image checked before writing
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     entries = {}
@@ -71,9 +88,7 @@ def build_hdri_source(src_dir: str | os.PathLike, out_dir: str | os.PathLike,
             raise ValueError(f"two HDRIs map to the id {asset_id!r} in {str(src)!r}")
         meta = {"category": "hdri", "description": f"environment map {path.name}",
                 "source_file": path.name}
-        size = _image_size(path)
-        if size:
-            meta["resolution"] = size
+        meta["resolution"] = sizes[path]
         entries[asset_id] = package_texture(asset_id, path, out, license=license, metadata=meta)
     return write_manifest(out / "manifest.json", name, VERSION, entries)
 

@@ -48,7 +48,7 @@ def build_polyhaven(out_dir: str | os.PathLike, resolution: str = "2k", fmt: str
     ``{"name", "total", "converted", "reused", "skipped": [{"id", "source", "reason"}]}``."""
     from kubric.assets.converter import read_entry
     from kubric.assets.download import DownloadError, fetch_file, get_json
-    from kubric.assets.hdri import _image_size
+    from kubric.assets.hdri import image_size
     from kubric.assets.writer import dumps, package_texture, write_manifest
 
     if resolution not in RESOLUTIONS:
@@ -91,9 +91,7 @@ def build_polyhaven(out_dir: str | os.PathLike, resolution: str = "2k", fmt: str
                 continue
             local = fetch_file(spec["url"], downloads / f"{safe}.{fmt}", size=int(spec["size"]),
                                md5=spec["md5"])
-            size = _image_size(local)
-            if size:
-                meta["resolution"] = size
+            meta["resolution"] = image_size(local)  # ValueError: a download that is no image
             lic = f"{LICENSE}; authors: {', '.join(authors) or 'unknown'}"
             entries[safe] = package_texture(safe, local, out, license=lic, metadata=meta)
             local.unlink()

@@ -32,7 +32,11 @@ def is_url(location) -> bool:
 
 
 def normalise(location) -> str:
-    """A canonical string form: URLs without a trailing slash, local paths absolute."""
+    """A canonical string form: URLs without a trailing slash, local paths absolute. An empty
+    location raises :class:`StorageError` (it would silently mean the current directory)."""
+    if not str(location).strip():
+        raise StorageError(f"output location {str(location)!r} is empty (give a directory or a "
+                           f"URL; '.' for the current directory)")
     if is_url(location):
         scheme, rest = _URL_RE.match(location).groups()
         rest = rest.rstrip("/")

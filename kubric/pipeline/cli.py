@@ -3,11 +3,15 @@
 from __future__ import annotations
 
 import ctypes
+import math
 import os
 import signal
 import sys
 
 from kubric.pipeline.options import OptionError
+
+#: the largest seed: numpy's RandomState (and so every recipe's rng) takes seeds < 2**32
+MAX_SEED = 2**32 - 1
 
 
 def _error(command: str, message) -> int:
@@ -30,26 +34,30 @@ def _die_with_parent() -> None:
         sys.exit(143)
 
 
-def _terminate(signum, _frame):
-    raise SystemExit(128 + signum)
-
-
 def cmd_worker(args) -> int:
     from kubric.io import storage
+    from kubric.pipeline.cleanup import handle_termination, private_tmpdir
     from kubric.pipeline.recipe import get_recipe
     from kubric.pipeline.worker import run_scene
     _die_with_parent()
-    signal.signal(signal.SIGTERM, _terminate)
+    handle_termination()  # SIGTERM like SIGINT: unwind, remove the work directory
     seed = args.seed if args.seed is not None else args.first_seed + args.index
-    if seed < 0:
-        return _error("worker", f"seed must be ≥ 0, got {seed}")
+    if not 0 <= seed <= MAX_SEED:
+        return _error("worker", f"seed must be in 0..{MAX_SEED} (2**32 - 1), got {seed}")
     try:
         recipe = get_recipe(args.recipe).from_assignments(args.set)
     except OptionError as err:
         return _error("worker", err)
-    if storage.is_url(args.out):
+    try:
+        out = storage.normalise(args.out)
+        if not storage.is_url(out):
+            storage.check_writable(out)
+    except storage.StorageError as err:
+        return _error("worker", err)
+    private_tmpdir()  # Blender's session folders and every temporary file go with this process
+    if storage.is_url(out):
         from kubric.pipeline.remote import run_scene_remote
-        result = run_scene_remote(recipe, seed, storage.normalise(args.out),
+        result = run_scene_remote(recipe, seed, out,
                                   echo=lambda line: print(line, flush=True))
     else:
         result = run_scene(recipe, seed, args.out)
@@ -106,12 +114,16 @@ def cmd_generate(args) -> int:
         return _error("generate", f"--scenes must be ≥ 1, got {args.scenes}")
     if args.first_seed < 0:
         return _error("generate", f"--first-seed must be ≥ 0, got {args.first_seed}")
+    if args.first_seed + args.scenes - 1 > MAX_SEED:
+        return _error("generate", f"--first-seed {args.first_seed} + --scenes {args.scenes}: the "
+                      f"last seed {args.first_seed + args.scenes - 1} is above {MAX_SEED} "
+                      f"(2**32 - 1, the largest seed)")
     if args.workers is not None and args.workers < 1:
         return _error("generate", f"--workers must be ≥ 1, got {args.workers}")
     if args.retries < 0:
         return _error("generate", f"--retries must be ≥ 0, got {args.retries}")
-    if args.timeout is not None and args.timeout <= 0:
-        return _error("generate", f"--timeout must be > 0, got {args.timeout}")
+    if args.timeout is not None and not (math.isfinite(args.timeout) and args.timeout > 0):
+        return _error("generate", f"--timeout must be a finite number of seconds > 0, got {args.timeout}")
     misplaced = _misplaced_flag(args)
     if misplaced:
         return _error("generate", misplaced)
@@ -126,6 +138,9 @@ def cmd_generate(args) -> int:
         if args.print_job_script:
             print(slurm_job_script(cluster_options))
             return 0
+    from kubric.pipeline.cleanup import handle_termination, private_tmpdir
+    handle_termination()  # until the runner installs its own (stop, end the workers, clean up)
+    private_tmpdir()  # the workers' temporary folders nest in it: all go when this process ends
     try:
         cls = get_recipe(args.recipe)
         cls.from_assignments(args.set).prepare()
@@ -197,7 +212,7 @@ def cmd_inspect(args) -> int:
             report = inspect_url(args.scene_dir, args.sheet)
         else:
             report = inspect_scene(args.scene_dir, args.sheet)
-    except (FileNotFoundError, ValueError) as err:
+    except FileNotFoundError as err:  # no such scene: a usage error; bad data raises on (exit 1)
         return _error("inspect", err)
     print(report)
     return 0
@@ -263,7 +278,8 @@ def add_parser(subparsers) -> None:
     p = subparsers.add_parser("inspect", help="summarise a scene directory, write a contact sheet")
     p.add_argument("scene_dir", help="a scene directory or its URL (s3://.../scene_00000000)")
     p.add_argument("--sheet", default=None, help="contact sheet path (default: "
-                   "SCENE_DIR/contact_sheet.png; .gif for an animation)")
+                   "./SCENE_contact_sheet.png in the current directory, never inside the scene; "
+                   ".gif for an animation)")
     p.set_defaults(func=cmd_inspect)
 
 

@@ -180,7 +180,8 @@ def scene_task(cmd: Sequence[str], attempt: int, timeout: float | None, threads:
         return subprocess.Popen(command, **kwargs)
 
     env = dict(os.environ, **{PARENT_ENV: str(os.getpid()), "KUBRIC_RENDER_THREADS":
-                              str(threads), "OMP_NUM_THREADS": str(threads)})
+                              str(threads), "OMP_NUM_THREADS": str(threads),
+                              "KUBRIC_DEBUG": "1"})  # the traceback of a failure in the log
     fd, log = tempfile.mkstemp(prefix="kubric-scene-", suffix=".log")
     os.close(fd)
     try:

@@ -165,9 +165,17 @@ def contact_sheet(layers: dict, background_depth: float | None, path: pathlib.Pa
     return path
 
 
+def default_sheet(scene_name: str) -> pathlib.Path:
+    """Where the contact sheet goes without ``--sheet``: the current directory."""
+    return pathlib.Path.cwd() / f"{scene_name}_contact_sheet.png"
+
+
 def inspect_scene(scene_dir, sheet=None) -> str:
-    """Summary text of ``scene_dir``; also writes the contact sheet (default
-    ``SCENE_DIR/contact_sheet.png``) and names it in the text."""
+    """Summary text of ``scene_dir``; also writes the contact sheet and names it in the text.
+
+    Read-only on the scene: the sheet goes to ``sheet`` or else to
+    ``./{scene name}_contact_sheet.png`` in the current directory, never into the scene directory
+    unless ``sheet`` says so (datasets may be read-only; finished scenes stay as written)."""
     from kubric import file_io
     from kubric.annotations.track_files import TRACKS_FILE, read_tracks
     from kubric.core.camera_geometry import BACKGROUND_DEPTH
@@ -183,7 +191,7 @@ def inspect_scene(scene_dir, sheet=None) -> str:
     layers = file_io.read_image_dict(scene_dir, formats=schema.layers if schema else None)
     if not layers:
         raise ValueError(f"{str(scene_dir)!r} holds no image layers")
-    sheet = pathlib.Path(sheet) if sheet else scene_dir / "contact_sheet.png"
+    sheet = pathlib.Path(sheet) if sheet else default_sheet(scene_dir.resolve().name)
     background = metadata.get("metadata", {}).get("background_depth", BACKGROUND_DEPTH)
     tracks, extra = None, ""
     if (scene_dir / TRACKS_FILE).exists():
@@ -210,7 +218,7 @@ def inspect_url(scene_url: str, sheet=None) -> str:
             "is incomplete (no _SUCCESS: an interrupted or running upload)"
         raise FileNotFoundError(f"{scene_url!r} {what}")
     name = scene_url.rsplit("/", 1)[-1]
-    sheet = pathlib.Path(sheet) if sheet else pathlib.Path.cwd() / f"{name}_contact_sheet.png"
+    sheet = pathlib.Path(sheet) if sheet else default_sheet(name)
     with tempfile.TemporaryDirectory(prefix="kubric-inspect-") as tmp:
         local = storage.download_dir(scene_url, pathlib.Path(tmp) / name)
         report = inspect_scene(local, sheet.resolve())

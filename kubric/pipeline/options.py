@@ -9,16 +9,26 @@ An :class:`Option` is declared as a class attribute of a recipe::
 Values arrive either as Python objects (API) or as strings (``--set samples=16``); both go through
 the same conversion and checks. Every failure raises :class:`OptionError` whose message is one
 line naming the recipe, the option, the bad value and what is allowed.
+
+Bounds: ``low``/``high`` are hard limits. ``limit`` is a *default* upper bound on sizes that make a
+scene huge or slow (resolution 8192, frame_end 10000, ...): exceeding it is refused unless the
+environment variable ``KUBRIC_ALLOW_LARGE=1`` is set (it is inherited by the runner's workers).
+Every number must be finite: NaN and ±inf are refused for every option.
 """
 
 from __future__ import annotations
 
+import math
+import os
 import pathlib
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 from kubric.core.resolution import ALLOWED as RESOLUTIONS_ALLOWED
 from kubric.core.resolution import parse_resolution
+
+#: environment variable lifting every option's default upper bound (``limit``)
+ALLOW_LARGE_ENV = "KUBRIC_ALLOW_LARGE"
 
 _TRUE = {"1", "true", "yes", "on"}
 _FALSE = {"0", "false", "no", "off"}
@@ -51,7 +61,15 @@ def _to_int(value):
 def _to_float(value):
     if isinstance(value, bool):
         raise ValueError("expected a number")
-    return float(value.strip() if isinstance(value, str) else value)
+    number = float(value.strip() if isinstance(value, str) else value)
+    if not math.isfinite(number):
+        raise ValueError("expected a finite number")
+    return number
+
+
+def allow_large() -> bool:
+    """True when ``KUBRIC_ALLOW_LARGE`` lifts the default upper bounds (``Option(limit=...)``)."""
+    return os.environ.get(ALLOW_LARGE_ENV, "").strip().lower() in _TRUE
 
 
 def _to_str(value):
@@ -81,6 +99,7 @@ def resolution(value) -> tuple[int, int]:
 
 
 resolution.allowed = RESOLUTIONS_ALLOWED
+resolution.limit = 8192  # pixels per side (KUBRIC_ALLOW_LARGE=1 lifts it)
 
 
 def float_range(value) -> tuple[float, float]:
@@ -91,6 +110,8 @@ def float_range(value) -> tuple[float, float]:
         low, high = (float(v) for v in value)
     except (TypeError, ValueError):
         raise ValueError("expected two numbers low,high") from None
+    if not (math.isfinite(low) and math.isfinite(high)):
+        raise ValueError("expected two finite numbers low,high")
     if low > high:
         raise ValueError("expected low ≤ high")
     return low, high
@@ -108,14 +129,18 @@ class Option:
       type: ``bool``, ``int``, ``float``, ``str``, ``pathlib.Path`` or a converter
         ``value -> value`` raising ValueError; default: the type of ``default``.
       choices: allowed values (after conversion).
-      low, high: inclusive bounds for numbers (for tuples: every element).
+      low, high: inclusive hard bounds for numbers (for tuples: every element).
+      limit: inclusive default upper bound (for tuples: every element) that the environment
+        variable ``KUBRIC_ALLOW_LARGE=1`` lifts; default: the converter's ``limit`` attribute
+        (e.g. :func:`resolution`: 8192 pixels).
       must_exist: for paths: the path must exist when the recipe is built.
       nullable: accept None (``--set key=none``).
     """
 
     def __init__(self, default: Any, help: str = "", *, type: Any = None,
                  choices: Sequence | None = None, low: float | None = None,
-                 high: float | None = None, must_exist: bool = False, nullable: bool = False):
+                 high: float | None = None, limit: float | None = None,
+                 must_exist: bool = False, nullable: bool = False):
         if type is None:
             if default is None:
                 raise TypeError("Option(default=None) needs an explicit type=")
@@ -126,6 +151,7 @@ class Option:
         self.convert_value = _CONVERTERS.get(type, type)
         self.choices = tuple(choices) if choices is not None else None
         self.low, self.high = low, high
+        self.limit = limit if limit is not None else getattr(type, "limit", None)
         self.must_exist = must_exist
         self.nullable = nullable or default is None
         self.name = "?"
@@ -149,7 +175,10 @@ class Option:
             parts = ["one of " + ", ".join(map(str, self.choices))]
         if self.low is not None:
             parts.append(f"≥ {self.low}")
-        if self.high is not None:
+        if self.limit is not None and not allow_large():
+            beyond = f", then ≤ {self.high}" if self.high is not None else ""
+            parts.append(f"≤ {self.limit} (unless {ALLOW_LARGE_ENV}=1{beyond})")
+        elif self.high is not None:
             parts.append(f"≤ {self.high}")
         if self.must_exist:
             parts.append("an existing path")
@@ -159,7 +188,10 @@ class Option:
 
     def convert(self, value, owner: str = "recipe"):
         """Converted, checked value; raises OptionError (one line)."""
-        where = f"{owner}: option {self.name}={value!r}"
+        shown = repr(value)
+        if len(shown) > 80:  # a pasted file, a runaway number: the start names it well enough
+            shown = shown[:60] + f"... ({len(shown)} characters)"
+        where = f"{owner}: option {self.name}={shown}"
         if value is None or (isinstance(value, str) and value.strip().lower() == "none"
                              and self.nullable):
             if self.nullable:
@@ -174,12 +206,26 @@ class Option:
         numbers = v if isinstance(v, tuple) else (v,)
         for n in numbers:
             if isinstance(n, (int, float)) and not isinstance(n, bool):
+                if isinstance(n, float) and not math.isfinite(n):
+                    raise OptionError(f"{where}: not a finite number (allowed: {self.allowed()})")
                 if (self.low is not None and n < self.low) or \
                         (self.high is not None and n > self.high):
                     raise OptionError(f"{where}: out of range (allowed: {self.allowed()})")
-        if self.must_exist and not pathlib.Path(v).exists():
-            raise OptionError(f"{where}: path does not exist")
+                if self.limit is not None and n > self.limit and not allow_large():
+                    raise OptionError(f"{where}: above the default bound {self.limit} (set "
+                                      f"{ALLOW_LARGE_ENV}=1 to allow; allowed: {self.allowed()})")
+        if self.must_exist:
+            try:
+                exists = pathlib.Path(v).exists()
+            except (OSError, ValueError) as err:  # a name too long, a NUL byte, ...
+                raise OptionError(f"{where}: not a usable path ({_one_line(err)})") from None
+            if not exists:
+                raise OptionError(f"{where}: path does not exist")
         return v
+
+
+def _one_line(err: BaseException) -> str:
+    return " ".join(str(err).split())[:200]
 
 
 def builtins_type(default):

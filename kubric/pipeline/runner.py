@@ -71,12 +71,22 @@ class RunSummary:
 
 
 def _last_line(log: pathlib.Path) -> str:
+    """Why the last attempt in ``log`` failed: its timeout, else its last line of output, else
+    its exit status."""
     try:
-        lines = [ln.strip() for ln in log.read_text(errors="replace").splitlines()
-                 if ln.strip() and not ln.startswith("=== ")]
+        lines = [ln.strip() for ln in log.read_text(errors="replace").splitlines() if ln.strip()]
     except OSError:
         return "no log"
-    return lines[-1][:200] if lines else "empty log"
+    starts = [i for i, ln in enumerate(lines) if ln.startswith("=== attempt ")]
+    last = lines[starts[-1] + 1:] if starts else lines
+    markers = [ln[4:] for ln in last if ln.startswith("=== ")]
+    timed_out = [m for m in markers if m.startswith("timed out")]
+    if timed_out:
+        return f"{timed_out[0]} (--timeout)"
+    output = [ln for ln in last if not ln.startswith("=== ")]
+    if output:
+        return output[-1][:200]
+    return markers[-1] if markers else "empty log"
 
 
 def worker_command(recipe_spec: str, seed: int, out_root, assignments: Sequence[str]) -> list[str]:
@@ -256,9 +266,15 @@ class Runner:
             if bar:
                 bar.close()
         summary.interrupted = self._stop.is_set()
-        if summary.interrupted and not self.remote:
-            time.sleep(0.2)
-            remove_stale(pathlib.Path(self.out_root))
+        if summary.interrupted:
+            if not self.remote:
+                time.sleep(0.2)
+                remove_stale(pathlib.Path(self.out_root))
+            # a worker stopped after its rename finished its scene: count what is on disk
+            for seed in todo:
+                if seed not in summary.done and self.scene_complete(seed):
+                    summary.done.append(seed)
+                    summary.failed.pop(seed, None)
         summary.seconds = time.time() - start
         return summary
 
@@ -290,7 +306,8 @@ class LocalRunner(Runner):
             return proc
 
     def _attempt(self, seed: int, attempt: int) -> bool:
-        env = dict(os.environ, **{PARENT_ENV: str(os.getpid())})
+        # KUBRIC_DEBUG: the traceback of a failure goes into the scene's log
+        env = dict(os.environ, **{PARENT_ENV: str(os.getpid()), "KUBRIC_DEBUG": "1"})
         try:
             rc = run_logged(self.command(seed), self.logs.path(seed), attempt, self.timeout, env,
                             start=self._start)

@@ -22,6 +22,8 @@ import shutil
 import time
 from dataclasses import dataclass
 
+from kubric.pipeline.cleanup import own, pid_alive, release
+
 SUCCESS = "_SUCCESS"
 _WORK_RE = re.compile(r"^\.(scene_\d{8,})\.incomplete-(\d+)$")
 
@@ -48,26 +50,6 @@ def write_success(directory, **info) -> pathlib.Path:
     return marker
 
 
-def _pid_alive(pid: int) -> bool:
-    """Whether process ``pid`` still runs. A zombie (exited, not yet reaped — e.g. a worker of a
-    killed runner in a container whose init does not reap orphans) counts as gone."""
-    if pid == os.getpid():
-        return True
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    if not pathlib.Path("/proc/self/stat").exists():
-        return True  # no procfs (macOS): the signal-0 answer is all we know
-    try:  # field 3 of /proc/PID/stat is the state; the name before it is in parentheses
-        stat = pathlib.Path(f"/proc/{pid}/stat").read_text()
-    except OSError:
-        return False  # gone meanwhile
-    return stat.rsplit(")", 1)[-1].split()[0] != "Z"
-
-
 def stale_work_dirs(out_root: pathlib.Path, seed: int | None = None) -> list[pathlib.Path]:
     """Work directories (of ``seed``, or of any seed) whose process no longer runs."""
     out_root = pathlib.Path(out_root)
@@ -78,7 +60,7 @@ def stale_work_dirs(out_root: pathlib.Path, seed: int | None = None) -> list[pat
         m = _WORK_RE.match(entry.name)
         if not m or (seed is not None and m.group(1) != scene_name(seed)):
             continue
-        if not _pid_alive(int(m.group(2))):
+        if not pid_alive(int(m.group(2))):
             stale.append(entry)
     return sorted(stale)
 
@@ -113,6 +95,7 @@ def run_scene(recipe, seed: int, out_root) -> SceneResult:
     if work.exists():
         shutil.rmtree(work)
     work.mkdir()
+    own(work)  # removed at exit even when Blender turns a signal into an immediate exit
     try:
         recipe.generate(seed, work)
         if is_complete(final):  # another process finished the same seed meanwhile
@@ -126,4 +109,7 @@ def run_scene(recipe, seed: int, out_root) -> SceneResult:
     except BaseException:
         shutil.rmtree(work, ignore_errors=True)
         raise
+    finally:
+        if not work.exists():  # renamed or removed; a removal cut short stays owned (atexit)
+            release(work)
     return SceneResult(seed, final, "done", seconds)

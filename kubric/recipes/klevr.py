@@ -131,7 +131,7 @@ class Klevr(_SemanticScenes, name="klevr"):
 
     shapes = Option(KLEVR_SHAPES, "comma-separated KuBasic shapes = the semantic classes")
     size_range = Option((0.8, 1.4), "object scale range low,high (shapes fit a 1 m cube)",
-                        type=float_range, low=0.05)
+                        type=float_range, low=0.05, limit=100.0)
 
     def check(self):
         super().check()
@@ -169,7 +169,7 @@ class ToyBox(_SemanticScenes, name="toybox"):
                             low=1, high=1000)
     categories = Option("", "comma-separated categories to use instead (empty: the most common)")
     size_range = Option((0.8, 1.6), "largest object extent (m) low,high", type=float_range,
-                        low=0.05)
+                        low=0.05, limit=100.0)
     hdri_source = Option(None, "HDRI asset source folder (default: the HDRIs shipped with bpy)",
                          type=pathlib.Path, must_exist=True)
 

@@ -145,7 +145,7 @@ class MoviB(_ClevrLike, name="movi_b"):
 
     schema = movi_schema.MOVI_B
 
-    size_range = Option((0.7, 1.4), "object scale range low,high", type=float_range, low=0.01)
+    size_range = Option((0.7, 1.4), "object scale range low,high", type=float_range, low=0.01, limit=100.0)
 
     def sample_look(self, rng):
         size = float(rng.uniform(*self.size_range))
@@ -168,7 +168,7 @@ class MoviC(MoviBase, name="movi_c"):
     min_num_objects = Option(3, "fewest objects", low=1, high=100)
     max_num_objects = Option(10, "most objects", low=1, high=100)
     size_range = Option((0.75, 3.0), "largest extent range (m) low,high", type=float_range,
-                        low=0.01)
+                        low=0.01, limit=100.0)
     objects_source = Option(None, "mesh asset source folder (default: the converted "
                             "pybullet_data collection)", type=pathlib.Path, must_exist=True)
     hdri_source = Option(None, "HDRI asset source folder (default: the HDRIs shipped with bpy)",
@@ -247,7 +247,7 @@ class MoviD(MoviC, name="movi_d"):
     max_num_objects = Option(20, "most static objects", low=0, high=100)
     min_num_dynamic = Option(1, "fewest dynamic objects", low=1, high=20)
     max_num_dynamic = Option(3, "most dynamic objects", low=1, high=20)
-    settle_frames = Option(100, "frames the static objects settle for", low=0)
+    settle_frames = Option(100, "frames the static objects settle for", low=0, limit=10000)
 
     def add_objects(self, scene, simulator, rng, sources):
         static = []
@@ -302,7 +302,7 @@ class MoviE(MoviD, name="movi_e"):
 
     schema = movi_schema.MOVI_E
 
-    max_camera_movement = Option(4.0, "largest camera path length (m)", low=0.0)
+    max_camera_movement = Option(4.0, "largest camera path length (m)", low=0.0, limit=100.0)
     camera = Option("linear", "linear: look at the origin; panning: the look-at point moves on "
                     "a line through the centre region too", choices=("linear", "panning"))
 

@@ -84,11 +84,11 @@ class MoviBase(Recipe):
     schema = None
 
     resolution = Option((256, 256), "(width, height) in pixels: N or WxH", type=resolution)
-    frame_start = Option(1, "first rendered frame", low=0)
-    frame_end = Option(24, "last rendered frame (simulation runs to frame_end + 1)", low=1)
-    frame_rate = Option(12, "frames per second", low=1)
-    step_rate = Option(240, "physics steps per second (a multiple of frame_rate)", low=1)
-    samples = Option(64, "Cycles samples per pixel", low=1, high=65536)
+    frame_start = Option(1, "first rendered frame", low=0, limit=10000)
+    frame_end = Option(24, "last rendered frame (simulation runs to frame_end + 1)", low=1, limit=10000)
+    frame_rate = Option(12, "frames per second", low=1, limit=1000)
+    step_rate = Option(240, "physics steps per second (a multiple of frame_rate)", low=1, limit=100000)
+    samples = Option(64, "Cycles samples per pixel", low=1, high=65536, limit=4096)
     denoise = Option(True, "denoise the RGB render (OIDN)")
     kubasic_source = Option(None, "KuBasic asset source folder (default: built locally)",
                             type=pathlib.Path, must_exist=True)

@@ -163,7 +163,7 @@ class MultiviewBase(Recipe):
     num_views = Option(32, "number of camera views (frames 0 .. num_views-1)", low=1, high=10000)
     split_ratio = Option((8, 1, 1), "train,val,test weights: view v is split by v mod "
                          "(train+val+test) (see transforms_*.json)", type=nerf_export.split_ratio)
-    samples = Option(32, "Cycles samples per pixel", low=1, high=65536)
+    samples = Option(32, "Cycles samples per pixel", low=1, high=65536, limit=4096)
     denoise = Option(True, "denoise the RGB render (OIDN)")
     camera_distance = Option((9.0, 11.0), "camera distance (m) from the look-at point, low,high",
                              type=float_range, low=0.1)

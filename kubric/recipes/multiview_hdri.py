@@ -115,7 +115,7 @@ class Nvs(_HdriObjects, name="nvs"):
     min_num_objects = Option(3, "fewest objects", low=1, high=50)
     max_num_objects = Option(6, "most objects", low=1, high=50)
     size_range = Option((0.6, 1.2), "largest object extent (m) low,high", type=float_range,
-                        low=0.05)
+                        low=0.05, limit=100.0)
     region = Option(2.2, "objects stand in the square ±region (m)", low=0.3)
     camera_distance = Option((5.0, 7.0), MultiviewBase.camera_distance.help,
                              type=float_range, low=0.1)

@@ -45,7 +45,7 @@ class RobustNerf(MultiviewBase, name="robust_nerf"):
     min_num_objects = Option(4, "fewest static objects", low=1, high=100)
     max_num_objects = Option(8, "most static objects", low=1, high=100)
     size_range = Option((0.8, 1.4), "static object scale range low,high (shapes fit a 1 m cube)",
-                        type=float_range, low=0.05)
+                        type=float_range, low=0.05, limit=100.0)
     region = Option(3.5, "objects and impostors stand in the square ±region (m)", low=0.5)
     num_impostors = Option(1, "number of impostor objects", low=0, high=20)
     impostor_shape = Option("suzanne", "KuBasic shape of the impostors")

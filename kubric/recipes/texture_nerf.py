@@ -106,7 +106,7 @@ class TextureNerf(MultiviewBase, name="texture_nerf"):
     """Texture-structure NeRF: ~30 small cubes with band-limited textures of known cut-off."""
 
     num_objects = Option(30, "number of cubes", low=1, high=200)
-    size_range = Option((0.4, 0.7), "cube edge (m) low,high", type=float_range, low=0.05)
+    size_range = Option((0.4, 0.7), "cube edge (m) low,high", type=float_range, low=0.05, limit=100.0)
     band_range = Option((-1.0, 2.0), "log10 of the texture cut-off (cycles per face) low,high",
                         type=float_range)
     band_width = Option(0.5, "width of a band label interval (decades)", low=0.01)
