@@ -91,9 +91,10 @@ def _check_member(member: tarfile.TarInfo, asset_id: str, max_member_bytes: int)
     return rel
 
 
-def _staged(target: Path, fill) -> Path:
+def build_staged(target: Path, fill, complete=Path.is_dir) -> Path:
     """Run ``fill(staging)`` in a temporary sibling of ``target``, then rename it into place (if
-    another process finished first, its copy is kept); nothing is left behind on failure."""
+    another process finished first — ``complete(target)`` is true — its copy is kept); nothing
+    is left behind on failure."""
     target.parent.mkdir(parents=True, exist_ok=True)
     staging = Path(tempfile.mkdtemp(prefix=f".{target.name}.", dir=target.parent))
     try:
@@ -101,7 +102,7 @@ def _staged(target: Path, fill) -> Path:
         try:
             os.rename(staging, target)
         except OSError:
-            if not target.is_dir():
+            if not complete(target):
                 raise
             shutil.rmtree(staging)
     except BaseException:
@@ -173,7 +174,7 @@ def safe_extract(archive_path: str | os.PathLike, target_dir: str | os.PathLike,
             _write_checked(checked, staging, asset_id, archive_path, tar.extractfile,
                            max_total_bytes)
 
-    return _staged(Path(target_dir), fill)
+    return build_staged(Path(target_dir), fill)
 
 
 def safe_extract_zip(zip_path: str | os.PathLike, target_dir: str | os.PathLike, asset_id: str,
@@ -212,4 +213,4 @@ def safe_extract_zip(zip_path: str | os.PathLike, target_dir: str | os.PathLike,
                 checked.append((info, info.filename, rel, info.is_dir(), info.file_size))
             _write_checked(checked, staging, asset_id, zip_path, zf.open, max_total_bytes)
 
-    return _staged(Path(target_dir), fill)
+    return build_staged(Path(target_dir), fill)

@@ -364,20 +364,9 @@ def build_once(target: str | os.PathLike, build) -> Path:
     The build happens in a temporary sibling folder, so a crash never leaves a half-built source
     and concurrent builders never see one; if another process finished first, its copy is kept.
     """
-    import tempfile
+    from kubric.assets.archive import build_staged
 
     target = Path(target)
     if (target / "manifest.json").is_file():
         return target
-    target.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{target.name}.", dir=target.parent))
-    try:
-        build(tmp)
-        try:
-            os.rename(tmp, target)
-        except OSError:
-            if not (target / "manifest.json").is_file():
-                raise
-    finally:
-        shutil.rmtree(tmp, ignore_errors=True)
-    return target
+    return build_staged(target, build, complete=lambda t: (t / "manifest.json").is_file())
