@@ -61,7 +61,11 @@ def cmd_worker(args) -> int:
                                   echo=lambda line: print(line, flush=True))
     else:
         result = run_scene(recipe, seed, args.out)
-    print(f"{result.status}: {result.path} ({result.seconds:.1f} s)")
+    # The scene is complete: a late SIGTERM / SIGINT must not interrupt the interpreter's (and
+    # Blender's own) shutdown code, which would print a traceback from inside bpy.
+    for sig in (signal.SIGTERM, signal.SIGINT):
+        signal.signal(sig, signal.SIG_IGN)
+    print(f"{result.status}: {result.path} ({result.seconds:.1f} s)", flush=True)
     return 0
 
 
