@@ -20,7 +20,8 @@ OPTIONS = sorted((name, key) for name, cls in RECIPES.items() for key in cls.opt
 NASTY = ["nan", "inf", "-inf", "NaN,NaN", "nan,1", "1,inf", "-inf,inf", "1e999", "-1e999",
          "1e308", "99999999999999999999", "-99999999999999999999", "100000", "1000000000",
          "4294967296", "0", "-1", "", " ", ",", "1,", ",1", "1,2,3", "1x", "x1", "0x0", "1.5",
-         "true", "none", "None", "null", "[]", "{}", "\x00", "é", "1" * 5000, "1e-400"]
+         "true", "none", "None", "null", "[]", "{}", "\x00", "é", "1" * 5000, "1e-400",
+         "0,309", "-1000,1000", "1e5,1e6"]  # 0,309: 10**309 overflowed texture_nerf's check
 
 values = st.one_of(
     st.sampled_from(NASTY),
@@ -53,7 +54,10 @@ def test_nasty_values_are_refused_with_one_line(recipe_name, key, monkeypatch):
         _check_refused_or_accepted(recipe_name, key, value)
 
 
-@settings(max_examples=300, deadline=None, suppress_health_check=list(HealthCheck))
+# derandomized: the same 300 examples in every run, so CI is deterministic (a random run on a
+# fresh clone found the 10**309 overflow now pinned in NASTY; turn derandomize off to explore)
+@settings(max_examples=300, deadline=None, suppress_health_check=list(HealthCheck),
+          derandomize=True)
 @given(st.sampled_from(OPTIONS), values)
 def test_fuzz_set_values_of_every_recipe_option(option, value):
     _check_refused_or_accepted(*option, value)

@@ -115,11 +115,20 @@ def test_worker_killed_mid_render_and_client_killed_then_rerun(cluster, referenc
     client = subprocess.Popen(generate_cmd(out, "--cluster", address), cwd=ROOT,
                               stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     try:
-        # a kubric worker subprocess has rendered for a second: SIGKILL its Dask worker process
-        pid = _wait(lambda: kubric_workers(out), 120, "a scene to start")[0]
-        time.sleep(1.0)
-        dask_worker = ppid(pid)
-        assert ppid(dask_worker) in nannies  # the Dask worker process under a `dask worker` nanny
+        # a kubric worker subprocess is rendering: SIGKILL its Dask worker process. Parents are
+        # read as soon as the scene process appears (a tiny scene may finish within a second).
+        def running_scene():
+            for scene_pid in kubric_workers(out):
+                try:
+                    worker_pid = ppid(scene_pid)
+                    return scene_pid, worker_pid, ppid(worker_pid)
+                except OSError:  # it ended between two looks at /proc
+                    continue
+            return None
+
+        pid, dask_worker, nanny = _wait(running_scene, 120, "a scene to start")
+        assert nanny in nannies  # the Dask worker process under a `dask worker` nanny
+        time.sleep(0.3)
         os.kill(dask_worker, signal.SIGKILL)
         _wait(lambda: _gone_or_zombie(pid), 30, "the orphaned scene process to die with its worker")
         stdout = client.communicate(timeout=400)[0]

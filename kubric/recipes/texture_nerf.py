@@ -108,7 +108,7 @@ class TextureNerf(MultiviewBase, name="texture_nerf"):
     num_objects = Option(30, "number of cubes", low=1, high=200)
     size_range = Option((0.4, 0.7), "cube edge (m) low,high", type=float_range, low=0.05, limit=100.0)
     band_range = Option((-1.0, 2.0), "log10 of the texture cut-off (cycles per face) low,high",
-                        type=float_range)
+                        type=float_range, low=-3.0, high=6.0)
     band_width = Option(0.5, "width of a band label interval (decades)", low=0.01)
     texture_size = Option(256, "texture pixels per face side", low=8, high=4096)
     region = Option(3.0, "cubes stand in the square ±region (m) of the floor", low=0.5)
