@@ -17,6 +17,7 @@ logs, resume, progress bar, summary, signals); :class:`LocalRunner` is the proce
 
 from __future__ import annotations
 
+import abc
 import os
 import pathlib
 import signal
@@ -178,7 +179,7 @@ class SceneLogs:
             storage.write_bytes(self.location(seed), self.path(seed).read_bytes())
 
 
-class Runner:
+class Runner(abc.ABC):
     """What every runner shares: seeds, options, output root (path or URL), per-scene logs,
     resume (complete scenes skipped, stale work directories removed), the progress bar, the
     summary and SIGINT/SIGTERM handling. Subclasses implement :meth:`_execute`."""
@@ -236,8 +237,9 @@ class Runner:
             previous[sig] = signal.signal(sig, self.stop)
         return previous
 
+    @abc.abstractmethod
     def _execute(self, todo: list[int], summary: RunSummary, bar) -> None:
-        raise NotImplementedError
+        """Run the scenes of ``todo`` (seeds), recording each result in ``summary``."""
 
     def run(self) -> RunSummary:
         start = time.time()

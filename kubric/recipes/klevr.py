@@ -17,6 +17,7 @@ surface with the depth layer (``xyz`` (N,3) float32 world metres, ``rgb`` (N,3) 
 
 from __future__ import annotations
 
+import abc
 import io
 import json
 import pathlib
@@ -27,7 +28,7 @@ import kubric as kb
 from kubric.core import camera_geometry as geo
 from kubric.io.paths import atomic_write_bytes
 from kubric.pipeline import Option, OptionError, float_range
-from kubric.recipes.movi_base import _existing_source as open_source
+from kubric.recipes.common import open_existing_source as open_source
 from kubric.recipes.multiview_base import (
     MultiviewBase,
     kubasic_object,
@@ -96,12 +97,13 @@ class _SemanticScenes(MultiviewBase):
     region = Option(3.5, "objects stand in the square ±region (m) of the floor", low=0.5)
     write_points = Option(True, "write points.npz (the labelled point cloud of all views)")
 
+    @abc.abstractmethod
     def class_names(self, sources) -> list[str]:
         """Semantic classes without the background (index k-1 = class id k)."""
-        raise NotImplementedError
 
+    @abc.abstractmethod
     def new_object(self, rng, sources, category: str):
-        raise NotImplementedError
+        """A new object of ``category`` (one of :meth:`class_names`), not yet placed."""
 
     def add_objects(self, scene, rng, sources):
         names = self.class_names(sources)

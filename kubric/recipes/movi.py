@@ -31,13 +31,13 @@ from kubric.assets.utils import get_clevr_lights
 from kubric.pipeline import Option, OptionError, float_range
 from kubric.randomness import CLEVR_COLORS, CLEVR_SHAPES, CLEVR_SIZES
 from kubric.recipes import movi_schema
+from kubric.recipes.common import open_existing_source
 from kubric.recipes.movi_base import (
     CAMERA_MIN_HEIGHT,
     DYNAMIC_SPAWN_REGION,
     MOVING_CAMERA_SHELL,
     STATIC_SPAWN_REGION,
     MoviBase,
-    _existing_source,
     new_camera,
     place_without_overlap,
 )
@@ -186,10 +186,10 @@ class MoviC(MoviBase, name="movi_c"):
     def open_sources(self):
         from kubric import assets
         sources = super().open_sources()
-        sources["objects"] = _existing_source(self.objects_source, "objects_source") \
+        sources["objects"] = open_existing_source(self.objects_source, "objects_source") \
             if self.objects_source is not None else \
             assets.ensure_pybullet_collection(limit=self.collection_limit)
-        sources["hdri"] = _existing_source(self.hdri_source, "hdri_source") \
+        sources["hdri"] = open_existing_source(self.hdri_source, "hdri_source") \
             if self.hdri_source is not None else assets.ensure_hdri_source()
         for key in ("objects", "hdri"):
             categories = self.object_categories if key == "objects" else None

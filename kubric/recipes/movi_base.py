@@ -31,6 +31,7 @@ import numpy as np
 import kubric as kb
 from kubric.io.scene_writer import write_scene
 from kubric.pipeline import Option, OptionError, Recipe, resolution
+from kubric.recipes.common import check_min_max, check_source_options, kubasic_sources
 
 DYNAMIC_SPAWN_REGION = ((-5.0, -5.0, 1.0), (5.0, 5.0, 5.0))
 STATIC_SPAWN_REGION = ((-7.0, -7.0, 0.0), (7.0, 7.0, 10.0))
@@ -50,11 +51,6 @@ def new_camera():
                                 sensor_width=CAMERA_SENSOR_WIDTH)
 
 
-def _existing_source(path, what: str):
-    source = kb.AssetSource(path)
-    if not len(source):
-        raise OptionError(f"{what} {str(path)!r} holds no assets")
-    return source
 
 
 def place_without_overlap(obj, simulator, region, rng, max_trials: int = 1000) -> bool:
@@ -111,17 +107,9 @@ class MoviBase(Recipe):
         if self.step_rate % self.frame_rate:
             raise OptionError(f"{self.name}: option step_rate={self.step_rate} must be a multiple "
                               f"of frame_rate={self.frame_rate}")
-        for name, value in self.values.items():
-            if name.endswith("_source") and value is not None:
-                manifest = value / "manifest.json" if value.is_dir() else value
-                if not manifest.is_file() or manifest.name != "manifest.json":
-                    raise OptionError(f"{self.name}: option {name}={str(value)!r} is not an asset "
-                                      "source (a folder with manifest.json)")
+        check_source_options(self)
         self.check_tracks()
-        for low, high in self.count_ranges():
-            if self.values[low] > self.values[high]:
-                raise OptionError(f"{self.name}: option {low}={self.values[low]} must be ≤ "
-                                  f"{high}={self.values[high]}")
+        check_min_max(self)
 
     def check_tracks(self) -> None:
         """Bad track options fail here, before anything renders (one line)."""
@@ -144,21 +132,13 @@ class MoviBase(Recipe):
                               f"{available} query points available ({num_frames} frames × "
                               f"{h}×{w} px on a grid of stride {self.track_stride})")
 
-    def count_ranges(self) -> list[tuple[str, str]]:
-        """(min option, max option) pairs that must be ordered."""
-        return [(a, a.replace("min_", "max_")) for a in self.options if a.startswith("min_")
-                and a.replace("min_", "max_") in self.options]
-
     def prepare(self) -> None:
         """Build / open the asset sources once before parallel workers start."""
         self.open_sources()
 
     # ------------------------------------------------------------------ steps
     def open_sources(self) -> dict:
-        from kubric import assets
-        if self.kubasic_source is not None:
-            return {"kubasic": _existing_source(self.kubasic_source, "kubasic_source")}
-        return {"kubasic": assets.ensure_kubasic()}
+        return kubasic_sources(self.kubasic_source)
 
     @abc.abstractmethod
     def build_background(self, scene, rng, sources) -> str:

@@ -39,7 +39,8 @@ import kubric as kb
 from kubric.annotations import nerf_export
 from kubric.core import camera_geometry as geo
 from kubric.pipeline import Option, OptionError, Recipe, float_range, resolution
-from kubric.recipes.movi_base import _existing_source as open_source
+from kubric.recipes.common import check_min_max, check_source_options, kubasic_sources
+from kubric.recipes.common import open_existing_source as open_source
 from kubric.recipes.movi_base import new_camera
 
 #: layers every multi-view scene writes (no flow: the views are not a motion sequence)
@@ -156,6 +157,16 @@ def write_label_layer(labels: np.ndarray, template: str, out_dir: pathlib.Path) 
                            out_dir / template.format(i))
 
 
+def write_flag_mask(layers: dict, instances: list, flag: str, template: str,
+                    out_dir: pathlib.Path) -> None:
+    """Write a 0/1 mask per view: 1 where the segmentation shows an instance whose metadata
+    ``flag`` is true (e.g. ``is_salient``, ``is_impostor``)."""
+    lut = np.zeros(len(instances) + 1, np.uint8)
+    for k, info in enumerate(instances, start=1):
+        lut[k] = bool(info[flag])
+    write_label_layer(lut[layers["segmentation"]], template, out_dir)
+
+
 class MultiviewBase(Recipe):
     """Common options and steps of the multi-view recipes (not registered itself)."""
 
@@ -177,28 +188,15 @@ class MultiviewBase(Recipe):
         message = nerf_export.check_views(self.name, self.num_views, self.split_ratio)
         if message:
             raise OptionError(message)
-        for name, value in self.values.items():
-            if (name.endswith("_source") or name == "objects") and value is not None:
-                manifest = value / "manifest.json" if value.is_dir() else value
-                if not manifest.is_file() or manifest.name != "manifest.json":
-                    raise OptionError(f"{self.name}: option {name}={str(value)!r} is not an asset "
-                                      "source (a folder with manifest.json)")
-        for low in self.options:
-            high = low.replace("min_", "max_")
-            if low.startswith("min_") and high in self.options and \
-                    self.values[low] > self.values[high]:
-                raise OptionError(f"{self.name}: option {low}={self.values[low]} must be ≤ "
-                                  f"{high}={self.values[high]}")
+        check_source_options(self, names=("objects",))
+        check_min_max(self)
 
     def prepare(self) -> None:
         self.open_sources()
 
     # ------------------------------------------------------------------ steps
     def open_sources(self) -> dict:
-        from kubric import assets
-        if self.kubasic_source is not None:
-            return {"kubasic": open_source(self.kubasic_source, "kubasic_source")}
-        return {"kubasic": assets.ensure_kubasic()}
+        return kubasic_sources(self.kubasic_source)
 
     @abc.abstractmethod
     def build_background(self, scene, rng, sources) -> str:

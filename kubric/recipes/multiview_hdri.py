@@ -22,14 +22,14 @@ import numpy as np
 
 import kubric as kb
 from kubric.pipeline import Option, float_range
-from kubric.recipes.movi_base import _existing_source as open_source
+from kubric.recipes.common import open_existing_source as open_source
 from kubric.recipes.multiview_base import (
     MultiviewBase,
     footprint_radius,
     open_hdri_source,
     sized_object,
     stand_upright,
-    write_label_layer,
+    write_flag_mask,
 )
 
 
@@ -102,10 +102,7 @@ class MultiviewMatting(_HdriObjects, name="multiview_matting"):
             self.add_upright(scene, obj, rng, occupied, self.region)
 
     def extra_outputs(self, scene, layers, instances, out_dir, meta):
-        lut = np.zeros(len(instances) + 1, np.uint8)
-        for k, info in enumerate(instances, start=1):
-            lut[k] = bool(info["is_salient"])
-        write_label_layer(lut[layers["segmentation"]], "mask_{:05d}.png", out_dir)
+        write_flag_mask(layers, instances, "is_salient", "mask_{:05d}.png", out_dir)
         return {"mask_file": "mask_{:05d}.png"}
 
 

@@ -22,8 +22,6 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
-
 from kubric.pipeline import Option, OptionError, float_range
 from kubric.recipes.multiview_base import (
     MultiviewBase,
@@ -32,7 +30,7 @@ from kubric.recipes.multiview_base import (
     kubasic_object,
     orbit_positions,
     stand_upright,
-    write_label_layer,
+    write_flag_mask,
 )
 
 PARKED_POSITION = (0.0, 0.0, -1000.0)
@@ -114,8 +112,5 @@ class RobustNerf(MultiviewBase, name="robust_nerf"):
         return place
 
     def extra_outputs(self, scene, layers, instances, out_dir, meta):
-        lut = np.zeros(len(instances) + 1, np.uint8)
-        for k, info in enumerate(instances, start=1):
-            lut[k] = bool(info["is_impostor"])
-        write_label_layer(lut[layers["segmentation"]], "impostor_mask_{:05d}.png", out_dir)
+        write_flag_mask(layers, instances, "is_impostor", "impostor_mask_{:05d}.png", out_dir)
         return {"impostor_mask_file": "impostor_mask_{:05d}.png"}
