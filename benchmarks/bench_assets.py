@@ -19,7 +19,7 @@ import numpy as np
 def bench_kubasic(out: Path, workers: int) -> dict:
     """A fresh KuBasic build through ``ensure_kubasic`` and then the cached path (what every later
     use costs), with the ratio of the two."""
-    from kubric.assets.kubasic import ensure_kubasic
+    from kubric.asset_tools.kubasic import ensure_kubasic
 
     t0 = time.perf_counter()
     ensure_kubasic(cache=out, workers=workers)
@@ -32,7 +32,7 @@ def bench_kubasic(out: Path, workers: int) -> dict:
 
 
 def bench_full_conversion(out: Path, workers: int, limit: int | None) -> dict:
-    from kubric.assets.pybullet_collection import build_pybullet_collection
+    from kubric.asset_tools.pybullet_collection import build_pybullet_collection
 
     t0 = time.perf_counter()
     report = build_pybullet_collection(out / "PybulletObjects", limit=limit, workers=workers)
@@ -85,9 +85,9 @@ def verify_source(path: Path) -> dict:
 
 def bench_decomposition() -> list[dict]:
     """Time, hull count and Σ hull volume / mesh volume for each non-convex test mesh."""
-    from kubric.assets import physics, shapes
-    from kubric.assets.converter import load_mesh
-    from kubric.assets.pybullet_collection import TEXTURED_MODELS, pybullet_jobs
+    from kubric.asset_tools import physics, shapes
+    from kubric.asset_tools.converter import load_mesh
+    from kubric.asset_tools.pybullet_collection import TEXTURED_MODELS, pybullet_jobs
 
     meshes = {}
     for job in pybullet_jobs(limit=0):

@@ -19,7 +19,7 @@ import traceback
 #: sub-command modules, in the order ``kubric --help`` lists them.
 SUBCOMMAND_MODULES = (
     "kubric.pipeline.cli",
-    "kubric.assets.cli",
+    "kubric.asset_tools.cli",
     "kubric.annotations.tracks_cli",
     "kubric.datasets.cli",
     "kubric.viewer.cli",

@@ -9,9 +9,9 @@ import pytest
 from collection_fixtures import LocalServer, gso_files, run_worker, write_zip
 from test_assets_polyhaven import _api
 
+from kubric.asset_tools.gso import build_gso
+from kubric.asset_tools.polyhaven import build_polyhaven
 from kubric.assets import AssetSource
-from kubric.assets.gso import build_gso
-from kubric.assets.polyhaven import build_polyhaven
 
 pytestmark = [pytest.mark.blender, pytest.mark.slow]
 

@@ -8,9 +8,15 @@ import tarfile
 import numpy as np
 import pytest
 
+from kubric.asset_tools import pybullet_collection as pbc
+from kubric.asset_tools.converter import (
+    CONVERTER_VERSION,
+    ConvertJob,
+    as_rgba,
+    convert_collection,
+    convert_jobs,
+)
 from kubric.assets import AssetSource
-from kubric.assets import pybullet_collection as pbc
-from kubric.assets.converter import CONVERTER_VERSION, ConvertJob, as_rgba, convert_collection, convert_jobs
 
 URDF_IDS = ["random_urdfs/000", "random_urdfs/003"]
 
@@ -211,7 +217,7 @@ def test_textured_and_coloured_materials_share_one_atlas(mtl_source):
 def test_stale_archives_and_manifests_are_rebuilt(tmp_path, monkeypatch):
     import pybullet_data
 
-    from kubric.assets.writer import Collision, package_object
+    from kubric.asset_tools.writer import Collision, package_object
 
     real_jobs = pbc.pybullet_jobs
     monkeypatch.setattr(pbc, "pybullet_jobs",
@@ -220,7 +226,7 @@ def test_stale_archives_and_manifests_are_rebuilt(tmp_path, monkeypatch):
     target = cache / f"{pbc.NAME}-1"
     # a collection written before appearance was kept: manifest 1.0, entry without the version
     mesh_path = f"{pybullet_data.getDataPath()}/random_urdfs/000/000.obj"
-    from kubric.assets.converter import load_mesh
+    from kubric.asset_tools.converter import load_mesh
 
     old = load_mesh(mesh_path, scale=0.015)
     entry = package_object("random_urdfs/000", old, target,

@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 
 import kubric as kb
+from kubric.asset_tools.writer import Collision, package_object
 from kubric.assets.asset_source import AssetSource
-from kubric.assets.writer import Collision, package_object
 from kubric.randomness import WorkerRandomState, bind_worker_rng
 
 BASE = {"sun": (11.6608, -6.62799, 25.8232), "lamp_back": (-1.1685, 2.64602, 5.81574),
@@ -178,14 +178,14 @@ def test_close_keeps_folders_another_process_still_uses(cube_source):
 # ------------------------------------------------------------------------ the dome
 @pytest.fixture(scope="module")
 def dome_source(tmp_path_factory):
-    from kubric.assets.kubasic import build_kubasic
+    from kubric.asset_tools.kubasic import build_kubasic
     root = tmp_path_factory.mktemp("kubasic_dome")
     return AssetSource(build_kubasic(root, workers=1, shapes=["dome"]),
                        scratch_dir=root / "scratch")
 
 
 def test_dome_archive_ships_textured_material(dome_source):
-    from kubric.assets.kubasic import DOME_TEXTURE_GREY, DOME_TEXTURE_SIZE, dome_texture_png
+    from kubric.asset_tools.kubasic import DOME_TEXTURE_GREY, DOME_TEXTURE_SIZE, dome_texture_png
     with tarfile.open(dome_source.archive_path("dome")) as tar:
         names = sorted(tar.getnames())
         mtl = tar.extractfile("visual_geometry.mtl").read().decode()
@@ -241,7 +241,7 @@ def test_dome_image_texture_node_can_be_replaced_and_renders(dome_source, tmp_pa
 def test_stale_kubasic_cache_is_discarded(tmp_path):
     """A cached KuBasic from another generator version (e.g. 1.0, whose dome had no texture) is
     removed so that ensure_kubasic rebuilds it; the current version is kept."""
-    from kubric.assets.kubasic import NAME, VERSION, _discard_if_stale
+    from kubric.asset_tools.kubasic import NAME, VERSION, _discard_if_stale
     assert VERSION != "1.0"
     target = tmp_path / NAME
     target.mkdir()

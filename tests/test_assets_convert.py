@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 from asset_checks import assert_rests_on_floor, blender_import_bounds, drop_test
 
+from kubric.asset_tools.converter import convert_collection, discover_jobs
+from kubric.asset_tools.pybullet_collection import build_pybullet_collection
 from kubric.assets import AssetSource
-from kubric.assets.converter import convert_collection, discover_jobs
-from kubric.assets.pybullet_collection import build_pybullet_collection
 
 SUBSET = [f"random_urdfs/{i:03d}" for i in (0, 3, 23, 101, 257, 512, 700, 999)] + ["duck",
                                                                                     "teddy"]
@@ -148,7 +148,7 @@ def test_decomposition_method_choice(tmp_path):
 
     import trimesh
 
-    from kubric.assets import physics
+    from kubric.asset_tools import physics
 
     src = tmp_path / "m"
     src.mkdir()

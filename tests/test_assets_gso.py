@@ -10,14 +10,14 @@ import pytest
 from collection_fixtures import LocalServer, box_obj, gso_files, write_zip
 
 import kubric as kb
-from kubric.assets import AssetSource
-from kubric.assets.gso import (
+from kubric.asset_tools.gso import (
     LICENSE,
     build_gso,
     download_gso,
     listing_url,
     model_zip_url,
 )
+from kubric.assets import AssetSource
 
 
 @pytest.fixture(autouse=True)
@@ -113,7 +113,7 @@ def test_catalogue_or_own_metadata_give_categories(tmp_path):
     for member, data in gso_files("Unpacked", category="Bag").items():
         (unpacked / member).parent.mkdir(parents=True, exist_ok=True)
         (unpacked / member).write_bytes(data)
-    from kubric.assets.cli import main
+    from kubric.asset_tools.cli import main
 
     assert main(["assets", "gso", str(src), "--out", str(tmp_path / "out"), "--workers", "1"]) == 0
     report = json.loads((tmp_path / "out" / "conversion_report.json").read_text())

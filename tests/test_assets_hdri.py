@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 import kubric as kb
+from kubric.asset_tools.hdri import bpy_world_hdri_dir, build_hdri_source
 from kubric.assets import AssetSource, ensure_hdri_source
-from kubric.assets.hdri import bpy_world_hdri_dir, build_hdri_source
 
 
 @pytest.fixture(autouse=True)
@@ -58,7 +58,7 @@ def test_hdri_folder_needs_a_licence_and_images(tmp_path):
 @pytest.mark.blender
 def test_hdri_lights_the_world_and_textures_the_dome(tmp_path):
     """An HDRI asset as world light + background, and as the colour of the KuBasic dome."""
-    from kubric.assets.kubasic import build_kubasic
+    from kubric.asset_tools.kubasic import build_kubasic
 
     hdri = ensure_hdri_source().create("courtyard")
     kubasic = AssetSource(build_kubasic(tmp_path / "kb", workers=1, shapes=["dome"]))

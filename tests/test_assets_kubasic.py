@@ -14,8 +14,8 @@ from asset_checks import (
     drop_test,
 )
 
+from kubric.asset_tools.kubasic import SHAPES, VERSION, build_kubasic, ensure_kubasic
 from kubric.assets import AssetSource
-from kubric.assets.kubasic import SHAPES, VERSION, build_kubasic, ensure_kubasic
 
 EXPECTED = {"cone", "cube", "cylinder", "gear", "sphere", "sponge", "spot", "suzanne", "teapot",
             "torus", "torus_knot", "dome"}

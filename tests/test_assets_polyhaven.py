@@ -10,9 +10,9 @@ import pytest
 from collection_fixtures import LocalServer, write_exr, write_hdr
 
 import kubric as kb
+from kubric.asset_tools.converter import srgb_bytes
+from kubric.asset_tools.polyhaven import build_polyhaven
 from kubric.assets import AssetSource
-from kubric.assets.converter import srgb_bytes
-from kubric.assets.polyhaven import build_polyhaven
 
 SKY = {"alpha": (0.2, 0.4, 0.8), "beta": (0.5, 0.5, 0.5), "gamma": (0.9, 0.1, 0.1),
        "delta": (0.1, 0.9, 0.1)}

@@ -9,8 +9,8 @@ import pytest
 from asset_checks import assert_rests_on_floor, blender_import_bounds, drop_test
 from collection_fixtures import box_obj, mtl_text, two_colour_png
 
+from kubric.asset_tools.shapenet import LICENSE, build_shapenet, repair_mesh
 from kubric.assets import AssetSource
-from kubric.assets.shapenet import LICENSE, build_shapenet, repair_mesh
 
 HALF = (0.15, 0.3, 0.1)  # x, y (ShapeNet's up), z
 

@@ -1,17 +1,25 @@
-"""Asset sources: manifests + archives, safe extraction, and the builders of our own sources.
+"""Asset runtime: what a worker needs at scene-build time (open sources, extract, cache).
 
-``import kubric.assets`` is light (numpy only); trimesh, PyBullet and bpy are imported inside the
-functions that need them. The source format is described in ``docs/assets.md``.
+``import kubric.assets`` is light (numpy only). The source format is described in
+``docs/assets.md``. Runtime modules:
 
-- :class:`AssetSource` — open a source (``manifest.json``), ``create(asset_id, **overrides)``.
-- :func:`cache_dir` — ``$KUBRIC_CACHE_DIR`` or ``~/.cache/kubric``.
-- ``kubric.assets.utils`` (also ``kb.assets.utils``, loaded on first access) —
+- :mod:`~kubric.assets.asset_source` — :class:`AssetSource`: open a source (``manifest.json``),
+  ``create(asset_id, **overrides)``, categories and held-out splits; :func:`cache_dir` —
+  ``$KUBRIC_CACHE_DIR`` or ``~/.cache/kubric``.
+- :mod:`~kubric.assets.archive` — safe extraction (:func:`safe_extract`, ``safe_extract_zip``)
+  and the deterministic archive format (``write_archive``).
+- :mod:`~kubric.assets.download` — resumable, checksum-verified HTTP downloads (stdlib only).
+- :mod:`~kubric.assets.utils` (also ``kb.assets.utils``, loaded on first access) —
   :func:`~kubric.assets.utils.get_clevr_lights`.
-- :func:`ensure_kubasic`, :func:`ensure_hdri_source`, :func:`ensure_pybullet_collection` — the
-  sources this project builds on the user's machine, built into the cache on first use.
-- Collection readers (offline build tools, ``kubric assets gso|shapenet|polyhaven``):
-  ``kubric.assets.gso``, ``kubric.assets.shapenet``, ``kubric.assets.polyhaven`` (downloads
-  through ``kubric.assets.download``); multi-link URDFs: ``kubric.assets.articulated``.
+- :mod:`~kubric.assets.articulated` — multi-link URDFs added to a scene, every link rendered.
+
+The offline **build tools** (converters, mesh physics, KuBasic, the GSO / ShapeNet / Poly Haven /
+pybullet collections, the asset writer, ``kubric assets``) live in :mod:`kubric.asset_tools`,
+which imports this package and never the reverse, with two documented exceptions, both lazy
+(inside the function): :func:`ensure_kubasic`, :func:`ensure_hdri_source` and
+:func:`ensure_pybullet_collection` build a default source into the cache on first use, and
+:func:`kubric.assets.articulated.export_link_meshes` writes a URDF's link meshes on demand with
+the build tools' GLB writer.
 """
 
 from kubric.assets.archive import (
@@ -24,20 +32,23 @@ from kubric.assets.asset_source import AssetSource, ManifestError, cache_dir, va
 
 
 def ensure_kubasic(cache=None, workers=None):
-    """KuBasic source, built into ``cache_dir()/KuBasic`` on first use (see kubric.assets.kubasic)."""
-    from kubric.assets.kubasic import ensure_kubasic as _ensure
+    """KuBasic source, built into ``cache_dir()/KuBasic`` on first use
+    (by :mod:`kubric.asset_tools.kubasic`, imported here only when called)."""
+    from kubric.asset_tools.kubasic import ensure_kubasic as _ensure
     return _ensure(cache, workers=workers)
 
 
 def ensure_hdri_source(cache=None):
-    """HDRI backgrounds from the bpy wheel's world HDRIs, built on first use (kubric.assets.hdri)."""
-    from kubric.assets.hdri import ensure_hdri_source as _ensure
+    """HDRI backgrounds from the bpy wheel's world HDRIs, built on first use
+    (by :mod:`kubric.asset_tools.hdri`, imported here only when called)."""
+    from kubric.asset_tools.hdri import ensure_hdri_source as _ensure
     return _ensure(cache)
 
 
 def ensure_pybullet_collection(limit=None, cache=None, workers=None):
-    """pybullet_data objects as a source (kubric.assets.pybullet_collection)."""
-    from kubric.assets.pybullet_collection import ensure_pybullet_collection as _ensure
+    """pybullet_data objects as a source, built on first use
+    (by :mod:`kubric.asset_tools.pybullet_collection`, imported here only when called)."""
+    from kubric.asset_tools.pybullet_collection import ensure_pybullet_collection as _ensure
     return _ensure(limit=limit, cache=cache, workers=workers)
 
 

@@ -101,7 +101,7 @@ def link_visuals(urdf: str | os.PathLike) -> dict[str, object]:
 
 def export_link_meshes(urdf: str | os.PathLike, out_dir: str | os.PathLike) -> dict[str, Path]:
     """Write ``<out_dir>/<link>.glb`` for every link with visuals; returns ``{link: path}``."""
-    from kubric.assets.writer import _write_visual_glb
+    from kubric.asset_tools.writer import write_visual_glb
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -109,7 +109,7 @@ def export_link_meshes(urdf: str | os.PathLike, out_dir: str | os.PathLike) -> d
     for name, mesh in link_visuals(urdf).items():
         safe = "".join(c if c.isalnum() or c in "-_" else "_" for c in name)
         path = out / f"{safe}.glb"
-        _write_visual_glb(mesh, path)
+        write_visual_glb(mesh, path)
         paths[name] = path
     return paths
 

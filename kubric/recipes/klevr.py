@@ -140,7 +140,7 @@ class Klevr(_SemanticScenes, name="klevr"):
         if not [s for s in self.shapes.split(",") if s.strip()]:
             raise OptionError(f"{self.name}: option shapes={self.shapes!r} names no shape")
         if self.kubasic_source is None:  # the built KuBasic: its shapes are known up front
-            from kubric.assets.kubasic import SHAPES
+            from kubric.asset_tools.kubasic import SHAPES
             self.check_shapes(set(SHAPES))
 
     def check_shapes(self, available) -> list[str]:

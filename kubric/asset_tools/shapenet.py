@@ -169,9 +169,9 @@ def build_shapenet(src_dir: str | os.PathLike, out_dir: str | os.PathLike, synse
                    progress: bool = True, name: str = NAME) -> dict:
     """Convert ShapeNetCore v2 models under ``src_dir`` into the source ``out_dir``; returns the
     report (with the repair totals under ``"repairs"``)."""
-    from kubric.assets.converter import REPORT_NAME, ConvertJob, convert_jobs
-    from kubric.assets.gso import check_texture
-    from kubric.assets.writer import dumps
+    from kubric.asset_tools.converter import REPORT_NAME, ConvertJob, convert_jobs
+    from kubric.asset_tools.gso import check_texture
+    from kubric.asset_tools.writer import dumps
 
     src = Path(src_dir)
     taxonomy_path = src / "taxonomy.json"

@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from kubric.assets import physics
+from kubric.asset_tools import physics
 from kubric.assets.archive import write_archive
 
 OBJ_IMPORT_KWARGS = {"forward_axis": "Y", "up_axis": "Z"}  # z-up OBJ into Blender unchanged
@@ -154,7 +154,7 @@ def _write_visual_obj(mesh, path: Path, material: str | None = None) -> None:
     path.write_text("\n".join(lines) + "\n")
 
 
-def _write_visual_glb(mesh, path: Path) -> None:
+def write_visual_glb(mesh, path: Path) -> None:
     """GLB in glTF's y-up convention: (x, y, z) z-up → (x, z, -y)."""
     to_gltf = np.array([[1, 0, 0, 0], [0, 0, 1, 0], [0, -1, 0, 0], [0, 0, 0, 1]], dtype=float)
     m = mesh.copy()
@@ -231,7 +231,7 @@ def package_object(asset_id: str, visual, out_dir: str | os.PathLike, *, collisi
             raise ValueError(f"{asset_id}: texture_png is only supported with visual_format "
                              f"'obj', got {visual_format!r}")
         elif visual_format == "glb":
-            _write_visual_glb(visual, stage / vis_name)
+            write_visual_glb(visual, stage / vis_name)
         else:
             raise ValueError(f"visual_format must be 'obj' or 'glb', got {visual_format!r}")
         if collision.kind == "concave":

@@ -14,7 +14,7 @@ import time
 
 
 def _kubasic(args) -> int:
-    from kubric.assets.kubasic import build_kubasic
+    from kubric.asset_tools.kubasic import build_kubasic
 
     t0 = time.perf_counter()
     manifest = build_kubasic(args.out, workers=args.workers, progress=True)
@@ -31,7 +31,7 @@ def _print_report(report: dict, seconds: float) -> int:
 
 
 def _convert(args) -> int:
-    from kubric.assets.converter import convert_collection
+    from kubric.asset_tools.converter import convert_collection
 
     t0 = time.perf_counter()
     report = convert_collection(args.src_dir, args.out, args.name, license=args.license,
@@ -41,7 +41,7 @@ def _convert(args) -> int:
 
 
 def _pybullet(args) -> int:
-    from kubric.assets.pybullet_collection import build_pybullet_collection
+    from kubric.asset_tools.pybullet_collection import build_pybullet_collection
 
     t0 = time.perf_counter()
     report = build_pybullet_collection(args.out, limit=args.limit, workers=args.workers)
@@ -49,7 +49,7 @@ def _pybullet(args) -> int:
 
 
 def _gso(args) -> int:
-    from kubric.assets.gso import build_gso
+    from kubric.asset_tools.gso import build_gso
 
     t0 = time.perf_counter()
     report = build_gso(args.src, args.out, catalogue=args.catalogue, workers=args.workers,
@@ -58,7 +58,7 @@ def _gso(args) -> int:
 
 
 def _polyhaven(args) -> int:
-    from kubric.assets.polyhaven import build_polyhaven
+    from kubric.asset_tools.polyhaven import build_polyhaven
 
     t0 = time.perf_counter()
     report = build_polyhaven(args.out, resolution=args.resolution, fmt=args.format,
@@ -67,7 +67,7 @@ def _polyhaven(args) -> int:
 
 
 def _shapenet(args) -> int:
-    from kubric.assets.shapenet import build_shapenet
+    from kubric.asset_tools.shapenet import build_shapenet
 
     t0 = time.perf_counter()
     report = build_shapenet(args.src, args.out, synsets=args.synsets, workers=args.workers,
@@ -78,12 +78,12 @@ def _shapenet(args) -> int:
 
 
 def _hdri(args) -> int:
-    from kubric.assets.hdri import bpy_world_hdri_dir, build_hdri_source
+    from kubric.asset_tools.hdri import bpy_world_hdri_dir, build_hdri_source
 
     src = args.src_dir or bpy_world_hdri_dir()
     license_ = args.license
     if args.src_dir is None and license_ is None:
-        from kubric.assets.hdri import BPY_WORLD_LICENSE
+        from kubric.asset_tools.hdri import BPY_WORLD_LICENSE
         license_ = BPY_WORLD_LICENSE
     manifest = build_hdri_source(src, args.out, name=args.name, license=license_)
     print(f"HDRIs from {src}: {manifest}")
@@ -141,7 +141,7 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--workers", type=int, default=None, help="processes (default: all cores)")
     p.set_defaults(func=_pybullet)
 
-    from kubric.assets import gso
+    from kubric.asset_tools import gso
 
     p = sub.add_parser("gso", help="Google Scanned Objects (zips or folders) → source")
     p.add_argument("src", help="folder of GSO zips / unpacked models (with --download: where "
@@ -156,7 +156,7 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--workers", type=int, default=None, help="processes (default: all cores)")
     p.set_defaults(func=_gso)
 
-    from kubric.assets import polyhaven
+    from kubric.asset_tools import polyhaven
 
     p = sub.add_parser("polyhaven", help="download Poly Haven HDRIs (CC0) → HDRI source")
     p.add_argument("--out", required=True, help="output folder (re-running resumes)")

@@ -1,12 +1,12 @@
 """A real third-party collection on every machine: the objects shipped in ``pybullet_data``.
 
 ``random_urdfs/NNN`` (1000 procedurally generated blobs, each a set of convex parts) and a list
-of textured models (duck, teddy, domino, ...), converted with :mod:`kubric.assets.converter` at
+of textured models (duck, teddy, domino, ...), converted with :mod:`kubric.asset_tools.converter` at
 the size their own URDF gives them (the URDF's mesh ``scale``). Ids: ``"random_urdfs/023"``,
 ``"duck"``, ...; categories ``"random_urdfs"`` and ``"textured_models"``.
 
 Appearance: a mesh's own texture or MTL colours are kept; a mesh without either gets its URDF's
-visual material colour (``<visual><material><color rgba>``), see :mod:`kubric.assets.converter`.
+visual material colour (``<visual><material><color rgba>``), see :mod:`kubric.asset_tools.converter`.
 :data:`VERSION` is the manifest version; a cached collection whose manifest carries another
 version is converted again (see :func:`ensure_pybullet_collection`).
 """
@@ -61,7 +61,7 @@ def urdf_visual_color(urdf: Path) -> tuple[float, float, float, float] | None:
     """
     import xml.etree.ElementTree as ET
 
-    from kubric.assets.converter import as_rgba
+    from kubric.asset_tools.converter import as_rgba
 
     try:
         robot = ET.parse(urdf).getroot()
@@ -88,7 +88,7 @@ def pybullet_jobs(limit: int | None = None, textured: bool = True):
     """Conversion jobs: the first ``limit`` random_urdfs (all if None) + the textured models."""
     import pybullet_data
 
-    from kubric.assets.converter import ConvertJob
+    from kubric.asset_tools.converter import ConvertJob
 
     root = Path(pybullet_data.getDataPath())
     jobs = []
@@ -119,7 +119,7 @@ def build_pybullet_collection(out_dir: str | os.PathLike, limit: int | None = No
 
     ``only``: restrict to these ids (e.g. a test subset).
     """
-    from kubric.assets.converter import convert_jobs
+    from kubric.asset_tools.converter import convert_jobs
 
     jobs = pybullet_jobs(limit=limit)
     if only is not None:

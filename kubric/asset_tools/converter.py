@@ -64,7 +64,7 @@ class ConvertJob:
     ``color``: fallback RGBA (or RGB) in [0, 1] for a mesh without a material or texture of its
     own; ``color_from`` names where it came from (the ``metadata["appearance"]`` value).
     ``repair``: a module-level function ``mesh -> (mesh, counts)`` applied after loading (e.g.
-    :func:`kubric.assets.shapenet.repair_mesh`); ``counts`` is stored as ``metadata["repairs"]``.
+    :func:`kubric.asset_tools.shapenet.repair_mesh`); ``counts`` is stored as ``metadata["repairs"]``.
     """
 
     asset_id: str
@@ -368,8 +368,8 @@ def _with_appearance(parts, fallback, color_from: str):
 
 def convert_one(job: ConvertJob, out_dir: str | os.PathLike) -> dict:
     """Convert one mesh into ``out_dir``; returns the manifest entry (raises on failure)."""
-    from kubric.assets import physics
-    from kubric.assets.writer import Collision, package_object
+    from kubric.asset_tools import physics
+    from kubric.asset_tools.writer import Collision, package_object
 
     mesh, look = load_visual(job.mesh_path, job.up, job.scale, job.color, job.color_from)
     repairs = None
@@ -419,7 +419,7 @@ def convert_jobs(jobs: list[ConvertJob], out_dir: str | os.PathLike, name: str,
     "skipped": [{"id", "source", "reason"}]}`` (also written to ``conversion_report.json``).
     ``skipped``: failures found before conversion (e.g. an unsafe zip), added to the report.
     """
-    from kubric.assets.writer import dumps, write_manifest
+    from kubric.asset_tools.writer import dumps, write_manifest
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -472,7 +472,7 @@ def convert_collection(src_dir: str | os.PathLike, out_dir: str | os.PathLike, n
     ``decomposition``: ``"auto"`` (default; own convex parts, else V-HACD), ``"vhacd"`` or
     ``"coacd"`` (optional package).
     """
-    from kubric.assets.physics import DECOMPOSITION_METHODS
+    from kubric.asset_tools.physics import DECOMPOSITION_METHODS
 
     if decomposition not in DECOMPOSITION_METHODS:
         raise ValueError(f"decomposition must be one of {list(DECOMPOSITION_METHODS)}, "

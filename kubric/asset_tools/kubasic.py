@@ -11,7 +11,7 @@ image (upstream's MOVi-C–F workers put the HDRI there). Building twice gives b
 manifests and archives.
 
 Size: every shape is **unit-sized** like upstream's KuBasic: it fits a 1 m cube (the cube itself
-spans ±0.5 m). :mod:`kubric.assets.shapes` designs the shapes at twice that size (cube ±1, the
+spans ±0.5 m). :mod:`kubric.asset_tools.shapes` designs the shapes at twice that size (cube ±1, the
 natural size of their formulas) and :func:`build_shape` scales them by :data:`SHAPE_SCALE`.
 Evidence for unit size: upstream's MOVi-A gives an object of scale ``s`` the mass ``2.7 · s³``,
 the mass of a unit-volume shape at that scale, and MOVi's scales 0.7 / 1.4 then give CLEVR's
@@ -76,8 +76,8 @@ def dome_texture_png() -> bytes:
 
 def build_shape(name: str, out_dir: str | os.PathLike) -> dict:
     """Generate, measure and package one KuBasic shape; return its manifest entry."""
-    from kubric.assets import physics, shapes
-    from kubric.assets.writer import Collision, package_object
+    from kubric.asset_tools import physics, shapes
+    from kubric.asset_tools.writer import Collision, package_object
 
     if name not in SHAPES:
         raise KeyError(f"KuBasic has no shape {name!r}; shapes: {sorted(SHAPES)}")
@@ -123,7 +123,7 @@ def build_kubasic(out_dir: str | os.PathLike, workers: int | None = None,
       shapes: a subset of :data:`SHAPES` (default: all).
     Returns the manifest path.
     """
-    from kubric.assets.writer import write_manifest
+    from kubric.asset_tools.writer import write_manifest
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)

@@ -46,10 +46,10 @@ def build_polyhaven(out_dir: str | os.PathLike, resolution: str = "2k", fmt: str
                     progress: bool = True, name: str = NAME) -> dict:
     """Download Poly Haven HDRIs into the source ``out_dir``; returns the report
     ``{"name", "total", "converted", "reused", "skipped": [{"id", "source", "reason"}]}``."""
-    from kubric.assets.converter import read_entry
+    from kubric.asset_tools.converter import read_entry
+    from kubric.asset_tools.hdri import image_size
+    from kubric.asset_tools.writer import dumps, package_texture, write_manifest
     from kubric.assets.download import DownloadError, fetch_file, get_json
-    from kubric.assets.hdri import image_size
-    from kubric.assets.writer import dumps, package_texture, write_manifest
 
     if resolution not in RESOLUTIONS:
         raise ValueError(f"resolution must be one of {list(RESOLUTIONS)}, got {resolution!r}")

@@ -17,7 +17,7 @@ server, only ``base_url`` differs.
 
 Each zip is extracted with :func:`~kubric.assets.archive.safe_extract_zip` into a scratch folder
 inside the output folder (removed at the end), checked (the OBJ exists, its texture is a
-readable image) and converted by :mod:`kubric.assets.converter` (texture kept, watertight copy,
+readable image) and converted by :mod:`kubric.asset_tools.converter` (texture kept, watertight copy,
 convex decomposition, mass and inertia at density 1). A model that fails any step is listed with
 its reason in ``conversion_report.json``; the others are converted.
 """
@@ -239,7 +239,7 @@ def build_gso(src_dir: str | os.PathLike, out_dir: str | os.PathLike,
     ``catalogue``: the saved model listing (default: ``src_dir/gso_catalogue.json`` if present).
     ``download``: first fetch the listing and the zips from ``base_url`` into ``src_dir``.
     """
-    from kubric.assets.converter import ConvertJob, convert_jobs
+    from kubric.asset_tools.converter import ConvertJob, convert_jobs
 
     src = Path(src_dir)
     errors: list = []

@@ -1,12 +1,12 @@
 """Procedural meshes of the KuBasic shapes at their design size (trimesh, z up, cube bounds ±1).
 
-The KuBasic source is unit-sized: :func:`kubric.assets.kubasic.build_shape` scales these meshes by
+The KuBasic source is unit-sized: :func:`kubric.asset_tools.kubasic.build_shape` scales these meshes by
 ``SHAPE_SCALE`` = 0.5, so every built shape fits a 1 m cube. The dome is built at its own size.
 
 Every function returns a ``trimesh.Trimesh`` built by our own code from formulas (or, for
 ``suzanne``, Blender's built-in monkey; for ``teapot``, Newell's Bezier patches; for ``spot``, the
 Stanford bunny that ships with ``pybullet_data``). Meshes are not yet centred on their centre of
-mass; :func:`kubric.assets.writer.package_object` does that.
+mass; :func:`kubric.asset_tools.writer.package_object` does that.
 """
 
 from __future__ import annotations
@@ -183,7 +183,7 @@ def sponge(level: int = 2):
 
 def teapot(n: int = 10):
     """Newell's Utah teapot: 32 Bezier patches at n×n quads each, scaled to max |coordinate| 1."""
-    from kubric.assets.teapot_data import PATCHES, POINTS
+    from kubric.asset_tools.teapot_data import PATCHES, POINTS
     trimesh = _trimesh()
     pts = np.asarray(POINTS, dtype=np.float64)
     s = np.linspace(0.0, 1.0, n + 1)

@@ -63,7 +63,7 @@ def build_hdri_source(src_dir: str | os.PathLike, out_dir: str | os.PathLike,
     ``license.txt`` next to the images, else raises (an asset must state its licence).
     Returns the manifest path.
     """
-    from kubric.assets.writer import package_texture, write_manifest
+    from kubric.asset_tools.writer import package_texture, write_manifest
 
     src = Path(src_dir)
     if not src.is_dir():
