@@ -17,21 +17,10 @@ from typing import Any
 
 import numpy as np
 
+from kubric.assets import clevr
 from kubric.core.color import Color
 from kubric.core.objects import PhysicalObject
 from kubric.core.quaternion import Quaternion
-
-#: CLEVR colours (sRGB 0–255), from the CLEVR dataset / MOVi-A.
-CLEVR_COLORS_RGB255 = {
-    "blue": (42, 75, 215), "brown": (129, 74, 25), "cyan": (41, 208, 208),
-    "gray": (87, 87, 87), "green": (29, 105, 20), "purple": (129, 38, 192),
-    "red": (173, 35, 35), "yellow": (255, 238, 5),
-}
-CLEVR_COLORS = {name: Color(*(c / 255.0 for c in rgb)) for name, rgb in CLEVR_COLORS_RGB255.items()}
-#: CLEVR object sizes (scale factor): MOVi-A uses small 0.7 and large 1.4.
-CLEVR_SIZES = {"small": 0.7, "large": 1.4}
-#: MOVi-A shapes (KuBasic asset ids).
-CLEVR_SHAPES = ("cube", "cylinder", "sphere")
 
 
 class WorkerRandomState(np.random.RandomState):
@@ -90,11 +79,11 @@ def random_hue_color(saturation: float = 1.0, value: float = 1.0, rng=None) -> C
 
 
 def random_clevr_color(rng=None) -> tuple[str, Color]:
-    """(name, Color) of a uniformly chosen CLEVR colour."""
+    """(name, Color) of a uniformly chosen CLEVR colour (:data:`kubric.assets.clevr.COLORS`)."""
     rng = _require_rng(rng, "random_clevr_color")
-    names = sorted(CLEVR_COLORS)
+    names = sorted(clevr.COLORS)
     name = names[_choice_index(rng, len(names))]
-    return name, CLEVR_COLORS[name]
+    return name, clevr.COLORS[name]
 
 
 def random_rotation(axis: str | Sequence[float] | None = None, rng=None) -> tuple[float, ...]:
@@ -227,15 +216,15 @@ def sample_color(strategy: str, rng=None) -> tuple[str | None, Color]:
 
 
 def sample_sizes(strategy: str, rng=None) -> tuple[str | None, float]:
-    """(label, scale) by strategy: ``"clevr"`` (small 0.7 / large 1.4), ``"uniform"``
-    (U(0.7, 1.4), label None) or ``"const"`` (1)."""
+    """(label, scale) by strategy: ``"clevr"`` (:data:`kubric.assets.clevr.SIZES`: small 0.7 /
+    large 1.4), ``"uniform"`` (U(small, large), label None) or ``"const"`` (1)."""
     rng = _require_rng(rng, "sample_sizes")
     if strategy == "clevr":
-        labels = list(CLEVR_SIZES)
+        labels = list(clevr.SIZES)
         label = labels[_choice_index(rng, len(labels))]
-        return label, CLEVR_SIZES[label]
+        return label, clevr.SIZES[label]
     if strategy == "uniform":
-        return None, float(_uniform(rng, 0.7, 1.4))
+        return None, float(_uniform(rng, clevr.SIZES["small"], clevr.SIZES["large"]))
     if strategy == "const":
         return None, 1.0
     raise ValueError(f"unknown size strategy {strategy!r}; allowed: clevr, uniform, const")

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 import kubric as kb
+from kubric.assets import clevr
 from kubric.pipeline import get_recipe
-from kubric.randomness import CLEVR_SIZES
 from kubric.recipes.movi_base import DYNAMIC_SPAWN_REGION
 
 
@@ -50,7 +50,7 @@ def test_movi_a_objects_have_clevr_sizes():
         _, objects = _populated(recipe, sources, seed)
         for obj in objects:
             label, size = obj.metadata["size_label"], obj.metadata["size"]
-            assert size == CLEVR_SIZES[label]
+            assert size == clevr.SIZES[label]
             # the unrotated model bounds times the scale: the object's extent in metres
             extent = np.ptp(np.asarray(obj.bounds), axis=0) * np.asarray(obj.scale)
             assert extent.max() == pytest.approx(size, rel=1e-6), (seed, obj.metadata["shape"])

@@ -7,6 +7,7 @@ import pytest
 
 import kubric as kb
 from kubric import randomness
+from kubric.assets import clevr
 
 
 def test_no_function_has_a_default_rng_object():
@@ -124,11 +125,11 @@ def test_half_sphere_shell():
 def test_upstream_sample_color_and_sizes():
     rng = np.random.RandomState(0)
     label, color = randomness.sample_color("clevr", rng)
-    assert color == randomness.CLEVR_COLORS[label]
+    assert color == clevr.COLORS[label]
     assert randomness.sample_color("uniform_hue", rng)[0] is None
     assert randomness.sample_color("gray", rng) == ("gray", kb.get_color("gray"))
     label, size = randomness.sample_sizes("clevr", rng)
-    assert randomness.CLEVR_SIZES[label] == size
+    assert clevr.SIZES[label] == size
     assert 0.7 <= randomness.sample_sizes("uniform", rng)[1] <= 1.4
     assert randomness.sample_sizes("const", rng) == (None, 1.0)
     with pytest.raises(ValueError, match="unknown size strategy 'huge'; allowed: clevr"):
@@ -136,7 +137,7 @@ def test_upstream_sample_color_and_sizes():
 
 
 def test_clevr_palette_values():
-    assert randomness.CLEVR_COLORS_RGB255["yellow"] == (255, 238, 5)
-    assert randomness.CLEVR_SIZES == {"small": 0.7, "large": 1.4}
+    assert clevr.COLORS_RGB255["yellow"] == (255, 238, 5)
+    assert clevr.SIZES == {"small": 0.7, "large": 1.4}
     name, color = randomness.random_clevr_color(rng=np.random.RandomState(0))
-    assert color == randomness.CLEVR_COLORS[name]
+    assert color == clevr.COLORS[name]

@@ -28,21 +28,24 @@ import os
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
+from kubric.assets.clevr import KUBASIC_SHAPES
+
 NAME = "KuBasic"
 VERSION = "2.1"  # 1.1: textured dome; 2.0: shapes unit-sized (were ±1 m); 2.1: manifest description
 #: factor from the shapes' design size (cube ±1) to KuBasic's unit size (cube ±0.5)
 SHAPE_SCALE = 0.5
 #: the manifest's ``description``
-DESCRIPTION = ("KuBasic: 11 unit-sized shapes (each fits a 1 m cube; the cube spans ±0.5 m, as "
-               "upstream's) and the dome (a 40 m floor and backdrop). Metres, z up, meshes centred "
-               "on their centre of mass, density 1.")
+DESCRIPTION = (f"KuBasic: {len(KUBASIC_SHAPES)} unit-sized shapes (each fits a 1 m cube; the "
+               "cube spans ±0.5 m, as upstream's) and the dome (a 40 m floor and backdrop). "
+               "Metres, z up, meshes centred on their centre of mass, density 1.")
 #: the dome's placeholder texture: DOME_TEXTURE_SIZE² pixels of this sRGB grey (0–255)
 DOME_TEXTURE_SIZE = 4
 DOME_TEXTURE_GREY = 200
 GENERATED_LICENSE = "CC0-1.0 (generated procedurally by kubric)"
 
-#: shape → (collision kind, licence, description)
-SHAPES = {
+#: how each shape is built: name → (collision kind, licence, description); the shapes are
+#: :data:`kubric.assets.clevr.KUBASIC_SHAPES` (see :data:`SHAPES`) and the ``dome``
+_BUILD = {
     "cone": ("hull", GENERATED_LICENSE, "cone, base radius 0.5 m, height 1 m"),
     "cube": ("box", GENERATED_LICENSE, "cube, edge 1 m"),
     "cylinder": ("cylinder", GENERATED_LICENSE, "cylinder, radius 0.5 m, height 1 m"),
@@ -59,6 +62,8 @@ SHAPES = {
     "dome": ("concave", GENERATED_LICENSE,
              "static floor and backdrop: disc of radius 25 m bending up into a 40 m wall"),
 }
+#: the source's assets: KuBasic's shapes (ids from :mod:`kubric.assets.clevr`) and the dome
+SHAPES = {name: _BUILD[name] for name in (*KUBASIC_SHAPES, "dome")}
 
 
 def dome_texture_png() -> bytes:

@@ -10,7 +10,8 @@
   and the deterministic archive format (``write_archive``).
 - :mod:`~kubric.assets.download` — resumable, checksum-verified HTTP downloads (stdlib only).
 - :mod:`~kubric.assets.utils` (also ``kb.assets.utils``, loaded on first access) —
-  :func:`~kubric.assets.utils.get_clevr_lights`.
+  :func:`~kubric.assets.utils.get_clevr_lights`; :mod:`~kubric.assets.clevr` — the CLEVR facts
+  (shapes, colours, sizes, materials, lamps, camera) and KuBasic's shape ids, as plain data.
 - :mod:`~kubric.assets.articulated` — multi-link URDFs added to a scene, every link rendered.
 
 The offline **build tools** (converters, mesh physics, KuBasic, the GSO / ShapeNet / Poly Haven /

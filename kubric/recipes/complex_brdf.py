@@ -21,13 +21,16 @@ import pathlib
 import numpy as np
 
 import kubric as kb
+from kubric.assets import clevr
 from kubric.pipeline import Option
 from kubric.recipes.multiview_base import MultiviewBase, open_source, orbit_positions
 
+#: metal as MOVi's (CLEVR's, :data:`kubric.assets.clevr.MATERIALS`); rubber purely Lambertian
 MATERIALS = {
-    "metal": {"metallic": 1.0, "roughness": 0.2, "ior": 2.5},
+    "metal": dict(clevr.MATERIALS["metal"].bsdf),
     "rubber": {"metallic": 0.0, "roughness": 1.0, "specular": 0.0},
 }
+#: the KuBasic shapes (:data:`kubric.assets.clevr.KUBASIC_SHAPES`) in this recipe's draw order
 SHAPES = ("cube", "cylinder", "sphere", "cone", "torus", "suzanne", "teapot", "torus_knot",
           "gear", "spot", "sponge")
 

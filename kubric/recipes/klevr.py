@@ -25,6 +25,7 @@ import pathlib
 import numpy as np
 
 import kubric as kb
+from kubric.assets import clevr
 from kubric.core import camera_geometry as geo
 from kubric.io.paths import atomic_write_bytes
 from kubric.pipeline import Option, OptionError, float_range
@@ -140,8 +141,7 @@ class Klevr(_SemanticScenes, name="klevr"):
         if not [s for s in self.shapes.split(",") if s.strip()]:
             raise OptionError(f"{self.name}: option shapes={self.shapes!r} names no shape")
         if self.kubasic_source is None:  # the built KuBasic: its shapes are known up front
-            from kubric.asset_tools.kubasic import SHAPES
-            self.check_shapes(set(SHAPES))
+            self.check_shapes(set(clevr.KUBASIC_SHAPES))
 
     def check_shapes(self, available) -> list[str]:
         names = [s.strip() for s in self.shapes.split(",") if s.strip()]

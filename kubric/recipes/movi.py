@@ -14,9 +14,9 @@
   ``camera=panning``: its look-at point moves on a line too (:func:`panning_look_at_path`).
 * F: as E with motion blur U(0, 2) frames and 512² images.
 
-Materials (A, B): metal = metallic 1, roughness 0.2, IOR 2.5, μ 0.4, e 0.3, density 2.7;
-rubber = metallic 0, roughness 0.7, specular 0.33, IOR 1.25, μ 0.8, e 0.7, density 1.1. Mass =
-the asset's mass (volume × density 1 at scale 1) × density × size³.
+Materials (A, B): CLEVR's metal and rubber (:data:`kubric.assets.clevr.MATERIALS`: BSDF,
+friction μ, restitution e, density); mass = the asset's mass (volume × density 1 at scale 1) ×
+density × size³. CLEVR's shapes, colours, sizes, lamps and camera: :mod:`kubric.assets.clevr`.
 """
 
 from __future__ import annotations
@@ -27,9 +27,9 @@ import pathlib
 import numpy as np
 
 import kubric as kb
+from kubric.assets import clevr
 from kubric.assets.utils import get_clevr_lights
 from kubric.pipeline import Option, OptionError, float_range
-from kubric.randomness import CLEVR_COLORS, CLEVR_SHAPES, CLEVR_SIZES
 from kubric.recipes import movi_schema
 from kubric.recipes.common import open_existing_source
 from kubric.recipes.movi_base import (
@@ -42,14 +42,9 @@ from kubric.recipes.movi_base import (
     place_without_overlap,
 )
 
-CLEVR_CAMERA_POSITION = (7.48113, -6.50764, 5.34367)
 #: C–F: height (m) above the floor of the viewpoint from which the dome looks up the HDRI (about
 #: an HDRI's capture height): the floor shows the HDRI's ground, the backdrop its horizon and sky.
 HDRI_PROJECTION_HEIGHT = 2.0
-MATERIALS = {
-    "metal": ({"metallic": 1.0, "roughness": 0.2, "ior": 2.5}, 0.4, 0.3, 2.7),
-    "rubber": ({"metallic": 0.0, "roughness": 0.7, "specular": 0.33, "ior": 1.25}, 0.8, 0.7, 1.1),
-}
 
 
 def add_clevr_lights(scene, rng, jitter: float = 1.0) -> list:
@@ -95,8 +90,8 @@ class _ClevrLike(MoviBase):
         for _ in range(rng.randint(self.min_num_objects, self.max_num_objects + 1)):
             shape = _choice(rng, shapes)
             size_label, size, color_label, color = self.sample_look(rng)
-            material_name = _choice(rng, sorted(MATERIALS))
-            params, friction, restitution, density = MATERIALS[material_name]
+            material_name = _choice(rng, sorted(clevr.MATERIALS))
+            params, friction, restitution, density = clevr.MATERIALS[material_name]
             obj = sources["kubasic"].create(shape, scale=size, friction=friction,
                                             restitution=restitution)
             obj.mass = obj.mass * density * size ** 3
@@ -116,15 +111,15 @@ class MoviA(_ClevrLike, name="movi_a"):
     schema = movi_schema.MOVI_A
 
     def shape_ids(self, sources):
-        missing = [s for s in CLEVR_SHAPES if s not in sources["kubasic"]]
+        missing = [s for s in clevr.SHAPES if s not in sources["kubasic"]]
         if missing:
             raise OptionError(f"{self.name}: the KuBasic source lacks {missing}")
-        return list(CLEVR_SHAPES)
+        return list(clevr.SHAPES)
 
     def sample_look(self, rng):
-        size_label = _choice(rng, sorted(CLEVR_SIZES))
-        color_label = _choice(rng, sorted(CLEVR_COLORS))
-        return size_label, CLEVR_SIZES[size_label], color_label, CLEVR_COLORS[color_label]
+        size_label = _choice(rng, sorted(clevr.SIZES))
+        color_label = _choice(rng, sorted(clevr.COLORS))
+        return size_label, clevr.SIZES[size_label], color_label, clevr.COLORS[color_label]
 
     def build_background(self, scene, rng, sources):
         floor = kb.get_color("gray")
@@ -135,7 +130,7 @@ class MoviA(_ClevrLike, name="movi_a"):
 
     def build_camera(self, scene, rng):
         camera = new_camera()
-        camera.position = np.asarray(CLEVR_CAMERA_POSITION) + rng.rand(3)
+        camera.position = np.asarray(clevr.CAMERA_POSITION) + rng.rand(3)
         camera.look_at((0.0, 0.0, 0.0))
         scene.camera = camera
 
@@ -145,7 +140,8 @@ class MoviB(_ClevrLike, name="movi_b"):
 
     schema = movi_schema.MOVI_B
 
-    size_range = Option((0.7, 1.4), "object scale range low,high", type=float_range, low=0.01, limit=100.0)
+    size_range = Option((clevr.SIZES["small"], clevr.SIZES["large"]), "object scale range low,high",
+                        type=float_range, low=0.01, limit=100.0)
 
     def sample_look(self, rng):
         size = float(rng.uniform(*self.size_range))

@@ -10,6 +10,7 @@ declare); here they are sequences of PNG images, which decode to the same arrays
 
 from __future__ import annotations
 
+from kubric.assets import clevr
 from kubric.io.schema import Feature, Schema, register_schema
 
 F = Feature
@@ -102,16 +103,17 @@ MOVI_BASE = Schema("movi", (
       doc="surface point in the object's box, [0, 1]³ · 65535"),
 ), description="Shared by MOVi-A … F.")
 
-SHAPES_B = ("cube", "cylinder", "sphere", "cone", "torus", "gear", "torus_knot", "sponge", "spot",
-            "teapot", "suzanne")
-COLORS = ("blue", "brown", "cyan", "gray", "green", "purple", "red", "yellow")
-MATERIALS = ("metal", "rubber")
+#: class names (label order) of the CLEVR / KuBasic features, from :mod:`kubric.assets.clevr`
+SHAPES_B = clevr.KUBASIC_SHAPES
+COLORS = tuple(clevr.COLORS)
+MATERIALS = tuple(clevr.MATERIALS)
 
 MOVI_A = register_schema(MOVI_BASE.extend("movi_a", (
     F("instances/shape_label", "int64", (), "instance:shape", "class_label",
-      names=("cube", "cylinder", "sphere"), doc="CLEVR shape"),
+      names=clevr.SHAPES, doc="CLEVR shape"),
     F("instances/size_label", "int64", (), "instance:size_label", "class_label",
-      names=("small", "large"), doc="CLEVR size: scale 0.7 (small) or 1.4 (large)"),
+      names=tuple(clevr.SIZES), doc=f"CLEVR size: scale {clevr.SIZES['small']} (small) or "
+      f"{clevr.SIZES['large']} (large)"),
     F("instances/color", "float32", (3,), "instance:color", doc="linear RGB"),
     F("instances/color_label", "int64", (), "instance:color_label", "class_label", names=COLORS,
       doc="CLEVR colour name"),
