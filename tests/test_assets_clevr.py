@@ -84,3 +84,18 @@ def test_no_other_module_restates_the_facts():
         text = path.read_text()
         offenders += [f"{path.relative_to(PACKAGE)}: {p}" for p in pats if re.search(p, text)]
     assert offenders == []
+
+
+def test_docs_list_the_facts_as_the_module_defines_them():
+    page = (PACKAGE.parent / "docs" / "assets.md").read_text()
+    for name, rgb in clevr.COLORS_RGB255.items():
+        assert f"| {name} | {', '.join(map(str, rgb))} |" in page, name
+    for name, m in clevr.MATERIALS.items():
+        assert re.search(rf"\| {name} \| [^|]+ \| {m.friction:g} \| {m.restitution:g} \| "
+                         rf"{m.density:g} \|", page), name
+        row = page[page.index(f"| {name} |"):].splitlines()[0]
+        for key, value in m.bsdf.items():
+            label = "IOR" if key == "ior" else key
+            assert f"{label} {value:g}" in row, (name, key)
+    for label, scale in clevr.SIZES.items():
+        assert f"`{label}` {scale:g}" in page, label

@@ -14,9 +14,10 @@
   ``camera=panning``: its look-at point moves on a line too (:func:`panning_look_at_path`).
 * F: as E with motion blur U(0, 2) frames and 512² images.
 
-Materials (A, B): CLEVR's metal and rubber (:data:`kubric.assets.clevr.MATERIALS`: BSDF,
-friction μ, restitution e, density); mass = the asset's mass (volume × density 1 at scale 1) ×
-density × size³. CLEVR's shapes, colours, sizes, lamps and camera: :mod:`kubric.assets.clevr`.
+Materials (A, B): CLEVR's metal and rubber (BSDF, friction μ, restitution e, density); mass =
+the asset's mass (volume × density 1 at scale 1) × density × size³. The CLEVR values (shapes,
+colours, sizes, materials, lamps, camera) are defined once, in :mod:`kubric.assets.clevr`, and
+listed in docs/assets.md ("CLEVR facts").
 """
 
 from __future__ import annotations
