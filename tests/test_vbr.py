@@ -16,7 +16,6 @@ from PIL import Image
 from kubric.io.layers import read_image_dict
 from kubric.io.pfm_io import read_pfm
 
-pytestmark = pytest.mark.blender
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 SMALL = ("resolution=56", "num_frames=4", "samples=4", "denoise=false", "camera_distance=3,3.5")
 
@@ -114,6 +113,7 @@ def _label_edges(seg):
                    for dr, dc in ((0, 1), (1, 0), (0, -1), (-1, 0))], axis=0)
 
 
+@pytest.mark.blender
 @pytest.mark.parametrize("kind", ["articulated", "rigid"])
 def test_lasr_flow_is_the_scene_flow_and_occlusion_matches_depth_reprojection(scenes, kind):
     meta, layers, seq, folder = _load(scenes[kind])
@@ -150,6 +150,7 @@ def test_lasr_flow_is_the_scene_flow_and_occlusion_matches_depth_reprojection(sc
     assert ratio[0] > 0.94 and ratio[1] > 0.98, ratio
 
 
+@pytest.mark.blender
 def test_silhouettes_images_and_config(scenes):
     for scene_dir in scenes.values():
         meta, layers, seq, folder = _load(scene_dir)
@@ -178,6 +179,7 @@ def _project(rtk, points):
                      rtk[3, 1] * cam[..., 1] / cam[..., 2] + rtk[3, 3]], -1)
 
 
+@pytest.mark.blender
 @pytest.mark.parametrize("kind", ["articulated", "rigid"])
 def test_camera_files_reproduce_the_pixels_of_the_objects_surface(scenes, kind):
     """A pixel's surface point (its ray walked by the depth layer), expressed in the root
@@ -201,6 +203,7 @@ def test_camera_files_reproduce_the_pixels_of_the_objects_surface(scenes, kind):
                                             world), want, atol=2e-3)
 
 
+@pytest.mark.blender
 def test_articulated_links_lie_inside_their_projected_urdf_boxes(scenes):
     """The r2d2 links' silhouettes lie inside the projection (through the exported base camera
     composed with the link's pose relative to the base) of their URDF meshes' boxes."""
@@ -234,8 +237,25 @@ def test_articulated_links_lie_inside_their_projected_urdf_boxes(scenes):
     assert checked >= 12
 
 
+@pytest.mark.blender
 def test_every_written_field_is_documented(scenes):
     from kubric.docgen import undocumented_scene_fields
 
     for scene_dir in scenes.values():
         assert undocumented_scene_fields(scene_dir) == []
+
+
+def test_bad_urdf_files_are_refused_before_anything_runs(tmp_path):
+    from kubric.pipeline import OptionError, get_recipe
+
+    vbr = get_recipe("vbr")
+    (tmp_path / "novis.urdf").write_text('<robot name="x"><link name="a"/></robot>')
+    (tmp_path / "broken.urdf").write_text("<robot")
+    (tmp_path / "mesh.obj").write_text("v 0 0 0\n")
+    for name, needle in (("novis.urdf", "no link has a <visual>"),
+                         ("broken.urdf", "not readable XML"), ("mesh.obj", "not a .urdf file")):
+        with pytest.raises(OptionError, match=needle) as err:
+            vbr(urdf_file=tmp_path / name)
+        assert "\n" not in str(err.value) and "urdf_file" in str(err.value)
+    with pytest.raises(OptionError, match="step_rate"):
+        vbr(frame_rate=7)

@@ -57,9 +57,10 @@ def unit_vector(rng) -> np.ndarray:
 
 
 class Vbr(Recipe, name="vbr"):
-    """Video-based reconstruction (LASR): one rigid or articulated object moving and spinning
-    for 30 frames; RGB, silhouette, flow with occlusion and a camera per frame, in our format and
-    as a LASR sequence (lasr/)."""
+    """Video-based reconstruction (LASR): a rigid or articulated object moves and spins for 30 frames.
+
+    RGB, silhouette, flow with occlusion and a camera per frame, in our format and as a LASR
+    sequence (lasr/)."""
 
     resolution = Option((256, 256), "(width, height) in pixels: N or WxH", type=resolution)
     num_frames = Option(30, "rendered frames (files 0 .. num_frames-1)", low=2, limit=10000)
@@ -101,8 +102,17 @@ class Vbr(Recipe, name="vbr"):
                               f"of frame_rate={self.frame_rate}")
         check_source_options(self)
         path = self.urdf_file
-        if path is not None and not (path.is_file() and path.suffix.lower() == ".urdf"):
-            raise OptionError(f"{self.name}: option urdf_file={str(path)!r} is not a .urdf file")
+        if path is not None:
+            from kubric.assets.articulated import link_visuals
+            where = f"{self.name}: option urdf_file={str(path)!r}"
+            if not (path.is_file() and path.suffix.lower() == ".urdf"):
+                raise OptionError(f"{where} is not a .urdf file")
+            try:
+                visuals = link_visuals(path)
+            except (ValueError, OSError) as err:
+                raise OptionError(f"{where}: {' '.join(str(err).split())[:200]}") from None
+            if not visuals:
+                raise OptionError(f"{where}: no link has a <visual> to render")
 
     def prepare(self) -> None:
         self.open_sources()
