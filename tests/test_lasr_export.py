@@ -181,3 +181,15 @@ def test_export_refuses_bad_instances_and_ambiguous_roots(tmp_path):
     lx.export_lasr(tmp_path / "scene", tmp_path / "d", instances=[1])  # one instance: its root
     assert json.loads((tmp_path / "d" / "export.json").read_text())["root_instance"] == 1
     assert not any(p.name.startswith(".") for p in tmp_path.iterdir())
+
+
+def test_command_line(tmp_path, capsys):
+    _synthetic_scene(tmp_path / "scene")
+    assert lx.main([str(tmp_path / "scene"), "--out", str(tmp_path / "o"), "--instances", "0,1",
+                    "--sequence", "clip"]) == 0
+    assert "wrote LASR sequence clip (3 frames)" in capsys.readouterr().out
+    assert (tmp_path / "o" / "configs" / "clip.config").is_file()
+    assert lx.main([str(tmp_path / "scene"), "--out", str(tmp_path / "o")]) == 2
+    assert lx.main([str(tmp_path / "nowhere"), "--out", str(tmp_path / "p")]) == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 2 and all(line.startswith("lasr_export: error: ") for line in lines)
