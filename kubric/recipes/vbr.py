@@ -23,9 +23,11 @@ asset or URDF model), ``lasr_sequence``; instance extras ``color``, ``size``, an
 articulated parts ``urdf`` / ``articulated_links`` (base) or ``articulated_link`` /
 ``articulated_base`` (other links).
 
-Random draws per seed, in order: background hue, lamp jitter, object type (``random``), shape or
-model, colour, orientation, speed, direction, spin, spin axis, camera distance, elevation,
-azimuth.
+Random draws per seed, in order: background hue, lamp jitter, object type, shape or model (both
+drawn even when an option fixes them, so the later draws do not shift), colour, orientation,
+speed, direction, spin, spin axis, camera distance, elevation, azimuth. Size: the PFM flow and
+occlusion files are uncompressed float32, 16 bytes per pixel per flow direction and frame
+(``lasr/`` of a default scene: 60 MB; ``lasr_export=false`` leaves it out).
 """
 
 from __future__ import annotations
