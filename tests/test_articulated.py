@@ -36,6 +36,9 @@ def fallen(tmp_path_factory):
 def test_every_link_falls_with_the_base_and_wheels_reach_the_floor(fallen):
     scene, base, links = fallen
     assert len(links) == 15  # 16 links with visuals; the base link is the object itself
+    meshes = link_visuals(URDF)
+    for name, obj in [("base_link", base), *links.items()]:  # bounds: the link's visuals
+        np.testing.assert_allclose(obj.bounds, meshes[name].bounds, atol=1e-9)
     drop = base.get_value_at("position", 0)[2] - base.get_value_at("position", FRAME)[2]
     assert drop > 0.4
     for name, obj in links.items():

@@ -134,18 +134,20 @@ def add_articulated(scene, simulator, urdf: str | os.PathLike, mesh_dir: str | o
 
     urdf = Path(urdf).resolve()
     meshes = export_link_meshes(urdf, mesh_dir)
+    bounds = {link: mesh.bounds for link, mesh in link_visuals(urdf).items()}  # link frames
     base_link = root_link(urdf)
-    base = FileBasedObject(name=name, simulation_filename=str(urdf),
-                           render_filename=str(meshes[base_link]) if base_link in meshes
-                           else None, **base_kwargs)
+    if base_link in meshes:
+        base_kwargs = {"render_filename": str(meshes[base_link]),
+                       "bounds": bounds[base_link], **base_kwargs}
+    base = FileBasedObject(name=name, simulation_filename=str(urdf), **base_kwargs)
     scene.add(base)
     links = {}
     for link, path in meshes.items():
         if link == base_link:
             continue
         obj = FileBasedObject(name=f"{name}_{link}", render_filename=str(path),
-                              scale=base.scale, metadata={"articulated_link": link,
-                                                          "articulated_base": name})
+                              bounds=bounds[link], scale=base.scale,
+                              metadata={"articulated_link": link, "articulated_base": name})
         scene.add(obj)
         links[link] = obj
     simulator.attach_links(base, links)

@@ -13,6 +13,13 @@
 * E: as D with a camera moving on a straight line (start in the shell [8, 12], length U(0, 4)).
   ``camera=panning``: its look-at point moves on a line too (:func:`panning_look_at_path`).
 * F: as E with motion blur U(0, 2) frames and 512² images.
+* C–F, ``articulated_objects=N`` (default 0): N multi-link URDF models of ``pybullet_data``
+  (``articulated_models``; :mod:`kubric.recipes.articulated_models`) join the dynamic objects,
+  sized, placed and thrown as they are; every link is simulated (passive joints) and is an
+  instance with its own segmentation label (metadata ``articulated_link`` / ``articulated_base``,
+  the base ``urdf`` / ``articulated_links``). At 0 the scene is byte for byte what it was
+  without the option (no random draw, no flag). Not in A / B: their schemas label every
+  instance with a CLEVR / KuBasic shape.
 
 Materials (A, B): CLEVR's metal and rubber (BSDF, friction μ, restitution e, density); mass =
 the asset's mass (volume × density 1 at scale 1) × density × size³. The CLEVR values (shapes,
@@ -32,6 +39,7 @@ from kubric.assets import clevr
 from kubric.assets.utils import get_clevr_lights
 from kubric.pipeline import Option, OptionError, float_range
 from kubric.recipes import movi_schema
+from kubric.recipes.articulated_models import MODELS, add_model, model_list
 from kubric.recipes.common import open_existing_source
 from kubric.recipes.movi_base import (
     CAMERA_MIN_HEIGHT,
@@ -179,6 +187,22 @@ class MoviC(MoviBase, name="movi_c"):
                                "split is made over the whole source first", type=category_list)
     floor_shadows = Option(True, "the HDRI floor receives the objects' shadows "
                            "(FlatMaterial.catch_shadows); false = unlit floor, faster")
+    articulated_objects = Option(0, "multi-link URDF models (pybullet_data) added as dynamic "
+                                 "objects, every link an instance (0 = none: the scene is as "
+                                 "without this option)", low=0, high=20)
+    articulated_models = Option(tuple(MODELS), "the models the articulated objects are drawn "
+                                "from (comma-separated)", type=model_list)
+
+    #: left out of ``flags`` while ``articulated_objects`` is 0, so that a scene made without
+    #: articulated objects is byte for byte the scene made before these options existed
+    ARTICULATED_OPTIONS = ("articulated_objects", "articulated_models")
+
+    def flags(self, seed: int) -> dict:
+        out = super().flags(seed)
+        if not self.articulated_objects:
+            for name in self.ARTICULATED_OPTIONS:
+                out.pop(name)
+        return out
 
     def open_sources(self):
         from kubric import assets
@@ -233,6 +257,27 @@ class MoviC(MoviBase, name="movi_c"):
     def add_objects(self, scene, simulator, rng, sources):
         for _ in range(rng.randint(self.min_num_objects, self.max_num_objects + 1)):
             self.new_object(scene, simulator, rng, sources, DYNAMIC_SPAWN_REGION, True)
+        self.add_articulated_objects(scene, simulator, rng)
+
+    def add_articulated_objects(self, scene, simulator, rng) -> None:
+        """``articulated_objects`` dynamic multi-link models (no random draw when 0): model,
+        largest rest-pose extent U(``size_range``), colour; placed and thrown as the others.
+        Each part's metadata: ``scale`` (that extent), ``is_dynamic``, ``color`` and the link
+        names (:mod:`kubric.recipes.articulated_models`)."""
+        for k in range(self.articulated_objects):
+            model = _choice(rng, self.articulated_models)
+            size = float(rng.uniform(*self.size_range))
+            name = f"articulated_{k}"
+            base, links, _ = add_model(scene, simulator, model, size, kb.random_hue_color(rng=rng),
+                                       simulator.scratch_dir / name, name, friction=0.5,
+                                       restitution=0.5)
+            for part in (base, *links.values()):
+                part.metadata = {**part.metadata, "scale": size, "is_dynamic": True}
+            if place_without_overlap(base, simulator, DYNAMIC_SPAWN_REGION, rng):
+                self.initial_velocity(base, rng)
+            else:  # the base was removed (and counted): its links go with it
+                for link in links.values():
+                    scene.remove(link)
 
 
 class MoviD(MoviC, name="movi_d"):
@@ -261,6 +306,7 @@ class MoviD(MoviC, name="movi_d"):
             obj.friction, obj.restitution = 0.5, 0.5
         for _ in range(rng.randint(self.min_num_dynamic, self.max_num_dynamic + 1)):
             self.new_object(scene, simulator, rng, sources, DYNAMIC_SPAWN_REGION, True)
+        self.add_articulated_objects(scene, simulator, rng)
 
 
 def linear_camera_path(rng, inner: float, outer: float, max_length: float):
