@@ -4,6 +4,10 @@
   and counted. A complete scene that cannot be read (unreadable PNG, missing layer, a field off
   the schema) is reported by path and skipped; the rest are packed.
 * The recipe schema comes from the scenes' ``metadata.json`` (``flags.recipe``) unless given.
+* A class label whose names come from the scenes (:data:`~kubric.io.schema.NAMES_FROM_SCENES`,
+  e.g. ``svr``'s ``instances/category``) gets the sorted distinct values of its source over all
+  complete scenes, found before anything is written; the dataset stores them (``features.json``,
+  ``kubric_dataset.json``), so a label's id is its index in that sorted list.
 * Each scene's split is a fixed function of its seed (:func:`~kubric.datasets.layout.split_of`);
   within a split, examples are in scene-name order; serialisation is deterministic, so packing
   the same scenes again gives byte-identical shards.
@@ -27,7 +31,7 @@ from kubric.datasets import layout
 from kubric.datasets.layout import DatasetError
 from kubric.datasets.scene_reader import SceneError, SceneReader, is_complete
 from kubric.io.json_io import read_json, write_json
-from kubric.io.schema import Schema, get_schema
+from kubric.io.schema import Schema, SchemaError, get_schema
 
 PROGRESS_FILE = "progress.json"
 DEFAULT_SPLITS = "train=0.9,validation=0.1"
@@ -130,6 +134,29 @@ def _schema_and_dims(complete: list[pathlib.Path], schema) -> tuple[Schema, dict
     raise DatasetError(f"no complete scene has a readable metadata.json (first: {errors[0]})")
 
 
+def resolve_names(schema: Schema, scenes: list[pathlib.Path]) -> Schema:
+    """``schema`` with every :data:`~kubric.io.schema.NAMES_FROM_SCENES` class label given the
+    sorted distinct values (as text) its source holds in ``scenes``. A scene whose metadata
+    cannot be read is left out here (the packer reports it as corrupt)."""
+    collect = [f for f in schema.features if f.names_from_scenes]
+    if not collect:
+        return schema
+    found: dict[str, set[str]] = {f.name: set() for f in collect}
+    for scene in scenes:
+        reader = SceneReader(scene, schema)
+        for f in collect:
+            try:
+                values = reader.raw_values(f)
+            except (SceneError, SchemaError, OSError, ValueError):
+                continue
+            found[f.name].update(str(v) for v in values)
+    empty = sorted(name for name, values in found.items() if not values)
+    if empty:
+        raise DatasetError(f"no complete scene holds a value of {empty}, so their class-label "
+                           "names cannot be collected")
+    return schema.with_names({name: sorted(values) for name, values in found.items()})
+
+
 def _check_out(out: pathlib.Path, overwrite: bool) -> None:
     if out.exists() and not out.is_dir():
         raise DatasetError(f"--out {str(out)!r} exists and is not a directory")
@@ -164,6 +191,7 @@ def pack(scenes_dir, out, name: str | None = None, splits=DEFAULT_SPLITS, worker
         raise DatasetError(f"{str(scenes_dir)!r} holds no complete scene directory (with "
                            f"_SUCCESS); {incomplete} incomplete")
     schema, dims = _schema_and_dims(complete, schema)
+    schema = resolve_names(schema, complete)
     name = name or schema.name
     if not layout.NAME_PATTERN.match(name):
         raise DatasetError(f"--name {name!r} must be a lower-case identifier (letters, digits, _)")
@@ -177,6 +205,7 @@ def pack(scenes_dir, out, name: str | None = None, splits=DEFAULT_SPLITS, worker
 
     plan = {"schema": schema.name, "name": name, "splits": split_fractions, "dims": dims,
             "examples_per_shard": examples_per_shard, "format_version": layout.FORMAT_VERSION,
+            "class_names": {f.name: f.names for f in schema.features if f.names},
             "scenes": {s: [p.name for p in v] for s, v in assignment.items()}}
     plan_key = hashlib.sha256(repr(sorted(plan.items())).encode()).hexdigest()
     work = out.parent / f".{out.name}.incomplete"
