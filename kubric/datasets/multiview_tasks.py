@@ -27,7 +27,8 @@ Camera conventions (both tasks):
   k = ``semantic_classes[k]``) plus ``semantic_classes`` (list of names) — KLEVR / ToyBox —,
   ``alpha`` (V, H, W) uint8 (svr), ``normal`` (V, H, W, 3) float32 in [−1, 1] (world frame),
   ``object_coordinates`` (V, H, W, 3) float32 in [0, 1];
-* options: ``split`` (``"train"``, ``"val"`` or ``"test"``: only its views) and ``layers``.
+* options: ``view_split`` (``"train"``, ``"val"`` or ``"test"``: only the views of that split
+  of the scene's ``split_ratio``; the dataset split is ``load``'s ``split``) and ``layers``.
 
 ``svr`` — one item per (scene, view) of an ``svr`` dataset:
 
@@ -94,26 +95,32 @@ def _layers(schema, options: dict) -> list[str]:
     return layers
 
 
+def _check_view_split(view_split) -> None:
+    if view_split is not None and view_split not in SPLIT_NAMES:
+        raise DatasetError(f"task 'multiview': view_split {view_split!r} is not one of "
+                           f"{SPLIT_NAMES} (or None for every view)")
+
+
 def _multiview_features(schema, options: dict) -> tuple[str, ...]:
+    """The optional layers to decode; checks the options when the source is made."""
+    _check_view_split(options.get("view_split"))
     return tuple(MULTIVIEW_LAYERS[name][0] for name in _layers(schema, options))
 
 
-def _views(example: dict, split) -> np.ndarray:
+def _views(example: dict, view_split) -> np.ndarray:
     splits = np.asarray(example["views"]["split"])
-    if split is None:
+    if view_split is None:
         return np.arange(len(splits))
-    if split not in SPLIT_NAMES:
-        raise DatasetError(f"task 'multiview': split {split!r} is not one of {SPLIT_NAMES} "
-                           "(or None for every view)")
-    return np.flatnonzero(splits == SPLIT_NAMES.index(split))
+    _check_view_split(view_split)
+    return np.flatnonzero(splits == SPLIT_NAMES.index(view_split))
 
 
 @register_task("multiview", features=("video", "camera", "views", "metadata"),
-               options=("split", "layers"), requires=_CAMERA,
+               options=("view_split", "layers"), requires=_CAMERA,
                extra_features=_multiview_features, wants_schema=True)
-def multiview_task(example, frame, schema, split=None, layers=None):
+def multiview_task(example, frame, schema, view_split=None, layers=None):
     """All views of a scene (or one split's): images, cameras, optional layers."""
-    views = _views(example, split)
+    views = _views(example, view_split)
     camera = example["camera"]
     to_world = camera["matrices_world"][views]
     item = {"scene_name": example["metadata"]["video_name"], "views": views.astype(np.int32),
