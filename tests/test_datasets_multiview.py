@@ -1,4 +1,5 @@
-"""Multi-view datasets end to end: `kubric generate` klevr, svr and texture_nerf at tiny settings →
+"""Multi-view datasets end to end: `kubric generate` klevr, svr, texture_nerf and complex_brdf at
+tiny settings →
 `kubric pack --verify` → the `multiview`, `svr` and `nerf_rays` tasks, every value checked
 against the scene directories read independently (PNG / TIFF files, metadata.json, the NeRF
 transforms files, the asset source's manifest). PyTorch adapter, no TensorFlow, one-line errors.
@@ -25,6 +26,7 @@ RUNS = {
     "klevr": (3, TINY + ["min_num_objects=3", "max_num_objects=4"]),
     "svr": (4, TINY + ["object_categories=boxy,round,kitchen"]),
     "texture_nerf": (2, TINY + ["num_objects=6", "texture_size=64", "band_range=-1,1.2"]),
+    "complex_brdf": (2, TINY),
 }
 CATEGORIES = {"cube": "boxy", "sponge": "boxy", "sphere": "round", "cylinder": "round",
               "torus": "round", "teapot": "kitchen"}
@@ -203,6 +205,23 @@ def test_nerf_rays_on_multiview_scenes_equal_the_transforms_files(packed):
     meta = json.loads((scene / "metadata.json").read_text())
     assert np.array_equal(example["metadata"]["bands"],
                           np.array(meta["metadata"]["bands"], np.float32))
+
+
+def test_complex_brdf_example_equals_its_metadata(packed):
+    scenes, dataset = packed["complex_brdf"]
+    source = load(dataset, "train")
+    for index, name in enumerate(source.scenes):
+        example = source[index]
+        meta = json.loads((scenes / name / "metadata.json").read_text())
+        (instance,) = meta["instances"]
+        assert ("metal", "rubber")[example["instances"]["material"][0]] == instance["material"]
+        assert np.array_equal(example["instances"]["color"][0],
+                              np.array(instance["color"], np.float32))
+        assert np.array_equal(example["metadata"]["lights"],
+                              np.array(meta["metadata"]["lights"], np.float32))
+        assert np.array_equal(example["views"]["split"],
+                              [nerf_export.SPLITS.index(v["split"]) for v in meta["metadata"]["views"]])
+        assert example["metadata"]["background"] == "black"
 
 
 def test_torch_adapter_for_the_new_tasks(packed):
