@@ -299,3 +299,21 @@ def test_datasets_info_and_schema_describe_multiview(packed):
         proc = kubric_cli("datasets", "schema", recipe)
         assert proc.returncode == 0 and f"### `{recipe}`" in proc.stdout, proc.stderr
     assert "| `semantic_segmentations` |" in kubric_cli("datasets", "schema", "klevr").stdout
+
+
+def test_docs_snippets_run(packed):
+    """The `multiview` and `svr` snippets of docs/datasets.md run on the packed datasets."""
+    text = (ROOT / "docs" / "datasets.md").read_text()
+    blocks = {}
+    for title in ("### `multiview`", "### `svr`"):
+        section = text.split(title, 1)[1]
+        blocks[title] = section.split("```python\n", 1)[1].split("```", 1)[0]
+    scope = {}
+    code = blocks["### `multiview`"].replace('"klevr_dataset"', repr(str(packed["klevr"][1])))
+    exec(compile(code, "docs/datasets.md multiview", "exec"), scope)
+    assert scope["item"]["images"].shape == (2, H, W, 3)  # the train views of split_ratio 2,1,1
+    code = blocks["### `svr`"].replace('"svr_dataset"', repr(str(packed["svr"][1])))
+    exec(compile(code, "docs/datasets.md svr", "exec"), scope)
+    batch = next(iter(scope["loader"]))
+    assert tuple(batch["image"].shape) == (4 * VIEWS, H, W, 4)
+
