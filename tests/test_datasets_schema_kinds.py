@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from kubric.datasets import DatasetError, load, pack
-from kubric.datasets.packer import resolve_names
+from kubric.datasets.packer import read_class_names, resolve_names
 from kubric.io import png_io, tiff_io
 from kubric.io.scene_writer import write_scene
 from kubric.io.schema import NAMES_FROM_SCENES, Feature, Schema, SchemaError, register_schema
@@ -98,3 +98,39 @@ def test_bad_declarations_and_values_are_one_line(tmp_path):
     with pytest.raises(DatasetError, match=r"no complete scene holds a value of "
                        r"\['instances/category'\]"):
         resolve_names(TOY, [scenes / "scene_00000000"])
+
+
+def test_given_class_names_keep_ids_stable_across_datasets(tmp_path):
+    """A second dataset packed with the first one's labels file shares its category ids, even
+    when its scenes hold fewer categories."""
+    first, second = tmp_path / "first", tmp_path / "second"
+    for seed in range(5):
+        run_scene(ToyKinds(), seed, first)
+    for seed in (6, 9):  # seed % 3 == 0: no instances; 7 would add two categories
+        run_scene(ToyKinds(), seed, second)
+    run_scene(ToyKinds(), 10, second)  # one instance: CATEGORIES[10 % 3] = "chair"
+    pack(first, tmp_path / "a", splits="train=1", progress=False)
+    labels = tmp_path / "a" / "instances-category.labels.txt"
+    assert labels.read_text().split() == ["bowl", "chair", "mug"]
+    given = read_class_names([f"instances/category={labels}"])
+    pack(second, tmp_path / "b", splits="train=1", progress=False, class_names=given,
+         verify=True)
+    source = load(tmp_path / "b", "train")
+    assert source.schema["instances/category"].names == ("bowl", "chair", "mug")
+    (with_instance,) = [i for i, s in enumerate(source.scenes) if s.endswith("10")]
+    assert list(source[with_instance]["instances"]["category"]) == [1]
+    # collected from these scenes alone, "chair" would have been id 0
+    assert resolve_names(TOY, [second / "scene_00000010"])["instances/category"].names == \
+        ("chair",)
+    with pytest.raises(DatasetError, match=r"the scenes hold 'instances/category' values "
+                       r"\['bowl', 'chair', 'mug'\], which the given class names \['lamp'\] lack"):
+        pack(first, tmp_path / "c", splits="train=1", progress=False,
+             class_names={"instances/category": ["lamp"]})
+    with pytest.raises(DatasetError, match=r"class names given for \['video'\], which are not"):
+        pack(first, tmp_path / "c", splits="train=1", progress=False,
+             class_names={"video": ["x"]})
+    with pytest.raises(DatasetError, match=r"--class-names 'instances/category' is not "
+                       r"FEATURE=FILE"):
+        read_class_names(["instances/category"])
+    assert not (tmp_path / "c").exists()
+
