@@ -62,6 +62,10 @@ def packed(tmp_path_factory):
         assert f"verified: every example equals its scene directory ({count} examples)" in \
             proc.stdout
         out[recipe] = (scenes, dataset)
+    proc = kubric_cli("pack", out["klevr"][0], "--out", root / "klevr_points", "--schema",
+                      "klevr_points", "--splits", "train=1", "--verify", "--no-progress")
+    assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-2000:]
+    out["klevr_points"] = (out["klevr"][0], root / "klevr_points")
     out["manifest"] = json.loads((source / "manifest.json").read_text())
     return out
 
@@ -141,6 +145,19 @@ def test_multiview_task_equals_the_klevr_scene_directories(packed):
     assert "depth" not in train and train["normal"].shape == (len(val_views), H, W, 3)
     normal = png_io.read_png(scene / f"normal_{val_views[0]:05d}.png")
     assert np.array_equal(train["normal"][0], normal.astype(np.float32) / 65535.0 * 2.0 - 1.0)
+
+
+def test_klevr_points_schema_packs_the_point_cloud(packed):
+    scenes, dataset = packed["klevr_points"]
+    source = load(dataset, "train")
+    for index, name in enumerate(source.scenes):
+        points = source[index]["points"]
+        with np.load(scenes / name / "points.npz") as stored:
+            assert set(points) == set(stored.files)
+            for key in stored.files:
+                assert points[key].dtype == stored[key].dtype, key
+                assert np.array_equal(points[key], stored[key]), key
+        assert len(points["xyz"]) == VIEWS * H * W  # the dome fills every pixel
 
 
 def test_svr_task_image_category_camera_pose(packed):

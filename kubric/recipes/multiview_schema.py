@@ -164,6 +164,25 @@ SVR = _register("svr", (
 ), description="Single-view reconstruction / pre-training: one object, random views, "
                "transparent background.")
 
+#: The labelled point cloud of KLEVR / ToyBox (``points.npz``, written unless
+#: ``write_points=false``): pack with ``kubric pack DIR --schema klevr_points`` (or
+#: ``toybox_points``) to add these features.
+POINT_FEATURES = (
+    F("points/xyz", "float32", ("P", 3), "npz:points.npz:xyz", unit="m",
+      doc="surface point of every pixel that sees a surface, world frame"),
+    F("points/rgb", "uint8", ("P", 3), "npz:points.npz:rgb", doc="its RGB"),
+    F("points/class", "uint16", ("P",), "npz:points.npz:class",
+      doc="its semantic class (index in metadata/semantic_classes)"),
+    F("points/instance", "uint16", ("P",), "npz:points.npz:instance",
+      doc="its segmentation label (0 = background, k = instances[k − 1])"),
+    F("points/view", "uint16", ("P",), "npz:points.npz:view", doc="the view it was seen in"),
+    F("points/pixel", "uint16", ("P", 2), "npz:points.npz:pixel", unit="px",
+      doc="(row, col) of its pixel in that view"),
+)
+POINT_SCHEMAS = {s.name: register_schema(s.extend(
+    f"{s.name}_points", POINT_FEATURES, description=f"{s.description} With the labelled point "
+    "cloud (points.npz).")) for s in (KLEVR, TOYBOX)}
+
 #: the schemas by recipe name
 MULTIVIEW_SCHEMAS = {s.name: s for s in (KLEVR, TOYBOX, TEXTURE_NERF, ROBUST_NERF,
                                          MULTIVIEW_MATTING, NVS, COMPLEX_BRDF, SVR)}
