@@ -135,6 +135,13 @@ def test_multiview_task_equals_the_klevr_scene_directories(packed):
             assert np.max(np.abs(pixels[:, 1] / pixels[:, 2] - (rows + 0.5))) < 2e-3
         assert np.allclose(item["world_to_camera"],
                            BLENDER_TO_OPENCV @ np.linalg.inv(item["camera_to_world"]), atol=1e-5)
+    # `frames` gives one item per view of a multi-view dataset
+    frames = load(dataset, "train", task="frames")
+    assert len(frames) == 3 * VIEWS
+    frame = frames[VIEWS + 2]
+    assert frame["video_name"] == source.scenes[1] and frame["frame"] == 2
+    assert np.array_equal(frame["image"], source[1]["images"][2])
+    assert np.array_equal(frame["camera_to_world"], source[1]["camera_to_world"][2])
     # one split's views, in view order, and chosen layers
     train = load(dataset, "train", task="multiview", view_split="val",
                  layers=("normal",))[0]
