@@ -248,7 +248,7 @@ def test_complex_brdf_example_equals_its_metadata(packed):
         assert example["metadata"]["background"] == "black"
 
 
-def test_torch_adapter_for_the_new_tasks(packed):
+def test_torch_and_grain_adapters_for_the_new_tasks(packed):
     import torch.utils.data
 
     from kubric.datasets.adapters import to_torch, torch_collate
@@ -272,6 +272,10 @@ def test_torch_adapter_for_the_new_tasks(packed):
     assert tuple(batch["world_to_camera"].shape) == (3, VIEWS, 4, 4)
     assert np.array_equal(batch["depth"][2].numpy(), multiview[2]["depth"])
     assert isinstance(batch["semantic_classes"], list)
+    from kubric.datasets.adapters import to_grain
+    grain_batch = to_grain(svr, batch_size=VIEWS)[1]
+    assert grain_batch["image"].shape == (VIEWS, H, W, 4)
+    assert np.array_equal(grain_batch["image"][2], svr[VIEWS + 2]["image"])
 
 
 def test_no_tensorflow_for_the_new_tasks(packed):
