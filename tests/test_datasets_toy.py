@@ -70,7 +70,9 @@ def test_toy_layer_flows_from_schema_to_loader(tmp_path):
         assert np.array_equal(example["target_points"], tracks)
         assert np.array_equal(load(tmp_path / "toy", "train", task="toy_tracks")[index]["tracks"],
                               tracks[:, ::2])
-    with pytest.raises(DatasetError, match=r"task 'nerf_rays' needs features \['depth', 'camera'"):
+    with pytest.raises(DatasetError, match=r"task 'nerf_rays' cannot read .* it needs \['depth', "
+                       r"'camera/intrinsics_pixels', 'camera/matrices_world'\]; this dataset "
+                       r"serves the tasks all, toy_tracks, video$"):
         load(tmp_path / "toy", "train", task="nerf_rays")
 
 

@@ -3,7 +3,8 @@
 * :func:`pack` (``kubric pack``) writes a dataset directory from scene directories;
 * :func:`load` gives a map-style source of numpy dicts (``len``, ``[i]``, ``__getitems__``);
 * :mod:`kubric.datasets.tasks` — what a loader decodes and returns (``video``, ``frames``,
-  ``nerf_rays``, your own with :func:`register_task`);
+  ``nerf_rays``, ``point_tracks``, the multi-view ``multiview`` and ``svr``
+  (:mod:`kubric.datasets.multiview_tasks`), your own with :func:`register_task`);
 * :mod:`kubric.datasets.adapters` — ``torch.utils.data.Dataset``, Grain, ``tf.data`` (only
   when TensorFlow is installed);
 * the output contract: :mod:`kubric.io.schema` (one schema per recipe).

@@ -12,14 +12,15 @@ def _error(command: str, message) -> int:
 
 def cmd_pack(args) -> int:
     from kubric.datasets.layout import DatasetError
-    from kubric.datasets.packer import pack
+    from kubric.datasets.packer import pack, read_class_names
     from kubric.io.schema import SchemaError
     try:
+        class_names = read_class_names(args.class_names)
         result = pack(args.scenes_dir, args.out, name=args.name, splits=args.splits,
                       workers=args.workers, schema=args.schema,
                       examples_per_shard=args.examples_per_shard,
                       progress=not args.no_progress, verify=args.verify,
-                      overwrite=args.overwrite)
+                      overwrite=args.overwrite, class_names=class_names)
     except (DatasetError, SchemaError) as err:
         return _error("pack", err)
     print(result.format())
@@ -66,6 +67,10 @@ def add_parser(subparsers) -> None:
     p.add_argument("--verify", action="store_true",
                    help="re-read every example and compare it with its scene directory")
     p.add_argument("--overwrite", action="store_true", help="replace an existing dataset")
+    p.add_argument("--class-names", action="append", default=[], metavar="FEATURE=FILE",
+                   help="names (one per line) of a class label otherwise collected from the "
+                   "scenes, e.g. instances/category=OTHER_DATASET/instances-category.labels.txt "
+                   "so that both datasets share category ids (repeatable)")
     p.add_argument("--no-progress", action="store_true")
     p.set_defaults(func=cmd_pack)
 

@@ -27,7 +27,8 @@ def dataset_info(dataset_dir) -> str:
     lines = [f"dataset {info['name']} at {path}",
              f"  schema {schema.name} (version {schema.version}), format version "
              f"{info['format_version']}, kubric {info.get('kubric_version')}",
-             f"  frames T={dims['T']}, resolution H×W={dims['H']}×{dims['W']}, size on disk "
+             f"  {'views' if 'metadata/num_views' in schema else 'frames'} T={dims['T']}, "
+             f"resolution H×W={dims['H']}×{dims['W']}, size on disk "
              f"{_size(size)}",
              "  splits:"]
     for split, count in info["counts"].items():
@@ -36,6 +37,8 @@ def dataset_info(dataset_dir) -> str:
                      f"(fraction {info['splits'][split]:g})")
     if info.get("incomplete_skipped"):
         lines.append(f"  incomplete scenes skipped when packing: {info['incomplete_skipped']}")
+    from kubric.datasets.tasks import servable_tasks
+    lines.append(f"  loader tasks: {', '.join(servable_tasks(schema))}")
     lines.append(f"  features ({len(schema.features)}):")
     width = max(len(f.name) for f in schema.features)
     for f in schema.features:

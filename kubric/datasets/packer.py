@@ -4,6 +4,12 @@
   and counted. A complete scene that cannot be read (unreadable PNG, missing layer, a field off
   the schema) is reported by path and skipped; the rest are packed.
 * The recipe schema comes from the scenes' ``metadata.json`` (``flags.recipe``) unless given.
+* A class label whose names come from the scenes (:data:`~kubric.io.schema.NAMES_FROM_SCENES`,
+  e.g. ``svr``'s ``instances/category``) gets the sorted distinct values of its source over all
+  complete scenes, found before anything is written; the dataset stores them (``features.json``,
+  ``kubric_dataset.json``), so a label's id is its index in that sorted list — unless the names
+  are given (``--class-names FEATURE=FILE``, e.g. another dataset's labels file, so that two
+  datasets share ids).
 * Each scene's split is a fixed function of its seed (:func:`~kubric.datasets.layout.split_of`);
   within a split, examples are in scene-name order; serialisation is deterministic, so packing
   the same scenes again gives byte-identical shards.
@@ -22,12 +28,13 @@ import os
 import pathlib
 import shutil
 import time
+from collections.abc import Mapping, Sequence
 
 from kubric.datasets import layout
 from kubric.datasets.layout import DatasetError
 from kubric.datasets.scene_reader import SceneError, SceneReader, is_complete
 from kubric.io.json_io import read_json, write_json
-from kubric.io.schema import Schema, get_schema
+from kubric.io.schema import Schema, SchemaError, get_schema
 
 PROGRESS_FILE = "progress.json"
 DEFAULT_SPLITS = "train=0.9,validation=0.1"
@@ -130,6 +137,65 @@ def _schema_and_dims(complete: list[pathlib.Path], schema) -> tuple[Schema, dict
     raise DatasetError(f"no complete scene has a readable metadata.json (first: {errors[0]})")
 
 
+def resolve_names(schema: Schema, scenes: list[pathlib.Path],
+                  given: Mapping[str, Sequence[str]] | None = None) -> Schema:
+    """``schema`` with every :data:`~kubric.io.schema.NAMES_FROM_SCENES` class label given the
+    sorted distinct values (as text) its source holds in ``scenes``, or the names ``given`` for
+    it (e.g. another dataset's, so that ids agree; every value found must be among them). A
+    scene whose metadata cannot be read is left out here (the packer reports it as corrupt)."""
+    given = {k: [str(n) for n in v] for k, v in dict(given or {}).items()}
+    collect = [f for f in schema.features if f.names_from_scenes]
+    wrong = sorted(set(given) - {f.name for f in collect})
+    if wrong:
+        raise DatasetError(f"class names given for {wrong}, which are not class labels collected "
+                           f"when packing in schema {schema.name!r} (those are "
+                           f"{[f.name for f in collect]})")
+    for feature, names in given.items():
+        dup = sorted({n for n in names if names.count(n) > 1})
+        if not names or dup:
+            raise DatasetError(f"class names for {feature!r} must be non-empty and distinct "
+                               f"(repeated: {dup})")
+    if not collect:
+        return schema
+    found: dict[str, set[str]] = {f.name: set() for f in collect}
+    for scene in scenes:
+        reader = SceneReader(scene, schema)
+        for f in collect:
+            try:
+                values = reader.raw_values(f)
+            except (SceneError, SchemaError, OSError, ValueError):
+                continue
+            found[f.name].update(str(v) for v in values)
+    for feature, names in given.items():
+        extra = sorted(found[feature] - set(names))
+        if extra:
+            raise DatasetError(f"the scenes hold {feature!r} values {extra}, which the given "
+                               f"class names {names} lack")
+    empty = sorted(n for n, values in found.items() if not values and n not in given)
+    if empty:
+        raise DatasetError(f"no complete scene holds a value of {empty}, so their class-label "
+                           "names cannot be collected")
+    return schema.with_names({n: given.get(n, sorted(values)) for n, values in found.items()})
+
+
+def read_class_names(specs: Sequence[str]) -> dict[str, list[str]]:
+    """``["instances/category=PATH", ...]`` (``--class-names``) → ``{feature: names}``; PATH is a
+    text file with one name per line (TFDS's ``*.labels.txt`` of another dataset)."""
+    out = {}
+    for spec in specs:
+        feature, sep, path = spec.partition("=")
+        if not sep or not feature or not path:
+            raise DatasetError(f"--class-names {spec!r} is not FEATURE=FILE (e.g. "
+                               "instances/category=other/instances-category.labels.txt)")
+        try:
+            text = pathlib.Path(path).read_text(encoding="utf-8")
+        except OSError as err:
+            raise DatasetError(f"--class-names {spec!r}: cannot read {path!r}: "
+                               f"{err.strerror}") from None
+        out[feature] = [line.strip() for line in text.splitlines() if line.strip()]
+    return out
+
+
 def _check_out(out: pathlib.Path, overwrite: bool) -> None:
     if out.exists() and not out.is_dir():
         raise DatasetError(f"--out {str(out)!r} exists and is not a directory")
@@ -145,10 +211,12 @@ def _check_out(out: pathlib.Path, overwrite: bool) -> None:
 # ------------------------------------------------------------------------ the packer
 def pack(scenes_dir, out, name: str | None = None, splits=DEFAULT_SPLITS, workers: int = 1,
          schema: Schema | str | None = None, examples_per_shard: int = 256,
-         progress: bool = True, verify: bool = False, overwrite: bool = False) -> PackResult:
+         progress: bool = True, verify: bool = False, overwrite: bool = False,
+         class_names: Mapping[str, Sequence[str]] | None = None) -> PackResult:
     """Pack the complete scenes of ``scenes_dir`` into the dataset directory ``out`` (module
-    doc). Raises :class:`~kubric.datasets.layout.DatasetError` (one line) on bad input before
-    writing anything."""
+    doc); ``class_names`` fixes the names of class labels otherwise collected from the scenes
+    (:func:`resolve_names`). Raises :class:`~kubric.datasets.layout.DatasetError` (one line) on
+    bad input before writing anything."""
     start = time.perf_counter()
     scenes_dir, out = pathlib.Path(scenes_dir), pathlib.Path(out)
     if not scenes_dir.is_dir():
@@ -164,6 +232,7 @@ def pack(scenes_dir, out, name: str | None = None, splits=DEFAULT_SPLITS, worker
         raise DatasetError(f"{str(scenes_dir)!r} holds no complete scene directory (with "
                            f"_SUCCESS); {incomplete} incomplete")
     schema, dims = _schema_and_dims(complete, schema)
+    schema = resolve_names(schema, complete, class_names)
     name = name or schema.name
     if not layout.NAME_PATTERN.match(name):
         raise DatasetError(f"--name {name!r} must be a lower-case identifier (letters, digits, _)")
@@ -177,6 +246,7 @@ def pack(scenes_dir, out, name: str | None = None, splits=DEFAULT_SPLITS, worker
 
     plan = {"schema": schema.name, "name": name, "splits": split_fractions, "dims": dims,
             "examples_per_shard": examples_per_shard, "format_version": layout.FORMAT_VERSION,
+            "class_names": {f.name: f.names for f in schema.features if f.names},
             "scenes": {s: [p.name for p in v] for s, v in assignment.items()}}
     plan_key = hashlib.sha256(repr(sorted(plan.items())).encode()).hexdigest()
     work = out.parent / f".{out.name}.incomplete"

@@ -18,7 +18,7 @@ import numpy as np
 
 from kubric.io import json_io, layers
 from kubric.io.scene_writer import EVENTS_FILE, METADATA_FILE, lookup
-from kubric.io.schema import Feature, Schema, SchemaError
+from kubric.io.schema import Feature, Schema, SchemaError, layer_channels
 from kubric.pipeline.worker import SUCCESS, is_complete
 
 UINT16_MAX = 65535
@@ -35,7 +35,18 @@ def _hex_to_rgb(value) -> np.ndarray:
     return np.array([int(text[i:i + 2], 16) / 255.0 for i in (0, 2, 4)], dtype=np.float32)
 
 
+def _split_indices(value) -> np.ndarray:
+    from kubric.annotations.nerf_export import SPLITS
+    names = [v["split"] if isinstance(v, Mapping) else v for v in value]
+    unknown = sorted({str(n) for n in names} - set(SPLITS))
+    if unknown:
+        raise ValueError(f"splits {unknown} are not in {SPLITS}")
+    return np.array([SPLITS.index(n) for n in names], dtype=np.int64)
+
+
 def _convert(name: str, value):
+    if name == "split_index":
+        return _split_indices(value)
     if name == "hex_to_rgb":
         return _hex_to_rgb(value)
     if name == "floor":
@@ -63,9 +74,12 @@ def dequantise(q: np.ndarray, value_range) -> np.ndarray:
 def _cast(feature: Feature, value, dims: Mapping[str, int], what: str):
     """One element's value (an instance's, an event's, or the scene's) checked and cast."""
     if feature.dtype == "str":
-        if isinstance(value, bytes):
-            value = value.decode("utf-8")
-        return str(value)
+        as_str = lambda v: v.decode("utf-8") if isinstance(v, bytes) else str(v)
+        if feature.shape:
+            if isinstance(value, str | bytes) or not isinstance(value, list | tuple):
+                raise SchemaError(f"{what}: expected a list of strings, got {value!r}"[:300])
+            return [as_str(v) for v in value]
+        return as_str(value)
     if feature.encoding == "class_label":
         if value not in feature.names:
             raise SchemaError(f"{what}: {value!r} is not one of {feature.names}")
@@ -163,12 +177,8 @@ class SceneReader:
         return np.array([finite.min(), finite.max()], dtype=np.float32)
 
     def _layer_feature(self, f: Feature) -> np.ndarray:
-        arg = f.source_arg
-        name, _, channels = arg.partition("[")
-        arr = self.layer(name)
-        if channels:
-            stop = int(channels.rstrip("]").lstrip(":"))
-            arr = arr[..., :stop]
+        name, channels = layer_channels(f.source_arg, f.name)
+        arr = self.layer(name)[..., channels]
         target = np.dtype(f.dtype)
         if arr.dtype.kind == "f" and target == np.uint16:
             lo, hi = (float(v) for v in self.layer_range(name))
@@ -185,6 +195,27 @@ class SceneReader:
         if kind == "instance":
             return list(self.metadata.get("instances", []))
         return list(self.events.get("collisions", []))
+
+    @staticmethod
+    def _converted(f: Feature, value, what: str):
+        try:
+            return _convert(f.convert, value)
+        except (ValueError, TypeError, KeyError) as err:
+            raise SchemaError(f"{what}: {f.convert}: {err}") from None
+
+    def raw_values(self, f: Feature) -> list:
+        """The values of a ``meta`` / ``camera`` / ``instance`` / ``collision`` feature as the
+        JSON holds them, before any cast (one per element for a sequence feature): what the
+        packer collects class-label names from."""
+        what = f"{str(self.scene_dir)!r} feature {f.name!r}"
+        kind, arg = f.source_kind, f.source_arg
+        if kind in ("meta", "camera"):
+            tree = self.metadata.get("metadata" if kind == "meta" else "camera", {})
+            return [lookup(tree, arg, what)]
+        if kind in ("instance", "collision"):
+            return [lookup(el, arg, f"{what} [{i}]") for i, el in enumerate(self._elements(kind))]
+        raise SchemaError(f"{what}: names are collected from metadata sources only, not "
+                          f"{f.source!r}")
 
     def feature(self, f: Feature):
         what = f"{str(self.scene_dir)!r} feature {f.name!r}"
@@ -206,10 +237,10 @@ class SceneReader:
             return _cast(f, value, self.dims, what)
         if kind in ("meta", "camera"):
             tree = self.metadata.get("metadata" if kind == "meta" else "camera", {})
-            value = _convert(f.convert, lookup(tree, arg, what))
+            value = self._converted(f, lookup(tree, arg, what), what)
             return _cast(f, value, self.dims, what)
-        values = [_cast(f, _convert(f.convert, lookup(el, arg, f"{what} [{i}]")), self.dims,
-                        f"{what} [{i}]") for i, el in enumerate(self._elements(kind))]
+        values = [_cast(f, self._converted(f, lookup(el, arg, f"{what} [{i}]"), f"{what} [{i}]"),
+                        self.dims, f"{what} [{i}]") for i, el in enumerate(self._elements(kind))]
         if f.dtype == "str" or (f.shape and f.shape[0] == "V"):
             return values
         if not values:

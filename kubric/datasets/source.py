@@ -44,7 +44,9 @@ def _regular(f: Feature, value, dims: dict):
     """A TFDS-decoded value of feature ``f`` in the regular form (module doc)."""
     if f.dtype == "str":
         as_str = lambda v: v.decode("utf-8") if isinstance(v, bytes) else str(v)
-        return [as_str(v) for v in value] if f.sequence else as_str(value)
+        if f.sequence and f.shape:
+            return [[as_str(x) for x in v] for v in value]
+        return [as_str(v) for v in value] if f.sequence or f.shape else as_str(value)
     dtype = np.int64 if f.encoding == "class_label" else np.dtype(f.dtype)
     if f.shape and f.shape[0] == "V":
         rest = tuple(d for d in f.shape[1:])
@@ -64,7 +66,7 @@ class DataSource:
     """A map-style source of one split (see module doc). Build with :func:`load`."""
 
     def __init__(self, dataset_dir, split: str, task=None, **task_options):
-        from kubric.datasets.tasks import get_task
+        from kubric.datasets.tasks import check_servable, get_task
         self.dataset_dir = pathlib.Path(dataset_dir)
         self.info = layout.read_info(self.dataset_dir)
         if split not in self.info["counts"] or not self.info["counts"][split]:
@@ -76,11 +78,8 @@ class DataSource:
         self.dims = dict(self.info["dims"])
         self.task = get_task(task)
         self.task_options = self.task.check_options(task_options)
-        top = {f.name.split("/", 1)[0] for f in self.schema.features}
-        missing = [k for k in self.task.features or () if k not in top]
-        if missing:
-            raise DatasetError(f"task {self.task.name!r} needs features {missing}, which "
-                               f"{str(self.dataset_dir)!r} does not have")
+        check_servable(self.task, self.schema, repr(str(self.dataset_dir)))
+        self._keys = self.task.decode_keys(self.schema, self.task_options)
         self.scenes: list[str] = list(self.info["scenes"][split])
         self._frames = self.task.per_frame and int(self.dims["T"])
         self._reader = None
@@ -106,7 +105,7 @@ class DataSource:
             from array_record.python.array_record_data_source import ArrayRecordDataSource
             from tensorflow_datasets.core import utils
             self._features = tfds.features.FeatureConnector.from_config(str(self.dataset_dir))
-            keys = self.task.features or tuple(self._features.keys())
+            keys = self._keys or tuple(self._features.keys())
             specs = {k: self._features.get_serialized_info()[k] for k in keys}
             self._parser = (specs, utils.flatten_nest_dict(specs), keys)
             # "path[0:n]" gives each shard's record count, so no reader is opened until a read

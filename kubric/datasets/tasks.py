@@ -12,8 +12,8 @@ task=NAME, **options)`` uses it. Built in:
 * ``nerf_rays``: one item per (scene, frame): ``ray_origins`` and unit ``ray_directions``
   (H, W, 3) in world space for every pixel centre, ``rgb`` (H, W, 3) float32 in [0, 1] and
   ``depth`` (H, W) in metres (distance along the ray: ``origin + depth · direction`` is the
-  surface point), plus ``frame`` and ``video_name``.
-
+  surface point), plus ``frame`` and ``video_name``; on multi-view datasets a frame is a view;
+* ``multiview`` and ``svr`` (multi-view datasets): :mod:`kubric.datasets.multiview_tasks`;
 * ``point_tracks`` (datasets packed with a ``<recipe>_tracks`` schema, e.g. ``kubric pack DIR
   --schema movi_e_tracks``): TAP-Vid's training fields ``video`` (T, H, W, 3) uint8,
   ``query_points`` (P, 3) (t, y, x), ``target_points`` (P, T, 2) (x, y) in pixels (centres at
@@ -27,7 +27,8 @@ Adding a task: declare the features it needs in the recipe's schema (e.g.
         return {"video": example["video"], "tracks": example["tracks"]["target_points"]}
 
 ``features`` are top-level names of the packed example (only those are decoded); ``per_frame``
-makes one item per frame (``frame`` is then the frame index, else None).
+makes one item per frame (``frame`` is then the frame index, else None). Loading a dataset with
+a task whose ``requires`` it lacks fails in one line naming the tasks the dataset serves.
 """
 
 from __future__ import annotations
@@ -43,12 +44,21 @@ from kubric.datasets.scene_reader import dequantise
 
 @dataclasses.dataclass(frozen=True)
 class Task:
+    """A registered task (see module doc). ``requires``: feature names (or name prefixes such as
+    ``camera``) a dataset must have for the task to serve it (default: ``features``);
+    ``extra_features(schema, options)`` adds top-level features to decode that depend on the
+    options and the dataset (e.g. ``multiview``'s optional layers); ``wants_schema`` passes the
+    dataset's schema to ``fn`` as ``schema=``."""
+
     name: str
     fn: Callable | None
     features: tuple[str, ...] | None = None
     per_frame: bool = False
     options: tuple[str, ...] = ()
     doc: str = ""
+    requires: tuple[str, ...] = ()
+    extra_features: Callable | None = None
+    wants_schema: bool = False
 
     def check_options(self, options: dict) -> dict:
         unknown = sorted(set(options) - set(self.options))
@@ -57,9 +67,24 @@ class Task:
                                f"{list(self.options) or 'none'}")
         return dict(options)
 
+    def missing(self, schema) -> list[str]:
+        """The required feature names (or prefixes) ``schema`` lacks."""
+        names = schema.names
+        return [r for r in self.requires or self.features or ()
+                if r not in names and not any(n.startswith(r + "/") for n in names)]
+
+    def decode_keys(self, schema, options: dict) -> tuple[str, ...] | None:
+        """Top-level features to decode (None: all)."""
+        if self.features is None:
+            return None
+        extra = tuple(self.extra_features(schema, options)) if self.extra_features else ()
+        return tuple(dict.fromkeys(self.features + extra))
+
     def __call__(self, example: dict, frame, source) -> dict:
         if self.fn is None:
             return example
+        if self.wants_schema:
+            return self.fn(example, frame, schema=source.schema, **source.task_options)
         return self.fn(example, frame, **source.task_options)
 
 
@@ -67,13 +92,30 @@ TASKS: dict[str, Task] = {}
 
 
 def register_task(name: str, features: tuple[str, ...] | None = None, per_frame: bool = False,
-                  options: tuple[str, ...] = ()):
-    """Decorator registering ``fn(example, frame, **options) -> dict`` as task ``name``."""
+                  options: tuple[str, ...] = (), requires: tuple[str, ...] = (),
+                  extra_features: Callable | None = None, wants_schema: bool = False):
+    """Decorator registering ``fn(example, frame, **options) -> dict`` as task ``name``
+    (:class:`Task` for ``requires``, ``extra_features`` and ``wants_schema``)."""
     def wrap(fn):
         TASKS[name] = Task(name, fn, tuple(features) if features else None, per_frame,
-                           tuple(options), (fn.__doc__ or "").strip().split("\n")[0])
+                           tuple(options), (fn.__doc__ or "").strip().split("\n")[0],
+                           tuple(requires), extra_features, wants_schema)
         return fn
     return wrap
+
+
+def servable_tasks(schema) -> list[str]:
+    """The names of the registered tasks that a dataset of ``schema`` can serve."""
+    return [name for name in sorted(TASKS) if not TASKS[name].missing(schema)]
+
+
+def check_servable(task: Task, schema, where: str) -> None:
+    """One-line :class:`DatasetError` when ``task`` cannot read a dataset of ``schema``."""
+    missing = task.missing(schema)
+    if missing:
+        raise DatasetError(f"task {task.name!r} cannot read {where} (schema {schema.name!r}): it "
+                           f"needs {missing}; this dataset serves the tasks "
+                           f"{', '.join(servable_tasks(schema))}")
 
 
 TASKS["all"] = Task("all", None, None, False, (), "every feature, nested numpy dict")
@@ -103,7 +145,8 @@ def resize_frames(frames: np.ndarray, size) -> np.ndarray:
 
 
 @register_task("video", features=("video", "metadata"),
-               options=("frame_stride", "num_frames", "resize"))
+               options=("frame_stride", "num_frames", "resize"),
+               requires=("video", "metadata/video_name"))
 def video_task(example, frame, frame_stride: int = 1, num_frames: int | None = None,
                resize=None):
     """RGB clips, optionally subsampled in time and resized."""
@@ -117,7 +160,9 @@ def video_task(example, frame, frame_stride: int = 1, num_frames: int | None = N
     return {"video": video, "video_name": example["metadata"]["video_name"]}
 
 
-@register_task("frames", features=("video", "camera", "metadata"), per_frame=True)
+@register_task("frames", features=("video", "camera", "metadata"), per_frame=True,
+               requires=("video", "camera/intrinsics_pixels", "camera/matrices_world",
+                         "metadata/video_name"))
 def frames_task(example, frame):
     """Single RGB frames with their camera (OpenCV intrinsics, camera-to-world pose)."""
     camera = example["camera"]
@@ -146,23 +191,39 @@ def pixel_rays(intrinsics_pixels: np.ndarray, camera_to_world: np.ndarray, heigh
     return origins.astype(np.float32), dirs.astype(np.float32)
 
 
-@register_task("nerf_rays", features=("video", "depth", "camera", "metadata"), per_frame=True)
+def metric_depth(example: dict, frame) -> np.ndarray:
+    """Depth (H, W) float32 metres of one frame: the stored float32 samples (multi-view
+    datasets), or uint16 samples scaled by ``metadata/depth_range`` (MOVi)."""
+    depth = example["depth"][frame, ..., 0]
+    if depth.dtype.kind == "f":
+        return depth.astype(np.float32, copy=True)
+    return dequantise(depth, example["metadata"]["depth_range"])
+
+
+@register_task("nerf_rays", features=("video", "depth", "camera", "metadata"), per_frame=True,
+               requires=("video", "depth", "camera/intrinsics_pixels", "camera/matrices_world",
+                         "metadata/video_name"))
 def nerf_rays_task(example, frame):
     """Per-pixel world rays, RGB and metric depth of one frame."""
     camera = example["camera"]
     height, width = example["video"].shape[1:3]
     origins, dirs = pixel_rays(camera["intrinsics_pixels"], camera["matrices_world"][frame],
                                height, width)
-    depth = dequantise(example["depth"][frame, ..., 0], example["metadata"]["depth_range"])
+    depth = metric_depth(example, frame)
     return {"ray_origins": origins, "ray_directions": dirs,
             "rgb": example["video"][frame].astype(np.float32) / 255.0, "depth": depth,
             "frame": np.int32(frame), "video_name": example["metadata"]["video_name"]}
 
 
-@register_task("point_tracks", features=("video", "tracks", "metadata"))
+@register_task("point_tracks", features=("video", "tracks", "metadata"),
+               requires=("video", "tracks/query_points", "tracks/target_points",
+                         "tracks/occluded", "metadata/video_name"))
 def point_tracks_task(example, frame):
     """TAP-Vid's fields from a dataset packed with a ``<recipe>_tracks`` schema."""
     tracks = example["tracks"]
     return {"video": example["video"], "query_points": tracks["query_points"],
             "target_points": tracks["target_points"], "occluded": tracks["occluded"],
             "video_name": example["metadata"]["video_name"]}
+
+
+from kubric.datasets import multiview_tasks  # noqa: E402,F401  (registers multiview, svr)

@@ -9,7 +9,8 @@ call ``tf.image.encode_png``); TFDS decodes them with OpenCV.
 
 Feature mapping: ``png`` → ``Sequence(Image((H, W, C), dtype, "png"), length=T)``; ``zlib`` →
 ``Sequence(Tensor((H, W, C), dtype, encoding=zlib), length=T)``; ``text`` → ``Text``;
-``class_label`` → ``ClassLabel(names)``; ``bbox`` → ``Sequence(BBoxFeature())``; a leading ``V``
+``class_label`` → ``ClassLabel(names)``; a list of text (shape ``("C",)``) →
+``Sequence(Text())``; ``bbox`` → ``Sequence(BBoxFeature())``; a leading ``V``
 → ``Sequence(Tensor(rest))``; anything else → ``Tensor(shape, dtype)``. ``instances/...`` and
 ``events/collisions/...`` features become one ``Sequence(FeaturesDict)`` each.
 """
@@ -34,7 +35,7 @@ def _leaf(f: Feature, dims: Mapping[str, int]):
     shape = f.concrete_shape(dims)
     dtype = np.bool_ if f.dtype == "bool" else np.dtype(f.dtype) if f.dtype != "str" else None
     if f.encoding == "text":
-        return tfds.features.Text()
+        return tfds.features.Sequence(tfds.features.Text()) if f.shape else tfds.features.Text()
     if f.encoding == "class_label":
         return tfds.features.ClassLabel(names=list(f.names))
     if f.encoding == "bbox":

@@ -13,9 +13,9 @@ The scene-directory writer (:func:`write_scene`), the scene reader and the packe
 layer or a metadata field to a recipe is one edit of its schema. :func:`schema_markdown` renders
 a schema as the Markdown table of the generated docs.
 
-Dimensions: ``T`` frames, ``H`` × ``W`` pixels, ``N`` instances, ``K`` collision events,
-``V`` the frames in which one instance is visible (varies per instance), ``P`` points (point
-tracks). Features named
+Dimensions: ``T`` frames (the views of a multi-view scene), ``H`` × ``W`` pixels, ``N``
+instances, ``K`` collision events, ``V`` the frames in which one instance is visible (varies per
+instance), ``P`` points (point tracks), ``C`` classes, ``B`` bands. Features named
 ``instances/...`` hold one value per instance (their shape omits ``N``), ``events/collisions/...``
 one per event (shape omits ``K``).
 
@@ -23,9 +23,10 @@ Sources (``source`` strings):
 
 =====================  =====================================================================
 ``scene_name``         the scene directory's name
-``layer:NAME``         layer NAME as stored (uint8 images, labels, raw uint16 PNG samples);
-                       a float (TIFF) layer stored as a feature of dtype uint16 is quantised
-                       with the range of ``range:NAME``; ``layer:NAME[:3]`` keeps channels 0–2
+``layer:NAME``         layer NAME as stored (uint8 images, labels, raw uint16 PNG samples,
+                       float32 TIFF samples); a float (TIFF) layer stored as a feature of dtype
+                       uint16 is quantised with the range of ``range:NAME``;
+                       ``layer:NAME[:3]`` keeps channels 0–2, ``layer:NAME[3:4]`` channel 3
 ``range:NAME``         [min, max] of layer NAME (``data_ranges.json``; for a float layer
                        quantised to uint16: min and max of its finite samples)
 ``meta:PATH``          ``metadata.json["metadata"][PATH]``; PATH is dotted (``resolution.0``)
@@ -36,12 +37,19 @@ Sources (``source`` strings):
 =====================  =====================================================================
 
 ``convert`` names a conversion applied after reading (:data:`CONVERSIONS`).
+
+Text features (dtype ``str``) are one string, or with shape ``("C",)`` (any one named
+dimension) a list of strings. A class label whose ``names`` are :data:`NAMES_FROM_SCENES` gets
+its names when packing: the sorted distinct values of its source over the packed scenes (e.g.
+the object categories of an asset collection, which no schema can know in advance); the packed
+dataset stores the resolved names.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import importlib
+import re
 from collections.abc import Iterable, Mapping
 
 from kubric.io.layers import LAYERS, LayerFormat, layer_table
@@ -49,7 +57,8 @@ from kubric.io.layers import LAYERS, LayerFormat, layer_table
 #: named dimensions and what they count
 DIMS = {"T": "frames", "H": "image height (pixels)", "W": "image width (pixels)",
         "N": "instances", "K": "collision events", "V": "frames in which the instance is visible",
-        "P": "points (e.g. point tracks)"}
+        "P": "points (e.g. point tracks)", "C": "classes (e.g. semantic classes)",
+        "B": "bands (e.g. texture frequency bands)"}
 #: feature name prefixes that hold one value per element of a sequence, and its dimension
 SEQUENCES = {"instances/": "N", "events/collisions/": "K"}
 ENCODINGS = ("none", "png", "zlib", "text", "class_label", "bbox")
@@ -60,7 +69,11 @@ CONVERSIONS = {
     "hex_to_rgb": "colour hex string '#rrggbb' → float32 (3,) in [0, 1]",
     "floor": "number → its floor (e.g. a fractional collision frame → the frame it falls in)",
     "negative_to_uint16_max": "−1 (no instance) → 65535, as upstream's uint16 instance indices",
+    "split_index": "per-view split names (a list of {'split': name} or of names) → their "
+                   "indices in (train, val, test)",
 }
+#: ``names`` of a class label whose names are collected from the scenes when packing
+NAMES_FROM_SCENES = ("<sorted values found when packing>",)
 #: version of the schema contract (bumped when a feature changes meaning, never for additions)
 SCHEMA_VERSION = "1.0.0"
 
@@ -105,6 +118,11 @@ class Feature:
         if self.encoding == "png" and (self.shape[:1] != ("T",) or len(self.shape) != 4
                                        or self.dtype not in ("uint8", "uint16")):
             raise SchemaError(f"{what}: png features are (T, H, W, C) uint8 / uint16")
+        if self.dtype == "str" and (len(self.shape) > 1 or self.shape[:1] not in
+                                    ((), *((d,) for d in DIMS))):
+            raise SchemaError(f"{what}: text features have shape () or one named dimension")
+        if self.source_kind == "layer":
+            layer_channels(self.source_arg, what)
 
     @property
     def sequence(self) -> str | None:
@@ -118,6 +136,11 @@ class Feature:
     @property
     def source_arg(self) -> str:
         return self.source.split(":", 1)[1] if ":" in self.source else ""
+
+    @property
+    def names_from_scenes(self) -> bool:
+        """Its class-label names are collected when packing (:data:`NAMES_FROM_SCENES`)."""
+        return tuple(self.names) == NAMES_FROM_SCENES
 
     def full_shape(self) -> tuple:
         """The shape with the sequence dimension in front (``instances/mass`` → ("N",))."""
@@ -192,12 +215,35 @@ class Schema:
                       + tuple(features), {**self.layers, **dict(layers or {})},
                       description or self.description, self.version)
 
+    def with_names(self, names: Mapping[str, Iterable[str]]) -> Schema:
+        """This schema with the class-label names of the features in ``names`` replaced (how
+        the packer resolves :data:`NAMES_FROM_SCENES`)."""
+        unknown = sorted(set(names) - set(self.names))
+        if unknown:
+            raise SchemaError(f"schema {self.name!r}: no features {unknown}")
+        features = tuple(dataclasses.replace(f, names=tuple(names[f.name]))
+                         if f.name in names else f for f in self.features)
+        return Schema(self.name, features, self.layers, self.description, self.version)
+
+
+def layer_channels(arg: str, what: str = "source") -> tuple[str, slice]:
+    """``"rgba[:3]"`` → ("rgba", slice(None, 3)); ``"rgba"`` → ("rgba", slice(None))."""
+    name, bracket, rest = arg.partition("[")
+    if not bracket:
+        return name, slice(None)
+    match = re.fullmatch(r"(\d*):(\d*)\]", rest)
+    if not name or match is None:
+        raise SchemaError(f"{what}: layer source {arg!r} must be NAME, NAME[:stop] or "
+                          "NAME[start:stop]")
+    start, stop = (int(v) if v else None for v in match.groups())
+    return name, slice(start, stop)
+
 
 # ------------------------------------------------------------------------------ registry
 #: schemas by recipe name
 REGISTRY: dict[str, Schema] = {}
 #: modules that declare the built-in recipes' schemas (imported on first lookup)
-BUILTIN_SCHEMA_MODULES = ("kubric.recipes.movi_schema",)
+BUILTIN_SCHEMA_MODULES = ("kubric.recipes.movi_schema", "kubric.recipes.multiview_schema")
 
 
 def register_schema(schema: Schema) -> Schema:
@@ -260,7 +306,9 @@ def schema_markdown(schema: Schema | str) -> str:
     lines += ["| feature | dtype | shape | encoding | unit | from the scene directory | doc |",
               "|---|---|---|---|---|---|---|"]
     for f in schema.features:
-        dtype = f"class label ({', '.join(f.names)})" if f.names else f.dtype
+        dtype = ("class label (names: the sorted values found when packing)"
+                 if f.names_from_scenes else
+                 f"class label ({', '.join(f.names)})" if f.names else f.dtype)
         source = f"`{f.source}`" + (f" → {f.convert}" if f.convert else "")
         doc = f.doc.replace("|", "\\|")
         lines.append(f"| `{f.name}` | {dtype} | {shape_text(f)} | {f.encoding} | {f.unit} | "
@@ -278,7 +326,7 @@ def dims_markdown() -> str:
     return "\n".join(f"* `{k}`: {v}" for k, v in DIMS.items()) + "\n"
 
 
-__all__ = ["CONVERSIONS", "DIMS", "Feature", "LAYERS", "LayerFormat", "REGISTRY", "Schema",
-           "builtin_schemas",
+__all__ = ["CONVERSIONS", "DIMS", "Feature", "LAYERS", "LayerFormat", "NAMES_FROM_SCENES",
+           "REGISTRY", "Schema", "builtin_schemas", "layer_channels",
            "SchemaError", "SEQUENCES", "dims_markdown", "get_schema", "register_schema",
            "schema_markdown"]
