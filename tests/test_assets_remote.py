@@ -67,6 +67,10 @@ def test_http_source_equals_local_and_downloads_once(published, kubasic_dir):
         assert tree(again.fetch("cube")) == tree(local.fetch("cube"))
         source.close()
         again.close()
+        listing = subprocess.run([sys.executable, "-m", "kubric", "assets", "list", url],
+                                 cwd=ROOT, capture_output=True, text=True, timeout=120)
+        assert listing.returncode == 0, listing.stderr
+        assert f"{local.name} {local.version}: {len(local)} assets" in listing.stdout
     assert server.gets == {"/kubasic/manifest.json": 1, "/kubasic/cube.tar.gz": 1,
                            "/kubasic/suzanne.tar.gz": 1, "/kubasic/dome.tar.gz": 1}
     folder = cache_folder(url)

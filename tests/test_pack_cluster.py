@@ -3,6 +3,7 @@ scheduler` + two `dask worker` processes on 127.0.0.1 and moto's S3 server. The 
 bit-identical (every file: shards and metadata) to the local packer's — also with an incomplete
 and a corrupt scene (the split is re-cut), from s3://, and with `--cluster local`."""
 
+import json
 import os
 import pathlib
 import shutil
@@ -125,3 +126,37 @@ def test_pack_on_local_cluster_and_bad_input(scenes, tmp_path):
     one_line(kubric("pack", root / "scenes", "--out", tmp_path / "y", "--jobs", 2, *PACK),
              "--jobs needs --cluster")
     assert not (tmp_path / "x").exists() and not (tmp_path / "y").exists()
+
+
+def test_interrupted_sharded_pack_resumes(scenes, tmp_path, monkeypatch):
+    """A pack stopped by a failure keeps its finished chunks; the rerun packs only the rest and
+    gives the same dataset."""
+    from kubric.datasets import dask_pack, packer
+    root, refs = scenes
+    encode, calls = packer._encode_scene, []
+
+    def failing(path):
+        calls.append(path)
+        if len(calls) == 4:  # train: chunks of 2 + 1 scenes done; validation's first scene
+            raise RuntimeError("stopped")
+        return encode(path)
+
+    monkeypatch.setattr(packer, "_encode_scene", failing)
+    kwargs = dict(splits="train=0.5,validation=0.5", examples_per_shard=2, progress=False)
+    with pytest.raises(RuntimeError, match="stopped"):
+        dask_pack.pack_sharded(root / "scenes", tmp_path / "ds", **kwargs)
+    assert not (tmp_path / "ds").exists()
+    work = tmp_path / ".ds.incomplete"
+    names = sorted(p.name for p in work.iterdir())
+    marks = [n for n in names if n.endswith(".json") and n != "plan.json"]
+    # the failed chunk left nothing; every finished one its file and its record (a chunk that
+    # was already running when the failure came may have finished too)
+    assert not any("validation.chunk-00000" in n for n in names), names
+    assert {".movi_a-train.chunk-00000.json", ".movi_a-train.chunk-00001.json"} <= set(marks)
+    assert sorted(names) == sorted(["plan.json", *marks, *(m[1:-5] for m in marks)])
+    done = sum(len(json.loads((work / m).read_text())["scenes"]) for m in marks)
+    calls.clear()
+    result = dask_pack.pack_sharded(root / "scenes", tmp_path / "ds", **kwargs)
+    assert result.resumed_scenes == done and len(calls) == 6 - done
+    assert tree(tmp_path / "ds") == tree(refs["scenes"][0])
+    assert not work.exists()
