@@ -24,7 +24,6 @@ import pathlib
 
 import numpy as np
 
-import kubric as kb
 from kubric.core import camera_geometry as geo
 from kubric.io.paths import atomic_write_bytes
 from kubric.pipeline import Option, OptionError, float_range
@@ -181,7 +180,7 @@ class ToyBox(_SemanticScenes, name="toybox"):
         if self.objects is None:
             raise OptionError(f"{self.name}: option objects is required: an asset source folder "
                               "whose assets have metadata.category")
-        self.chosen_categories(kb.AssetSource(self.objects))
+        self.chosen_categories(open_source(self.objects, "objects"))
 
     def chosen_categories(self, source) -> list[str]:
         available = source.categories
