@@ -250,3 +250,48 @@ def test_generate_with_url_source_equals_local_path(published, tmp_path):
     for layer, values in layers.items():
         np.testing.assert_array_equal(values, ref_layers[layer], err_msg=layer)
     assert server.gets["/kubasic/manifest.json"] == 1  # the runner's and the worker's open
+
+
+def test_unsafe_remote_archives_are_refused(published, tmp_path):
+    """The downloaded archive goes through the same checks as a local one: a member with '..'
+    or a link escaping the folder is refused and nothing lands outside the extraction folder."""
+    import io
+    import tarfile
+
+    from kubric.assets.archive import UnsafeArchiveError
+
+    def archive(name, member):
+        with tarfile.open(published / "kubasic" / name, "w:gz") as tar:
+            if member.issym():
+                tar.addfile(member)
+            else:
+                member.size = 4
+                tar.addfile(member, io.BytesIO(b"evil"))
+
+    archive("cube.tar.gz", tarfile.TarInfo("../../escaped.txt"))
+    link = tarfile.TarInfo("visual_geometry.obj")
+    link.type, link.linkname = tarfile.SYMTYPE, "/etc/passwd"
+    archive("cone.tar.gz", link)
+    manifest = json.loads((published / "kubasic" / "manifest.json").read_text())
+    for entry in manifest["assets"].values():
+        entry.pop("sha256")  # the publisher's own (bad) archives
+    manifest["assets"]["sphere"]["path"] = "../sphere.tar.gz"  # names a URL, not a file
+    manifest["assets"]["torus"]["path"] = "../../torus.tar.gz"
+    (published / "kubasic" / "manifest.json").write_text(json.dumps(manifest))
+    with serve(published) as server:
+        source = kb.AssetSource(f"{server.url}/kubasic")
+        with pytest.raises(UnsafeArchiveError, match=r"asset 'cube': archive member "
+                           r"'../../escaped.txt' leaves the extraction directory"):
+            source.fetch("cube")
+        with pytest.raises(UnsafeArchiveError, match=r"asset 'cone': archive member "
+                           r"'visual_geometry.obj' is a link \(to '/etc/passwd'\)"):
+            source.fetch("cone")
+        from kubric.assets.remote_source import RemoteSourceError
+        with pytest.raises(RemoteSourceError, match=r"asset 'sphere' \(http://127.0.0.1:\d+/"
+                           r"sphere.tar.gz\): HTTP 404 File not found$"):
+            source.fetch("sphere")
+        with pytest.raises(RemoteSourceError, match=r"^asset 'torus': path '../../torus.tar.gz' "
+                           r"climbs above http://127.0.0.1:\d+/$"):
+            source.fetch("torus")
+    assert not list(tmp_path.rglob("escaped.txt"))
+    assert not any(p.is_symlink() for p in tmp_path.rglob("*"))

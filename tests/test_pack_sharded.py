@@ -81,3 +81,12 @@ def test_sharded_pack_bad_input(scenes, tmp_path):
         dask_pack.pack_sharded(scenes / "clean", tmp_path / "a", splits="train=0.5",
                                examples_per_shard=2, progress=False)
     assert not (tmp_path / "a").exists() and not list(tmp_path.glob(".*incomplete*"))
+
+
+def test_a_worker_that_cannot_see_the_output_fails_in_one_line(scenes, tmp_path):
+    with pytest.raises(packer.DatasetError, match=r"^the pack worker on .* cannot see '.*/nfs/"
+                       r"\.ds\.incomplete': --out must be on a filesystem shared with the "
+                       r"workers$"):
+        dask_pack.encode_chunk(str(tmp_path / "nfs" / ".ds.incomplete"), "x-train.chunk-00000",
+                               [str(scenes / "clean" / "scene_00000000")], SCHEMA,
+                               {"T": T, "H": H, "W": W})

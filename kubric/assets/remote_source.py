@@ -237,6 +237,24 @@ def download(url: str, dest, checksums: dict | None = None, what: str | None = N
 
 
 # ------------------------------------------------------------------------ a remote source
+def join_url(base: str, rel: str, what: str) -> str:
+    """``rel`` (a URL, or a path with ``.`` / ``..`` parts) resolved against the folder URL
+    ``base``; a path that climbs above the host or bucket raises :class:`RemoteSourceError`."""
+    if storage.is_url(rel):
+        return storage.normalise(rel)
+    scheme, rest = base.split("://", 1)
+    root, _, path = rest.partition("/")
+    parts = [p for p in path.split("/") if p]
+    for part in rel.split("/"):
+        if part == "..":
+            if not parts:
+                raise RemoteSourceError(f"{what} {rel!r} climbs above {scheme}://{root}/")
+            parts.pop()
+        elif part not in ("", "."):
+            parts.append(part)
+    return "/".join([f"{scheme}://{root}", *parts])
+
+
 class RemoteSource:
     """The cached manifest of the source at ``url`` and its archives (downloaded on demand)."""
 
@@ -264,22 +282,12 @@ class RemoteSource:
         data_dir = manifest.get("data_dir")
         if not data_dir:
             return base
-        if storage.is_url(data_dir):
-            return storage.normalise(data_dir)
-        parts = base.split("/")
-        for part in str(data_dir).strip("/").split("/"):
-            if part == "..":
-                if len(parts) <= 3:  # scheme:, '', host
-                    raise RemoteSourceError(f"{self.url}: data_dir {data_dir!r} leaves the host")
-                parts.pop()
-            elif part not in ("", "."):
-                parts.append(part)
-        return "/".join(parts)
+        return join_url(base, str(data_dir), f"{self.url}: data_dir")
 
     def archive(self, manifest: dict, asset_id: str, entry: dict) -> Path:
         """The local copy of the asset's archive (downloaded and checked the first time)."""
         rel = entry.get("path", f"{asset_id}.tar.gz")
-        url = rel if storage.is_url(rel) else f"{self.data_url(manifest)}/{rel.lstrip('/')}"
+        url = join_url(self.data_url(manifest), rel, f"asset {asset_id!r}: path")
         digest = hashlib.sha256(url.encode()).hexdigest()[:12]
         name = f"{digest}-{_safe(url.rsplit('/', 1)[-1])}"
         return download(url, self.folder / "archives" / name,
@@ -287,5 +295,5 @@ class RemoteSource:
                         what=f"asset {asset_id!r} ({url})")
 
 
-__all__ = ["RemoteSource", "RemoteSourceError", "download", "is_remote", "local_path",
+__all__ = ["RemoteSource", "RemoteSourceError", "download", "is_remote", "join_url", "local_path",
            "manifest_url", "verify_checksums", "cache_folder", "timeout_s"]
