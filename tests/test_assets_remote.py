@@ -280,18 +280,17 @@ def test_unsafe_remote_archives_are_refused(published, tmp_path):
     (published / "kubasic" / "manifest.json").write_text(json.dumps(manifest))
     with serve(published) as server:
         source = kb.AssetSource(f"{server.url}/kubasic")
-        with pytest.raises(UnsafeArchiveError, match=r"asset 'cube': archive member "
-                           r"'../../escaped.txt' leaves the extraction directory"):
-            source.fetch("cube")
-        with pytest.raises(UnsafeArchiveError, match=r"asset 'cone': archive member "
-                           r"'visual_geometry.obj' is a link \(to '/etc/passwd'\)"):
-            source.fetch("cone")
-        from kubric.assets.remote_source import RemoteSourceError
-        with pytest.raises(RemoteSourceError, match=r"asset 'sphere' \(http://127.0.0.1:\d+/"
-                           r"sphere.tar.gz\): HTTP 404 File not found$"):
-            source.fetch("sphere")
-        with pytest.raises(RemoteSourceError, match=r"^asset 'torus': path '../../torus.tar.gz' "
-                           r"climbs above http://127.0.0.1:\d+/$"):
-            source.fetch("torus")
+        refused = [
+            (UnsafeArchiveError, "cube", r"^asset 'cube': archive member '../../escaped.txt' "
+             r"leaves the extraction directory"),
+            (UnsafeArchiveError, "cone", r"^asset 'cone': archive member 'visual_geometry.obj' "
+             r"is a link \(to '/etc/passwd'\)"),
+            (RemoteSourceError, "sphere", r"^asset 'sphere' \(http://127.0.0.1:\d+/sphere.tar.gz"
+             r"\): HTTP 404 File not found$"),
+            (RemoteSourceError, "torus", r"^asset 'torus': path '../../torus.tar.gz' climbs "
+             r"above http://127.0.0.1:\d+/$")]
+        for error, asset_id, pattern in refused:
+            with pytest.raises(error, match=pattern):
+                source.fetch(asset_id)
     assert not list(tmp_path.rglob("escaped.txt"))
     assert not any(p.is_symlink() for p in tmp_path.rglob("*"))
