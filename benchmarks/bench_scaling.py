@@ -13,12 +13,18 @@ Measured in one run, each configuration into a fresh output directory:
   costs on a cluster (the input for the 1000-worker sizing in the README).
 
 The LocalCluster's start-up (once per run) is printed separately and not counted in its times.
-Run: ``python benchmarks/bench_scaling.py [--scenes N] [--overhead-scenes M]``.
+The issue's targets (speed-up with 2 workers ≥ 1.8×, Dask's per-scene overhead within 5 % of the
+pool's) are printed next to the measured values, as met or not met.
+
+Run: ``python benchmarks/bench_scaling.py [--scenes N] [--overhead-scenes M] [--tasks K]``; the
+full size is N = 6 (then M = 10, K = 2000). A smaller ``--scenes`` scales M and K down with it,
+so ``--scenes 2`` is a smoke run of about a minute and a half.
 """
 
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import pathlib
 import sys
@@ -29,6 +35,8 @@ ROOT = pathlib.Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 FAKE = f"{ROOT / 'tests' / 'fake_recipes.py'}:Fake"
 TINY = ["resolution=32", "frame_end=3", "samples=2", "denoise=false", "max_num_objects=5"]
+SPEEDUP_TARGET = 1.8     # the issue's: 2 workers at least 1.8x faster than 1
+OVERHEAD_TARGET = 0.05   # the issue's: Dask's per-scene overhead within 5 % of the pool's
 
 
 def run(kind: str, recipe: str, options: list[str], scenes: int, workers: int, root: pathlib.Path):
@@ -80,11 +88,26 @@ def scheduler_cost(tasks: int) -> float:
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--scenes", type=int, default=6, help="MOVi-A scenes per configuration")
-    parser.add_argument("--overhead-scenes", type=int, default=10,
-                        help="test-recipe scenes for the per-scene overhead")
-    parser.add_argument("--tasks", type=int, default=2000, help="no-op tasks for the scheduler cost")
+    parser.add_argument("--scenes", type=int, default=6,
+                        help="MOVi-A scenes per configuration (default 6)")
+    parser.add_argument("--overhead-scenes", type=int, default=None,
+                        help="test-recipe scenes for the per-scene overhead, even (default: "
+                        "10 for 6 scenes, scaled with --scenes)")
+    parser.add_argument("--tasks", type=int, default=None, help="no-op tasks for the scheduler "
+                        "cost (default: 2000 for 6 scenes, scaled with --scenes, at least 100)")
     args = parser.parse_args(argv)
+    if args.scenes < 2:
+        parser.error(f"--scenes must be ≥ 2 (two workers need two scenes), got {args.scenes}")
+    if args.overhead_scenes is None:
+        args.overhead_scenes = 2 * math.ceil(5 * args.scenes / 6)  # 6 → 10, 2 → 4
+    if args.tasks is None:
+        args.tasks = max(100, 2000 * args.scenes // 6)
+    if args.overhead_scenes < 2 or args.overhead_scenes % 2:
+        parser.error(f"--overhead-scenes must be even and ≥ 2, got {args.overhead_scenes}")
+    if args.tasks < 1:
+        parser.error(f"--tasks must be ≥ 1, got {args.tasks}")
+    print(f"sizes: {args.scenes} MOVi-A scenes per configuration, {args.overhead_scenes} "
+          f"overhead scenes, {args.tasks} scheduler tasks")
     os.environ["KUBRIC_RENDER_THREADS"] = "1"  # the pool's workers render as the Dask tasks do
     from kubric.pipeline.recipe import get_recipe
     get_recipe("movi_a").from_assignments(TINY).prepare()  # assets built before timing
@@ -100,7 +123,9 @@ def main(argv=None) -> int:
                 print(f"{kind:>4}, {workers} worker(s): {args.scenes} MOVi-A scenes in "
                       f"{seconds:6.1f} s = {seconds / args.scenes:5.2f} s/scene{extra}", flush=True)
         for kind in ("pool", "dask"):
-            print(f"speed-up 1 → 2 workers, {kind}: {times[kind, 1] / times[kind, 2]:.2f}x")
+            speedup = times[kind, 1] / times[kind, 2]
+            print(f"speed-up 1 → 2 workers, {kind}: {speedup:.2f}x (target ≥ {SPEEDUP_TARGET}x: "
+                  f"{'met' if speedup >= SPEEDUP_TARGET else 'NOT met'})")
         print(f"dask / pool time, 2 workers: {times['dask', 2] / times['pool', 2]:.3f}")
         totals = {"pool": 0.0, "dask": 0.0}
         for rounds in range(2):  # alternating halves, so that drifting load hits both alike
@@ -113,8 +138,10 @@ def main(argv=None) -> int:
             print(f"{kind:>4}: per-scene overhead (no rendering, 1 worker) "
                   f"{per_scene[kind] * 1000:7.1f} ms", flush=True)
         diff = per_scene["dask"] - per_scene["pool"]
-        print(f"Dask per-scene overhead vs pool: {per_scene['dask'] / per_scene['pool']:.3f}x "
-              f"({diff * 1000:+.1f} ms per scene)")
+        ratio = per_scene["dask"] / per_scene["pool"]
+        print(f"Dask per-scene overhead vs pool: {ratio:.3f}x ({diff * 1000:+.1f} ms per scene; "
+              f"target within {OVERHEAD_TARGET:.0%}: "
+              f"{'met' if ratio <= 1 + OVERHEAD_TARGET else 'NOT met'})")
         per_task = scheduler_cost(args.tasks)
         print(f"scheduler + worker round trip: {per_task * 1000:.2f} ms per task "
               f"({args.tasks} no-op tasks with the scene resource, 2 workers)")

@@ -50,6 +50,7 @@ USAGE_ERRORS = (("kubric.pipeline.options", "OptionError"),
 #: (module, class) of expected failures (exit 1) besides OSError and ValueError (bad input data)
 FAILURES = (("kubric.assets.archive", "AssetArchiveError"),
             ("kubric.assets.download", "DownloadError"),
+            ("kubric.assets.remote_source", "RemoteSourceError"),
             ("kubric.viewer.source", "SceneError"))
 
 

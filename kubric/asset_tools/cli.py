@@ -188,7 +188,8 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     p.set_defaults(func=_hdri)
 
     p = sub.add_parser("list", help="list the assets of a source")
-    p.add_argument("source", help="source folder or manifest.json")
+    p.add_argument("source", help="source folder or manifest.json, or its URL (https://, "
+                   "s3://, gs://, any fsspec URL)")
     p.set_defaults(func=_list)
 
     p = sub.add_parser("cache", help="print the cache directory")

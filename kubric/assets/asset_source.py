@@ -91,7 +91,9 @@ class AssetSource:
     """A collection of assets described by a ``manifest.json``.
 
     Args:
-      path: the source folder (containing ``manifest.json``) or the manifest file itself.
+      path: the source folder (containing ``manifest.json``) or the manifest file itself, or the
+        URL of either (``https://``, ``s3://``, ``gs://``, any fsspec URL): downloaded once per
+        machine into the cache, archives on first use (:mod:`kubric.assets.remote_source`).
       scratch_dir: where archives are extracted; default ``cache_dir()/extracted/<name>-<hash>``.
 
     Attributes:
@@ -107,7 +109,12 @@ class AssetSource:
     """
 
     def __init__(self, path: str | os.PathLike, scratch_dir: str | os.PathLike | None = None):
-        path = Path(path).expanduser()
+        from kubric.assets import remote_source
+        self.remote = None  # a RemoteSource for URLs (kubric.assets.remote_source)
+        if remote_source.is_remote(path):
+            self.remote = remote_source.RemoteSource(path)
+            path = self.remote.manifest_path
+        path = Path(remote_source.local_path(path)).expanduser()
         manifest_path = path / "manifest.json" if path.is_dir() else path
         if not manifest_path.is_file():
             raise FileNotFoundError(f"AssetSource: no manifest.json at {str(manifest_path)!r}")
@@ -123,6 +130,8 @@ class AssetSource:
         data_dir = manifest.get("data_dir")
         base = self.manifest_path.parent
         self.data_dir = (base / data_dir).resolve() if data_dir else base
+        if self.remote is not None:
+            self.data_dir = self.remote.folder / "archives"
         self.db: dict[str, dict] = dict(manifest["assets"])
         if scratch_dir is None:
             import hashlib
@@ -235,7 +244,10 @@ class AssetSource:
                            f"Known ids: {shown}{more}") from None
 
     def archive_path(self, asset_id: str) -> Path:
+        """The asset's archive (of a source at a URL: its cached copy, downloaded if needed)."""
         entry = self._entry(asset_id)
+        if self.remote is not None:
+            return self.remote.archive(self.manifest, asset_id, entry)
         return self.data_dir / entry.get("path", f"{asset_id}.tar.gz")
 
     def fetch(self, asset_id: str) -> Path:
@@ -254,6 +266,9 @@ class AssetSource:
         target = self.scratch_dir / (_safe_name(asset_id) + stamp)
         self._hold_scratch_dir()
         if not target.is_dir():
+            from kubric.assets.remote_source import verify_checksums
+            if archive.is_file():
+                verify_checksums(archive, self.db[asset_id], f"asset {asset_id!r} ({archive})")
             safe_extract(archive, target, asset_id)
             self._extracted.append(target)
         return target

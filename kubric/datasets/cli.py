@@ -13,16 +13,68 @@ def _error(command: str, message) -> int:
 def cmd_pack(args) -> int:
     from kubric.datasets.layout import DatasetError
     from kubric.datasets.packer import pack, read_class_names
+    from kubric.io import storage
     from kubric.io.schema import SchemaError
+    common = dict(name=args.name, splits=args.splits, schema=args.schema,
+                  workers=1 if args.workers is None else args.workers,
+                  examples_per_shard=args.examples_per_shard, progress=not args.no_progress,
+                  verify=args.verify, overwrite=args.overwrite)
+    if storage.is_url(args.out):
+        return _error("pack", f"--out {args.out!r}: the dataset is written to a directory (on a "
+                      "filesystem the workers share, with --cluster), not a URL")
+    from kubric.pipeline.cli import _misplaced_flag
+    misplaced = _misplaced_flag(args)
+    if misplaced:
+        return _error("pack", misplaced)
     try:
-        class_names = read_class_names(args.class_names)
-        result = pack(args.scenes_dir, args.out, name=args.name, splits=args.splits,
-                      workers=args.workers, schema=args.schema,
-                      examples_per_shard=args.examples_per_shard,
-                      progress=not args.no_progress, verify=args.verify,
-                      overwrite=args.overwrite, class_names=class_names)
+        common["class_names"] = read_class_names(args.class_names)
+    except DatasetError as err:
+        return _error("pack", err)
+    if args.cluster is not None:
+        return _pack_on_cluster(args, common)
+    try:
+        if storage.is_url(args.scenes_dir):
+            from kubric.datasets.dask_pack import pack_sharded
+            result = pack_sharded(args.scenes_dir, args.out, **common)
+        else:
+            result = pack(args.scenes_dir, args.out, **common)
     except (DatasetError, SchemaError) as err:
         return _error("pack", err)
+    return _report(args, result)
+
+
+def _pack_on_cluster(args, common: dict) -> int:
+    from kubric.datasets.dask_pack import DaskExecutor, pack_sharded
+    from kubric.datasets.layout import DatasetError
+    from kubric.io.schema import SchemaError
+    from kubric.pipeline.cli import _cluster_options
+    from kubric.pipeline.dask_runner import ClusterError, open_cluster, slurm_job_script
+    options = _cluster_options(args)
+    try:
+        options.validate()
+    except ClusterError as err:
+        return _error("pack", err)
+    if args.print_job_script:
+        print(slurm_job_script(options))
+        return 0
+    common["workers"] = 1  # the cluster's slots do the work
+    try:
+        client, cluster = open_cluster(options, processes=True)
+    except ClusterError as err:
+        return _error("pack", err)
+    print(f"Dask dashboard: {client.dashboard_link}", flush=True)
+    try:
+        result = pack_sharded(args.scenes_dir, args.out, executor=DaskExecutor(client), **common)
+    except (DatasetError, SchemaError) as err:
+        return _error("pack", err)
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+    return _report(args, result)
+
+
+def _report(args, result) -> int:
     print(result.format())
     if args.verify:
         print(f"verified: every example equals its scene directory ({sum(result.counts.values())}"
@@ -55,13 +107,15 @@ def add_parser(subparsers) -> None:
         description="Write DATASET_DIR (dataset_info.json, features.json, "
         "NAME-SPLIT.array_record-0000k-of-0000n shards, kubric_dataset.json) from the complete "
         "scenes of SCENES_DIR. Resumable; the output appears only when complete.")
-    p.add_argument("scenes_dir", metavar="SCENES_DIR")
+    p.add_argument("scenes_dir", metavar="SCENES_DIR", help="a directory of scenes or its URL "
+                   "(s3://bucket/run, gs://..., any fsspec URL)")
     p.add_argument("--out", required=True, metavar="DATASET_DIR")
     p.add_argument("--name", default=None, help="dataset name (default: the recipe name)")
     p.add_argument("--splits", default="train=0.9,validation=0.1",
                    help="NAME=FRACTION,... summing to 1 (default train=0.9,validation=0.1); a "
                    "scene's split is a fixed function of its seed")
-    p.add_argument("--workers", type=int, default=1, help="encoding processes (default 1)")
+    p.add_argument("--workers", type=int, default=None, help="encoding processes (default 1; "
+                   "with --cluster local: the LocalCluster's worker processes)")
     p.add_argument("--schema", default=None, help="recipe schema (default: the scenes' recipe)")
     p.add_argument("--examples-per-shard", type=int, default=256)
     p.add_argument("--verify", action="store_true",
@@ -72,6 +126,9 @@ def add_parser(subparsers) -> None:
                    "scenes, e.g. instances/category=OTHER_DATASET/instances-category.labels.txt "
                    "so that both datasets share category ids (repeatable)")
     p.add_argument("--no-progress", action="store_true")
+    from kubric.pipeline.cli import add_cluster_arguments
+    add_cluster_arguments(p, "pack on Dask, one task per shard (kubric.datasets.dask_pack): a "
+                          "LocalCluster, a running scheduler, or Slurm jobs")
     p.set_defaults(func=cmd_pack)
 
     p = subparsers.add_parser("datasets", help="packed datasets: info, schema")

@@ -208,6 +208,18 @@ def _check_out(out: pathlib.Path, overwrite: bool) -> None:
                                "replace it")
 
 
+def check_options(splits, workers: int, examples_per_shard: int, out: pathlib.Path,
+                  overwrite: bool) -> dict[str, float]:
+    """The split fractions; raises DatasetError (one line) on a bad option or output."""
+    split_fractions = layout.parse_splits(splits)
+    if workers < 1:
+        raise DatasetError(f"--workers must be ≥ 1, got {workers}")
+    if examples_per_shard < 1:
+        raise DatasetError(f"examples per shard must be ≥ 1, got {examples_per_shard}")
+    _check_out(out, overwrite)
+    return split_fractions
+
+
 # ------------------------------------------------------------------------ the packer
 def pack(scenes_dir, out, name: str | None = None, splits=DEFAULT_SPLITS, workers: int = 1,
          schema: Schema | str | None = None, examples_per_shard: int = 256,
@@ -221,12 +233,7 @@ def pack(scenes_dir, out, name: str | None = None, splits=DEFAULT_SPLITS, worker
     scenes_dir, out = pathlib.Path(scenes_dir), pathlib.Path(out)
     if not scenes_dir.is_dir():
         raise DatasetError(f"SCENES_DIR {str(scenes_dir)!r} is not a directory")
-    split_fractions = layout.parse_splits(splits)
-    if workers < 1:
-        raise DatasetError(f"--workers must be ≥ 1, got {workers}")
-    if examples_per_shard < 1:
-        raise DatasetError(f"examples per shard must be ≥ 1, got {examples_per_shard}")
-    _check_out(out, overwrite)
+    split_fractions = check_options(splits, workers, examples_per_shard, out, overwrite)
     complete, incomplete = find_scenes(scenes_dir)
     if not complete:
         raise DatasetError(f"{str(scenes_dir)!r} holds no complete scene directory (with "

@@ -222,6 +222,29 @@ def cmd_inspect(args) -> int:
     return 0
 
 
+def add_cluster_arguments(p, what: str) -> None:
+    """The ``--cluster`` flags (of ``generate`` and ``pack``); ``what`` is --cluster's help."""
+    g = p.add_argument_group("Dask cluster (kubric.pipeline.dask_runner)")
+    g.add_argument("--cluster", default=None, metavar="local|tcp://HOST:PORT|slurm",
+                   help=what)
+    g.add_argument("--threads-per-scene", type=int, default=None,
+                   help="render threads of each scene (one scene per worker slot; default 1)")
+    g.add_argument("--connect-timeout", type=float, default=None,
+                   help="seconds to wait for the scheduler (default 20)")
+    g.add_argument("--dashboard-address", default=None,
+                   help="dashboard address of a cluster started here (default :8787)")
+    g.add_argument("--jobs", type=int, default=None, help="slurm: worker jobs to submit")
+    g.add_argument("--cores-per-job", type=int, default=None, help="slurm: cores of each job")
+    g.add_argument("--memory", default=None, help="slurm: memory of each job (default 4GB)")
+    g.add_argument("--walltime", default=None, help="slurm: time limit of each job")
+    g.add_argument("--queue", default=None, help="slurm: partition")
+    g.add_argument("--job-directive", action="append", default=None, metavar="DIRECTIVE",
+                   help="slurm: extra #SBATCH line, e.g. --job-directive=--gres=gpu:1 "
+                   "(repeatable)")
+    g.add_argument("--print-job-script", action="store_true",
+                   help="slurm: print the worker job script and exit (submits nothing)")
+
+
 def add_parser(subparsers) -> None:
     p = subparsers.add_parser("worker", help="generate one scene (one seed) with a recipe",
                               description="Write OUT/scene_{seed:08d}/ atomically (_SUCCESS "
@@ -254,25 +277,7 @@ def add_parser(subparsers) -> None:
     p.add_argument("--timeout", type=float, default=None, help="seconds per worker attempt")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
-    g = p.add_argument_group("Dask cluster (kubric.pipeline.dask_runner)")
-    g.add_argument("--cluster", default=None, metavar="local|tcp://HOST:PORT|slurm",
-                   help="run on Dask: a LocalCluster, a running scheduler, or Slurm jobs")
-    g.add_argument("--threads-per-scene", type=int, default=None,
-                   help="render threads of each scene (one scene per worker slot; default 1)")
-    g.add_argument("--connect-timeout", type=float, default=None,
-                   help="seconds to wait for the scheduler (default 20)")
-    g.add_argument("--dashboard-address", default=None,
-                   help="dashboard address of a cluster started here (default :8787)")
-    g.add_argument("--jobs", type=int, default=None, help="slurm: worker jobs to submit")
-    g.add_argument("--cores-per-job", type=int, default=None, help="slurm: cores of each job")
-    g.add_argument("--memory", default=None, help="slurm: memory of each job (default 4GB)")
-    g.add_argument("--walltime", default=None, help="slurm: time limit of each job")
-    g.add_argument("--queue", default=None, help="slurm: partition")
-    g.add_argument("--job-directive", action="append", default=None, metavar="DIRECTIVE",
-                   help="slurm: extra #SBATCH line, e.g. --job-directive=--gres=gpu:1 "
-                   "(repeatable)")
-    g.add_argument("--print-job-script", action="store_true",
-                   help="slurm: print the worker job script and exit (submits nothing)")
+    add_cluster_arguments(p, "run on Dask: a LocalCluster, a running scheduler, or Slurm jobs")
     p.set_defaults(func=cmd_generate)
 
     p = subparsers.add_parser("recipes", help="list recipes and their options")
@@ -287,4 +292,4 @@ def add_parser(subparsers) -> None:
     p.set_defaults(func=cmd_inspect)
 
 
-__all__ = ["add_parser"]
+__all__ = ["add_parser", "add_cluster_arguments"]

@@ -115,8 +115,10 @@ def slurm_job_script(options: ClusterOptions) -> str:
         cluster.close()
 
 
-def open_cluster(options: ClusterOptions):
-    """(client, cluster or None) for ``options``; raises :class:`ClusterError` (one line)."""
+def open_cluster(options: ClusterOptions, processes: bool = False):
+    """(client, cluster or None) for ``options``; raises :class:`ClusterError` (one line).
+    ``processes``: a ``local`` cluster's workers are processes (for work done in the task itself,
+    as packing), not threads of this process (enough for tasks that wait for a subprocess)."""
     options.validate()
     kind = options.kind
     if kind == "slurm" and shutil.which("sbatch") is None:
@@ -128,7 +130,7 @@ def open_cluster(options: ClusterOptions):
     try:
         if kind == "local":
             slots = options.workers or max(1, usable_cores() // options.threads_per_scene)
-            cluster = LocalCluster(n_workers=slots, threads_per_worker=1, processes=False,
+            cluster = LocalCluster(n_workers=slots, threads_per_worker=1, processes=processes,
                                    resources={RESOURCE: 1}, dashboard_address=
                                    options.dashboard_address, silence_logs=40)
             client = Client(cluster)

@@ -5,11 +5,48 @@ from __future__ import annotations
 from kubric.pipeline import OptionError
 
 
-def open_existing_source(path, what: str):
-    """The :class:`~kubric.AssetSource` at ``path`` (option ``what``); one line if it is empty."""
-    import kubric as kb
+def source_location(value):
+    """Option converter for an asset source: a local folder / ``manifest.json`` (a ``Path``,
+    which must exist) or the URL of one (a normalised ``str``: ``https://``, ``s3://``, ``gs://``,
+    any fsspec URL; ``file://`` URLs become paths)."""
+    import pathlib
 
-    source = kb.AssetSource(path)
+    from kubric.assets.remote_source import is_remote, local_path
+    from kubric.io import storage
+
+    if not isinstance(value, (str, pathlib.Path)) or not str(value).strip():
+        raise ValueError("expected a path or URL")
+    if is_remote(str(value)):
+        try:
+            return storage.normalise(str(value))
+        except storage.StorageError as err:
+            raise ValueError(str(err)) from None
+    path = pathlib.Path(local_path(str(value))).expanduser()
+    try:
+        exists = path.exists()
+    except (OSError, ValueError) as err:  # a name too long, a NUL byte, ...
+        raise ValueError(f"not a usable path ({' '.join(str(err).split())[:200]})") from None
+    if not exists:
+        raise ValueError("path does not exist")
+    return path
+
+
+source_location.allowed = ("an existing asset-source folder / manifest.json, or its URL "
+                           "(https://, s3://, gs://, ...)")
+source_location.__name__ = "path|URL"
+
+
+def open_existing_source(path, what: str):
+    """The :class:`~kubric.AssetSource` at ``path`` (option ``what``, a path or URL); one line if
+    it cannot be fetched, is malformed or is empty."""
+    import kubric as kb
+    from kubric.assets.asset_source import ManifestError
+    from kubric.assets.remote_source import RemoteSourceError
+
+    try:
+        source = kb.AssetSource(path)
+    except (RemoteSourceError, ManifestError) as err:
+        raise OptionError(f"{what} {str(path)!r}: {err}") from None
     if not len(source):
         raise OptionError(f"{what} {str(path)!r} holds no assets")
     return source
@@ -26,9 +63,11 @@ def kubasic_sources(kubasic_source) -> dict:
 
 def check_source_options(recipe, names=None) -> None:
     """Every asset-source option (``*_source``, plus ``names``) that is set names a folder with
-    ``manifest.json`` (or that file); raises OptionError (one line) otherwise."""
+    ``manifest.json`` (or that file) or is a URL; raises OptionError (one line) otherwise."""
     for name, value in recipe.values.items():
         if (name.endswith("_source") or name in (names or ())) and value is not None:
+            if isinstance(value, str):  # a URL: fetched (and checked) when the source opens
+                continue
             manifest = value / "manifest.json" if value.is_dir() else value
             if not manifest.is_file() or manifest.name != "manifest.json":
                 raise OptionError(f"{recipe.name}: option {name}={str(value)!r} is not an asset "

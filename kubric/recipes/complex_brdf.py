@@ -16,13 +16,13 @@ three lights (elevation, azimuth).
 from __future__ import annotations
 
 import math
-import pathlib
 
 import numpy as np
 
 import kubric as kb
 from kubric.assets import clevr
 from kubric.pipeline import Option
+from kubric.recipes.common import source_location
 from kubric.recipes.multiview_base import MultiviewBase, open_source, orbit_positions
 
 #: metal as MOVi's (CLEVR's, :data:`kubric.assets.clevr.MATERIALS`); rubber purely Lambertian
@@ -45,7 +45,7 @@ class ComplexBrdf(MultiviewBase, name="complex_brdf"):
     shape = Option("random", "KuBasic shape, or random per seed (ignored with objects_source)",
                    choices=("random", *SHAPES))
     objects_source = Option(None, "mesh asset source to draw the object from (default: the "
-                            "KuBasic shapes)", type=pathlib.Path, must_exist=True)
+                            "KuBasic shapes)", type=source_location)
     object_size = Option(2.0, "largest extent of the object (m)", low=0.01)
     orbit_distance = Option(6.0, "camera distance from the object (m)", low=0.1)
     orbit_elevation = Option(30.0, "camera elevation above the horizon (degrees)", low=-89.0,

@@ -24,12 +24,12 @@ import pathlib
 
 import numpy as np
 
-import kubric as kb
 from kubric.assets import clevr
 from kubric.core import camera_geometry as geo
 from kubric.io.paths import atomic_write_bytes
 from kubric.pipeline import Option, OptionError, float_range
 from kubric.recipes.common import open_existing_source as open_source
+from kubric.recipes.common import source_location
 from kubric.recipes.multiview_base import (
     MultiviewBase,
     kubasic_object,
@@ -166,21 +166,21 @@ class ToyBox(_SemanticScenes, name="toybox"):
     """ToyBox: 4–12 upright objects of an asset source with categories, HDRI background."""
 
     objects = Option(None, "asset source folder whose assets have metadata.category (required)",
-                     type=pathlib.Path, must_exist=True)
+                     type=source_location)
     num_categories = Option(5, "use the N most common categories (5 = ToyBox5, 13 = ToyBox13)",
                             low=1, high=1000)
     categories = Option("", "comma-separated categories to use instead (empty: the most common)")
     size_range = Option((0.8, 1.6), "largest object extent (m) low,high", type=float_range,
                         low=0.05, limit=100.0)
     hdri_source = Option(None, "HDRI asset source folder (default: the HDRIs shipped with bpy)",
-                         type=pathlib.Path, must_exist=True)
+                         type=source_location)
 
     def check(self):
         super().check()
         if self.objects is None:
             raise OptionError(f"{self.name}: option objects is required: an asset source folder "
                               "whose assets have metadata.category")
-        self.chosen_categories(kb.AssetSource(self.objects))
+        self.chosen_categories(open_source(self.objects, "objects"))
 
     def chosen_categories(self, source) -> list[str]:
         available = source.categories

@@ -30,7 +30,6 @@ listed in docs/assets.md ("CLEVR facts").
 from __future__ import annotations
 
 import abc
-import pathlib
 
 import numpy as np
 
@@ -40,7 +39,7 @@ from kubric.assets.utils import get_clevr_lights
 from kubric.pipeline import Option, OptionError, float_range
 from kubric.recipes import movi_schema
 from kubric.recipes.articulated_models import MODELS, add_model, model_list
-from kubric.recipes.common import open_existing_source
+from kubric.recipes.common import open_existing_source, source_location
 from kubric.recipes.movi_base import (
     CAMERA_MIN_HEIGHT,
     DYNAMIC_SPAWN_REGION,
@@ -175,9 +174,9 @@ class MoviC(MoviBase, name="movi_c"):
     size_range = Option((0.75, 3.0), "largest extent range (m) low,high", type=float_range,
                         low=0.01, limit=100.0)
     objects_source = Option(None, "mesh asset source folder (default: the converted "
-                            "pybullet_data collection)", type=pathlib.Path, must_exist=True)
+                            "pybullet_data collection)", type=source_location)
     hdri_source = Option(None, "HDRI asset source folder (default: the HDRIs shipped with bpy)",
-                         type=pathlib.Path, must_exist=True)
+                         type=source_location)
     collection_limit = Option(None, "with the default objects_source: convert only this many of "
                               "pybullet_data's random_urdfs (none = all 1000)", type=int, low=0)
     split = Option("train", "asset / background split (10% of the sorted ids are held out)",

@@ -31,7 +31,7 @@ import numpy as np
 import kubric as kb
 from kubric.io.scene_writer import write_scene
 from kubric.pipeline import Option, OptionError, Recipe, resolution
-from kubric.recipes.common import check_min_max, check_source_options, kubasic_sources
+from kubric.recipes.common import check_min_max, check_source_options, kubasic_sources, source_location
 
 DYNAMIC_SPAWN_REGION = ((-5.0, -5.0, 1.0), (5.0, 5.0, 5.0))
 STATIC_SPAWN_REGION = ((-7.0, -7.0, 0.0), (7.0, 7.0, 10.0))
@@ -86,8 +86,8 @@ class MoviBase(Recipe):
     step_rate = Option(240, "physics steps per second (a multiple of frame_rate)", low=1, limit=100000)
     samples = Option(64, "Cycles samples per pixel", low=1, high=65536, limit=4096)
     denoise = Option(True, "denoise the RGB render (OIDN)")
-    kubasic_source = Option(None, "KuBasic asset source folder (default: built locally)",
-                            type=pathlib.Path, must_exist=True)
+    kubasic_source = Option(None, "KuBasic asset source folder or URL (default: built locally)",
+                            type=source_location)
     save_state = Option(False, "also write scene.blend (animated) and scene.bullet (initial "
                         "physics state)")
     tracks = Option(0, "point tracks to sample and write to tracks.npz (0 = none; docs/tracks.md)",

@@ -39,7 +39,7 @@ import kubric as kb
 from kubric.annotations import nerf_export
 from kubric.core import camera_geometry as geo
 from kubric.pipeline import Option, OptionError, Recipe, float_range, resolution
-from kubric.recipes.common import check_min_max, check_source_options, kubasic_sources
+from kubric.recipes.common import check_min_max, check_source_options, kubasic_sources, source_location
 from kubric.recipes.common import open_existing_source as open_source
 from kubric.recipes.movi_base import new_camera
 
@@ -180,8 +180,8 @@ class MultiviewBase(Recipe):
                              type=float_range, low=0.1)
     elevation_range = Option((20.0, 70.0), "camera elevation above the horizon (degrees), "
                              "low,high", type=float_range, low=-89.0, high=89.9)
-    kubasic_source = Option(None, "KuBasic asset source folder (default: built locally)",
-                            type=pathlib.Path, must_exist=True)
+    kubasic_source = Option(None, "KuBasic asset source folder or URL (default: built locally)",
+                            type=source_location)
 
     # ------------------------------------------------------------------ checks
     def check(self) -> None:

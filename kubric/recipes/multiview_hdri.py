@@ -16,13 +16,12 @@ views on a sphere cap.
 
 from __future__ import annotations
 
-import pathlib
-
 import numpy as np
 
 import kubric as kb
 from kubric.pipeline import Option, float_range
 from kubric.recipes.common import open_existing_source as open_source
+from kubric.recipes.common import source_location
 from kubric.recipes.multiview_base import (
     MultiviewBase,
     footprint_radius,
@@ -38,9 +37,9 @@ class _HdriObjects(MultiviewBase):
 
     num_views = Option(10, "number of camera views", low=1, high=10000)
     objects = Option(None, "asset source folder of the objects (default: the KuBasic shapes)",
-                     type=pathlib.Path, must_exist=True)
+                     type=source_location)
     hdri_source = Option(None, "HDRI asset source folder (default: the HDRIs shipped with bpy)",
-                         type=pathlib.Path, must_exist=True)
+                         type=source_location)
 
     def open_sources(self):
         sources = super().open_sources()

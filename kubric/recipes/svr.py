@@ -18,6 +18,7 @@ from __future__ import annotations
 import pathlib
 
 from kubric.pipeline import Option, OptionError, float_range
+from kubric.recipes.common import source_location
 from kubric.recipes.movi import add_clevr_lights, category_list
 from kubric.recipes.multiview_base import MultiviewBase, open_source, sphere_cap_positions
 
@@ -28,7 +29,7 @@ class Svr(MultiviewBase, name="svr"):
 
     num_views = Option(24, "number of random views of the object", low=1, high=10000)
     objects_source = Option(None, "mesh asset source (default: the KuBasic shapes)",
-                            type=pathlib.Path, must_exist=True)
+                            type=source_location)
     object_categories = Option(None, "only assets of these categories (comma-separated; none "
                                "= all)", type=category_list)
     split = Option("all", "asset split: all, or train / test (10% of the sorted ids held out, "

@@ -1,0 +1,359 @@
+"""Packing sharded over workers: ``kubric pack SCENES --out DIR --cluster local|tcp://…|slurm``, and
+``kubric pack URL --out DIR`` (scenes on object storage, any fsspec URL).
+
+The output is that of :func:`kubric.datasets.packer.pack` for the same scenes — **bit-identical
+files** (shards, ``dataset_info.json``, ``features.json``, ``kubric_dataset.json``): the same
+split of every scene (a function of its seed), the same example order, the same serialisation.
+
+* The client lists the complete scenes (``_SUCCESS``; an URL's through
+  :func:`kubric.io.storage.complete_scenes`), reads every ``metadata.json`` (seed → split, the
+  schema, the frame count and resolution) and cuts each split, in scene-name order, into chunks of
+  ``examples_per_shard`` scenes.
+* One task per chunk (a Dask task asking for the resource ``scene=1``, or a local process): it
+  reads its scenes (downloading a URL's scene into local scratch first), encodes them and writes
+  one ArrayRecord file into the work directory ``.DIR.incomplete`` next to ``DIR``, then a small
+  ``.json`` record of it (scenes, corrupt scenes, bytes) — the chunk's completion mark. A rerun of
+  the same plan skips chunks that have their record, so an interrupted pack resumes.
+* A corrupt scene is skipped and reported as locally. Since the local packer fills every shard
+  with ``examples_per_shard`` *good* examples, a split with a corrupt scene is re-cut: one more
+  task per final shard copies its records out of the chunk files. Without corrupt scenes the
+  chunks are the shards.
+* The client writes the final metadata and renames the work directory to ``DIR``.
+
+``DIR`` must be on a filesystem that every worker can write (a shared filesystem for a real
+cluster; each task checks and fails in one line otherwise). Scenes may be local (shared) paths or
+URLs.
+"""
+
+from __future__ import annotations
+
+import concurrent.futures
+import hashlib
+import json
+import multiprocessing
+import os
+import pathlib
+import shutil
+import socket
+import tempfile
+import time
+from collections.abc import Mapping, Sequence
+
+from kubric.datasets import layout, packer
+from kubric.datasets.layout import DatasetError
+from kubric.io import storage
+from kubric.io.json_io import read_json, write_json
+
+PLAN_FILE = "plan.json"
+
+
+# ------------------------------------------------------------------------ on a worker
+def _require_work(work: str) -> pathlib.Path:
+    path = pathlib.Path(work)
+    if not (path / PLAN_FILE).is_file():
+        raise DatasetError(f"the pack worker on {socket.gethostname()} cannot see {work!r}: "
+                           "--out must be on a filesystem shared with the workers")
+    return path
+
+
+def _encode_location(location: str) -> tuple[str, bytes | None, str | None]:
+    """:func:`packer._encode_scene` for a path or URL (a URL's scene is downloaded first)."""
+    if not storage.is_url(location):
+        return packer._encode_scene(location)
+    name = location.rstrip("/").rsplit("/", 1)[-1]
+    with tempfile.TemporaryDirectory(prefix="kubric-pack-") as tmp:
+        local = pathlib.Path(tmp) / name
+        try:
+            storage.download_dir(location, local)
+        except Exception as err:  # each backend raises its own types
+            return name, None, f"cannot read {location}: {' '.join(str(err).split())[:300]}"
+        got = packer._encode_scene(str(local))
+    error = got[2].replace(str(local), location) if got[2] else None
+    return got[0], got[1], error
+
+
+def encode_chunk(work: str, file: str, scenes: list[str], schema, dims: dict) -> dict:
+    """Encode ``scenes`` (paths or URLs) into the ArrayRecord file ``work/file``; then write its
+    record ``work/.file.json`` (the completion mark) and return it."""
+    from array_record.python import array_record_module
+    work_dir = _require_work(work)
+    packer._init_worker(schema, dims)
+    tmp = work_dir / f".{file}.tmp-{os.getpid()}"
+    writer = array_record_module.ArrayRecordWriter(str(tmp), "group_size:1")
+    record = {"file": file, "scenes": [], "corrupt": [], "num_bytes": 0}
+    try:
+        for location in scenes:
+            name, data, error = _encode_location(location)
+            if error is not None:
+                record["corrupt"].append((location, error))
+                continue
+            writer.write(data)
+            record["scenes"].append(name)
+            record["num_bytes"] += len(data)
+        writer.close()
+        os.replace(tmp, work_dir / file)
+    finally:
+        tmp.unlink(missing_ok=True)
+    write_json(record, work_dir / f".{file}.json")
+    return record
+
+
+def recut_shard(work: str, file: str, pieces: list[tuple[str, list[int]]]) -> dict:
+    """Write ``work/file`` from records of chunk files: ``pieces`` = [(chunk file, [record
+    indices])] in order; returns ``{"file", "num_bytes"}``."""
+    from array_record.python import array_record_module
+    work_dir = _require_work(work)
+    tmp = work_dir / f".{file}.tmp-{os.getpid()}"
+    writer = array_record_module.ArrayRecordWriter(str(tmp), "group_size:1")
+    num_bytes = 0
+    try:
+        for chunk, indices in pieces:
+            reader = array_record_module.ArrayRecordReader(str(work_dir / chunk))
+            try:
+                for data in reader.read(indices):
+                    writer.write(data)
+                    num_bytes += len(data)
+            finally:
+                reader.close()
+        writer.close()
+        os.replace(tmp, work_dir / file)
+    finally:
+        tmp.unlink(missing_ok=True)
+    return {"file": file, "num_bytes": num_bytes}
+
+
+# ------------------------------------------------------------------------ executors
+class _LocalExecutor:
+    """Tasks in this process (``workers == 1``) or a pool of spawned processes."""
+
+    def __init__(self, workers: int):
+        self.pool = concurrent.futures.ThreadPoolExecutor(1) if workers == 1 else \
+            concurrent.futures.ProcessPoolExecutor(workers,
+                                                   mp_context=multiprocessing.get_context("spawn"))
+
+    def submit(self, fn, *args):
+        return self.pool.submit(fn, *args)
+
+    def as_completed(self, futures):
+        return concurrent.futures.as_completed(futures)
+
+    def close(self):
+        self.pool.shutdown(cancel_futures=True)
+
+
+class DaskExecutor:
+    """Tasks on a Dask client; each asks for one ``scene`` slot (as a scene render does)."""
+
+    def __init__(self, client):
+        self.client = client
+
+    def submit(self, fn, *args):
+        from kubric.pipeline.dask_runner import RESOURCE
+        return self.client.submit(fn, *args, resources={RESOURCE: 1}, pure=False)
+
+    def as_completed(self, futures):
+        from distributed import as_completed
+        return as_completed(futures)
+
+    def close(self):
+        pass
+
+
+def _run(executor, calls: list[tuple], on_done) -> None:
+    """Submit ``calls`` (fn, *args); ``on_done(call index, result)`` as each finishes. The
+    first failure cancels the rest and is raised."""
+    futures = {executor.submit(*call): k for k, call in enumerate(calls)}
+    try:
+        for future in executor.as_completed(list(futures)):
+            on_done(futures[future], future.result())
+    except BaseException:
+        for future in futures:
+            future.cancel()
+        raise
+
+
+# ------------------------------------------------------------------------ on the client
+def _list_scenes(scenes_dir: str, mirror: pathlib.Path) -> tuple[list[str], list[pathlib.Path],
+                                                                  int]:
+    """(complete scene locations, their local metadata folders, incomplete count) in name order.
+    A URL's scenes get a local mirror holding only ``metadata.json``."""
+    if not storage.is_url(scenes_dir):
+        complete, incomplete = packer.find_scenes(pathlib.Path(scenes_dir))
+        return [str(p) for p in complete], complete, incomplete
+    names = storage.listdir(scenes_dir)
+    complete = storage.complete_scenes(scenes_dir)
+    incomplete = sum(1 for n in names if n.startswith("scene_") and n not in complete)
+    locations, folders = [], []
+    for name in sorted(complete):
+        location = storage.join(scenes_dir, name)
+        folder = mirror / name
+        folder.mkdir(parents=True)
+        try:
+            (folder / "metadata.json").write_bytes(
+                storage.read_bytes(storage.join(location, "metadata.json")))
+        except FileNotFoundError:
+            pass  # no seed / schema from it: reported as the local packer does
+        locations.append(location)
+        folders.append(folder)
+    return locations, folders, incomplete
+
+
+def _chunks(scenes: list, size: int) -> list[list]:
+    return [scenes[i:i + size] for i in range(0, len(scenes), size)]
+
+
+def pack_sharded(scenes_dir, out, executor=None, name: str | None = None,
+                 splits=packer.DEFAULT_SPLITS, workers: int = 1, schema=None,
+                 examples_per_shard: int = 256, progress: bool = True, verify: bool = False,
+                 overwrite: bool = False,
+                 class_names: Mapping[str, Sequence[str]] | None = None) -> packer.PackResult:
+    """Pack like :func:`kubric.datasets.packer.pack`, one task per shard (module doc).
+    ``executor``: a :class:`DaskExecutor`, or None for ``workers`` local processes;
+    ``class_names`` as for :func:`~kubric.datasets.packer.pack`."""
+    from tqdm import tqdm
+    start = time.perf_counter()
+    scenes_dir = storage.normalise(str(scenes_dir)) if storage.is_url(str(scenes_dir)) \
+        else str(pathlib.Path(scenes_dir))
+    out = pathlib.Path(out).absolute()
+    if storage.is_url(scenes_dir):
+        try:
+            if not storage.exists(scenes_dir):
+                raise DatasetError(f"SCENES_DIR {scenes_dir!r} does not exist")
+        except storage.StorageError as err:
+            raise DatasetError(str(err)) from None
+        if verify:
+            raise DatasetError("--verify compares with local scene directories; pack the URL "
+                               "without it and verify a local copy")
+    elif not pathlib.Path(scenes_dir).is_dir():
+        raise DatasetError(f"SCENES_DIR {scenes_dir!r} is not a directory")
+    split_fractions = packer.check_options(splits, workers, examples_per_shard, out, overwrite)
+
+    with tempfile.TemporaryDirectory(prefix="kubric-pack-meta-") as mirror:
+        locations, folders, incomplete = _list_scenes(scenes_dir, pathlib.Path(mirror))
+        if not locations:
+            raise DatasetError(f"{scenes_dir!r} holds no complete scene directory (with "
+                               f"_SUCCESS); {incomplete} incomplete")
+        schema, dims = packer._schema_and_dims(folders, schema)
+        schema = packer.resolve_names(schema, folders, class_names)
+        name = name or schema.name
+        if not layout.NAME_PATTERN.match(name):
+            raise DatasetError(f"--name {name!r} must be a lower-case identifier (letters, "
+                               "digits, _)")
+        assignment: dict[str, list[str]] = {s: [] for s in split_fractions}
+        corrupt: list[tuple[str, str]] = []
+        for location, folder in zip(locations, folders, strict=True):
+            try:
+                assignment[layout.split_of(packer._seed_of(folder), split_fractions)].append(
+                    location)
+            except (packer.SceneError, ValueError) as err:
+                corrupt.append((location, str(err).replace(str(folder), location)))
+
+    plan = {"engine": "sharded", "schema": schema.name, "name": name, "splits": split_fractions,
+            "dims": dims, "examples_per_shard": examples_per_shard,
+            "format_version": layout.FORMAT_VERSION, "scenes": assignment,
+            "class_names": {f.name: f.names for f in schema.features if f.names}}
+    plan_key = hashlib.sha256(json.dumps(plan, sort_keys=True).encode()).hexdigest()
+    work = out.parent / f".{out.name}.incomplete"
+    _open_work(work, plan_key)
+
+    chunk_of = {}  # (split, k) -> chunk file
+    calls, todo_scenes, records = [], 0, {}
+    for split, scenes in assignment.items():
+        for k, chunk in enumerate(_chunks(scenes, examples_per_shard)):
+            file = f"{name}-{split}.chunk-{k:05d}"
+            chunk_of[split, k] = file
+            mark = work / f".{file}.json"
+            if mark.is_file() and (work / file).is_file():
+                records[split, k] = read_json(mark)
+                continue
+            calls.append((encode_chunk, str(work), file, chunk, schema, dims))
+            todo_scenes += len(chunk)
+    resumed = sum(len(r["scenes"]) + len(r["corrupt"]) for r in records.values())
+    keys = [key for key in chunk_of if key not in records]
+    own = executor is None
+    executor = executor or _LocalExecutor(workers)
+    bar = tqdm(total=todo_scenes, unit="scene", desc=f"pack {name}", disable=not progress)
+    try:
+        def done(k, record):
+            records[keys[k]] = record
+            bar.update(len(record["scenes"]) + len(record["corrupt"]))
+        _run(executor, calls, done)
+        bar.close()
+        state = _recut(work, executor, name, assignment, chunk_of, records, examples_per_shard)
+    finally:
+        bar.close()
+        if own:
+            executor.close()
+    corrupt += [tuple(c) for key in chunk_of for c in records[key]["corrupt"]]
+    if not any(sh["scenes"] for shards in state["shards"].values() for sh in shards):
+        first = f"; first: {corrupt[0][0]}: {corrupt[0][1]}" if corrupt else ""
+        shutil.rmtree(work, ignore_errors=True)
+        raise DatasetError(f"no scene could be packed: all {len(locations)} complete scenes are "
+                           f"corrupt{first}")
+    from kubric.datasets import tfds_io
+    features = tfds_io.tfds_features(schema, dims)
+    write_json(state, work / packer.PROGRESS_FILE)  # _finalise removes it
+    counts = packer._finalise(work, state, schema, name, dims, split_fractions, incomplete,
+                              features)
+    packer._swap_into_place(work, out)
+    result = packer.PackResult(out, counts, incomplete, corrupt, time.perf_counter() - start,
+                               resumed)
+    if verify:
+        from kubric.datasets.verify import verify_dataset
+        verify_dataset(out, scenes_dir, progress=progress)
+    return result
+
+
+def _open_work(work: pathlib.Path, plan_key: str) -> None:
+    """The work directory of this plan (kept from an interrupted run of the same plan)."""
+    if (work / PLAN_FILE).is_file():
+        try:
+            if read_json(work / PLAN_FILE).get("plan") == plan_key:
+                return
+        except ValueError:
+            pass
+    if work.exists():
+        shutil.rmtree(work)
+    work.mkdir(parents=True)
+    write_json({"plan": plan_key}, work / PLAN_FILE)
+
+
+def _recut(work: pathlib.Path, executor, name: str, assignment: dict, chunk_of: dict,
+           records: dict, per_shard: int) -> dict:
+    """The final shards as the local packer's progress state ``{"shards": {split: [...]}}``:
+    the chunks themselves, or (a split with corrupt scenes) shards re-cut from them to hold
+    ``per_shard`` good examples each. Removes everything else from ``work``."""
+    state: dict = {"shards": {}}
+    calls, targets = [], []
+    for split in assignment:
+        chunks = [records[key] for key in sorted(k for k in records if k[0] == split)]
+        if not any(r["corrupt"] for r in chunks):
+            state["shards"][split] = [{"file": r["file"], "scenes": r["scenes"],
+                                       "num_bytes": r["num_bytes"]} for r in chunks]
+            continue
+        good = [(r["file"], i, scene) for r in chunks for i, scene in enumerate(r["scenes"])]
+        shards = []
+        for j, part in enumerate(_chunks(good, per_shard)):
+            pieces: list[tuple[str, list[int]]] = []
+            for file, index, _ in part:
+                if not pieces or pieces[-1][0] != file:
+                    pieces.append((file, []))
+                pieces[-1][1].append(index)
+            shard = {"file": f"{name}-{split}.shard-{j:05d}", "scenes": [s for *_, s in part],
+                     "num_bytes": 0}
+            shards.append(shard)
+            calls.append((recut_shard, str(work), shard["file"], pieces))
+            targets.append(shard)
+        state["shards"][split] = shards
+
+    def done(k, result):
+        targets[k]["num_bytes"] = result["num_bytes"]
+    _run(executor, calls, done)
+    keep = {sh["file"] for shards in state["shards"].values() for sh in shards}
+    for entry in work.iterdir():
+        if entry.name not in keep:
+            entry.unlink()
+    return state
+
+
+__all__ = ["pack_sharded", "DaskExecutor", "encode_chunk", "recut_shard"]
