@@ -59,11 +59,13 @@ def undocumented_options(classes) -> list[str]:
 
 def _family_doc(cls) -> str:
     """The docstrings of the modules that define a recipe and its bases (base modules first,
-    the generic recipe machinery left out): the family's shared facts."""
+    the generic recipe machinery and option mixins left out): the family's shared facts."""
+    from kubric.pipeline.recipe import Recipe
     docs, seen = [], set()
     for klass in reversed(cls.__mro__):
         name = klass.__module__
-        if name in seen or name.startswith(("kubric.pipeline", "builtins", "abc")):
+        if name in seen or name.startswith(("kubric.pipeline", "builtins", "abc")) or \
+                not issubclass(klass, Recipe):
             continue
         seen.add(name)
         module = sys.modules.get(name)
@@ -83,6 +85,9 @@ def recipes_markdown() -> str:
            "DIR [--set option=value ...]`, many with `kubric generate RECIPE --out DIR --scenes N`; "
            "`kubric recipes` prints the same tables. Every option is checked before anything "
            "renders; a bad value fails in one line naming the value and what is allowed.", ""]
+    from kubric.recipes import render_quality
+    out += ["## Render quality (`quality`, `samples`, `denoise`)", "",
+            rst_to_markdown(inspect.cleandoc(render_quality.__doc__)), ""]
     families: dict[str, list] = {}
     for cls in classes:
         families.setdefault(cls.__module__, []).append(cls)

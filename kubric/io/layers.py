@@ -123,7 +123,7 @@ def _templates(file_templates: Mapping[str, str] | None, table: Mapping[str, Lay
 
 
 # -------------------------------------------------------------------------------- encoding
-def _unit_interval_to_uint16(arr: np.ndarray, lo: float, hi: float, what: str) -> np.ndarray:
+def _check_unit_interval(arr: np.ndarray, lo: float, hi: float, what: str) -> None:
     if arr.dtype.kind != "f":
         raise TypeError(f"{what}: expected float values in [{lo}, {hi}] or quantised uint8 / "
                         f"uint16 samples, got dtype {arr.dtype}")
@@ -132,8 +132,22 @@ def _unit_interval_to_uint16(arr: np.ndarray, lo: float, hi: float, what: str) -
     vmin, vmax = float(arr.min()), float(arr.max())
     if vmin < lo - RANGE_TOLERANCE or vmax > hi + RANGE_TOLERANCE:
         raise ValueError(f"{what}: values must lie in [{lo}, {hi}], got range [{vmin}, {vmax}]")
+
+
+def _unit_interval_to_uint16(arr: np.ndarray, lo: float, hi: float) -> np.ndarray:
     scaled = (np.clip(arr.astype(np.float64), lo, hi) - lo) * (png_io.UINT16_MAX / (hi - lo))
     return np.rint(scaled).astype(np.uint16)
+
+
+def _png_of(quantise: Callable) -> Callable:
+    """Frame encoder quantising one (H, W, C) frame at a time (C = 2 gets a zero third channel):
+    a layer's 16-bit copy and its float64 temporaries never exist whole."""
+    def encode(frame: np.ndarray) -> bytes:
+        q = quantise(frame)
+        if q.shape[-1] == 2:
+            q = np.concatenate([q, np.zeros_like(q[..., :1])], axis=-1)
+        return png_io.encode_png(q)
+    return encode
 
 
 def _prepare_layer(name: str, fmt: LayerFormat, data, ranges: dict
@@ -162,16 +176,13 @@ def _prepare_layer(name: str, fmt: LayerFormat, data, ranges: dict
     if fmt.kind == "scaled":
         value_range = png_io.float_range(arr, what)
         ranges[name] = value_range
-        q = png_io.scale_to_uint16(arr, value_range["min"], value_range["max"])
-    elif arr.dtype in (np.uint8, np.uint16):  # normal / uv / object coordinates, quantised
+        lo, hi = value_range["min"], value_range["max"]
+        return arr, _png_of(lambda frame: png_io.scale_to_uint16(frame, lo, hi))
+    if arr.dtype in (np.uint8, np.uint16):  # normal / uv / object coordinates, quantised
         return arr, png_io.encode_png        # already: stored as they are (see module doc)
-    elif fmt.kind == "signed_unit":
-        q = _unit_interval_to_uint16(arr, -1.0, 1.0, what)
-    else:
-        q = _unit_interval_to_uint16(arr, 0.0, 1.0, what)
-    if q.shape[-1] == 2:
-        q = np.concatenate([q, np.zeros_like(q[..., :1])], axis=-1)
-    return q, png_io.encode_png
+    lo = -1.0 if fmt.kind == "signed_unit" else 0.0
+    _check_unit_interval(arr, lo, 1.0, what)
+    return arr, _png_of(lambda frame: _unit_interval_to_uint16(frame, lo, 1.0))
 
 
 def write_image_dict(data_dict: Mapping[str, np.ndarray], directory: PathLike,

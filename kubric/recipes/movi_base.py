@@ -32,6 +32,7 @@ import kubric as kb
 from kubric.io.scene_writer import write_scene
 from kubric.pipeline import Option, OptionError, Recipe, resolution
 from kubric.recipes.common import check_min_max, check_source_options, kubasic_sources, source_location
+from kubric.recipes.render_quality import RenderQuality
 
 DYNAMIC_SPAWN_REGION = ((-5.0, -5.0, 1.0), (5.0, 5.0, 5.0))
 STATIC_SPAWN_REGION = ((-7.0, -7.0, 0.0), (7.0, 7.0, 10.0))
@@ -71,7 +72,7 @@ def place_without_overlap(obj, simulator, region, rng, max_trials: int = 1000) -
     return False
 
 
-class MoviBase(Recipe):
+class MoviBase(RenderQuality, Recipe):
     """Common options and steps of the MOVi recipes (not registered itself).
 
     ``schema``: the variant's output contract (:mod:`kubric.recipes.movi_schema`).
@@ -84,8 +85,6 @@ class MoviBase(Recipe):
     frame_end = Option(24, "last rendered frame (simulation runs to frame_end + 1)", low=1, limit=10000)
     frame_rate = Option(12, "frames per second", low=1, limit=1000)
     step_rate = Option(240, "physics steps per second (a multiple of frame_rate)", low=1, limit=100000)
-    samples = Option(64, "Cycles samples per pixel", low=1, high=65536, limit=4096)
-    denoise = Option(True, "denoise the RGB render (OIDN)")
     kubasic_source = Option(None, "KuBasic asset source folder or URL (default: built locally)",
                             type=source_location)
     save_state = Option(False, "also write scene.blend (animated) and scene.bullet (initial "
@@ -203,14 +202,13 @@ class MoviBase(Recipe):
             if self.save_state:  # the initial state, before the simulation (as upstream)
                 simulator.save_state(out_dir / "scene.bullet")
             _, collisions = simulator.run(frame_start=0, frame_end=scene.frame_end + 1)
-            renderer = kb.renderer.Blender(scene, scratch, samples_per_pixel=self.samples,
-                                           use_denoising=self.denoise, motion_blur=blur)
+            renderer = kb.renderer.Blender(scene, scratch, motion_blur=blur,
+                                           **self.renderer_quality())
             layers = renderer.render()
             if self.save_state:
                 renderer.save_state(out_dir / "scene.blend")
-            render_settings = {"samples_per_pixel": self.samples, "engine": "CYCLES",
-                               "view_transform": "Standard", "denoising": self.denoise,
-                               "motion_blur": blur}
+            render_settings = {"engine": "CYCLES", "view_transform": "Standard",
+                               **self.quality_settings(), "motion_blur": blur}
             self.write_outputs(scene, layers, collisions, seed, out_dir, background,
                                render_settings)
             simulator.close()

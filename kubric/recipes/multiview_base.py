@@ -42,6 +42,7 @@ from kubric.pipeline import Option, OptionError, Recipe, float_range, resolution
 from kubric.recipes.common import check_min_max, check_source_options, kubasic_sources, source_location
 from kubric.recipes.common import open_existing_source as open_source
 from kubric.recipes.movi_base import new_camera
+from kubric.recipes.render_quality import RenderQuality
 
 #: layers every multi-view scene writes (no flow: the views are not a motion sequence)
 RENDERED_LAYERS = ("rgba", "depth", "segmentation", "normal", "object_coordinates")
@@ -167,15 +168,13 @@ def write_flag_mask(layers: dict, instances: list, flag: str, template: str,
     write_label_layer(lut[layers["segmentation"]], template, out_dir)
 
 
-class MultiviewBase(Recipe):
+class MultiviewBase(RenderQuality, Recipe):
     """Common options and steps of the multi-view recipes (not registered itself)."""
 
     resolution = Option((128, 128), "(width, height) in pixels: N or WxH", type=resolution)
     num_views = Option(32, "number of camera views (frames 0 .. num_views-1)", low=1, high=10000)
     split_ratio = Option((8, 1, 1), "train,val,test weights: view v is split by v mod "
                          "(train+val+test) (see transforms_*.json)", type=nerf_export.split_ratio)
-    samples = Option(32, "Cycles samples per pixel", low=1, high=65536, limit=4096)
-    denoise = Option(True, "denoise the RGB render (OIDN)")
     camera_distance = Option((9.0, 11.0), "camera distance (m) from the look-at point, low,high",
                              type=float_range, low=0.1)
     elevation_range = Option((20.0, 70.0), "camera elevation above the horizon (degrees), "
@@ -291,12 +290,10 @@ class MultiviewBase(Recipe):
             self.key_camera(scene, self.camera_positions(rng))
             self.animate(scene, rng, splits, sources)
             renderer = kb.renderer.Blender(scene, self.scratch / "render",
-                                           samples_per_pixel=self.samples,
-                                           use_denoising=self.denoise, **self.renderer_options())
+                                           **self.renderer_quality(), **self.renderer_options())
             layers = renderer.render(return_layers=RENDERED_LAYERS)
-        render_settings = {"samples_per_pixel": self.samples, "engine": "CYCLES",
-                           "view_transform": "Standard", "denoising": self.denoise,
-                           **self.renderer_options()}
+        render_settings = {"engine": "CYCLES", "view_transform": "Standard",
+                           **self.quality_settings(), **self.renderer_options()}
         self.write_outputs(scene, layers, seed, out_dir, background, render_settings, splits)
 
     def write_outputs(self, scene, layers, seed, out_dir, background, render_settings,

@@ -45,6 +45,7 @@ from kubric.recipes.common import check_source_options, kubasic_sources, open_ex
 from kubric.recipes.complex_brdf import SHAPES
 from kubric.recipes.movi import add_clevr_lights
 from kubric.recipes.movi_base import new_camera
+from kubric.recipes.render_quality import RenderQuality
 
 ELEVATION_DEG = (10.0, 50.0)
 
@@ -58,7 +59,7 @@ def unit_vector(rng) -> np.ndarray:
             return v / n
 
 
-class Vbr(Recipe, name="vbr"):
+class Vbr(RenderQuality, Recipe, name="vbr"):
     """Video-based reconstruction (LASR): a rigid or articulated object moves and spins for 30 frames.
 
     RGB, silhouette, flow with occlusion and a camera per frame, in our format and as a LASR
@@ -69,8 +70,6 @@ class Vbr(Recipe, name="vbr"):
     frame_rate = Option(12, "frames per second", low=1, limit=1000)
     step_rate = Option(240, "physics steps per second (a multiple of frame_rate)", low=1,
                        limit=100000)
-    samples = Option(64, "Cycles samples per pixel", low=1, high=65536, limit=4096)
-    denoise = Option(True, "denoise the RGB render (OIDN)")
     object_type = Option("random", "rigid (a KuBasic shape or an objects_source asset), "
                          "articulated (a multi-link URDF), or random per seed",
                          choices=("random", "rigid", "articulated"))
@@ -216,11 +215,10 @@ class Vbr(Recipe, name="vbr"):
             _, collisions = simulator.run(frame_start=0, frame_end=scene.frame_end + 1)
             if self.camera == "follow":
                 self.follow(scene, camera, base, centre)
-            renderer = kb.renderer.Blender(scene, scratch, samples_per_pixel=self.samples,
-                                           use_denoising=self.denoise)
+            renderer = kb.renderer.Blender(scene, scratch, **self.renderer_quality())
             layers = renderer.render()
-            settings = {"samples_per_pixel": self.samples, "engine": "CYCLES",
-                        "view_transform": "Standard", "denoising": self.denoise}
+            settings = {"engine": "CYCLES", "view_transform": "Standard",
+                        **self.quality_settings()}
             kb.compute_visibility(layers["segmentation"], scene.assets)
             totals = [int(np.sum(p.metadata["visibility"])) for p in parts]
             order = [parts[i] for i in sorted(range(len(parts)), key=lambda i: -totals[i])]

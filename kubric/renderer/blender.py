@@ -15,6 +15,9 @@ object_coordinates float32.
 
 Options:
   samples_per_pixel (int ≥ 1), adaptive_sampling (bool), use_denoising (bool, OIDN),
+  denoising_quality ("HIGH", "BALANCED" or "FAST": OIDN's network size; default "HIGH"),
+  denoising_prefilter ("ACCURATE", "FAST" or "NONE": how OIDN cleans the albedo / normal
+  guide passes; default "ACCURATE"; both are Blender's defaults, measured in docs/render-cost.md),
   background_transparency (bool: transparent film, alpha 0 where the background shows),
   motion_blur (False / 0 = off, True = shutter 0.5 frames, or a shutter length in frames > 0;
   RGB only — annotations are always sharp), device ("CPU" or "GPU"; default "GPU" when the
@@ -100,6 +103,15 @@ def _device(value):
     return value
 
 
+def _choice(allowed):
+    def convert(name, value):
+        if not isinstance(value, str) or value.upper() not in allowed:
+            raise ValueError(f"Blender option {name} must be one of {list(allowed)}, "
+                             f"got {value!r}")
+        return value.upper()
+    return convert
+
+
 def _live_option(name, convert, apply):
     """A renderer option: validated by ``convert(name, value)``, applied to the Blender scene at
     once by ``apply(bpy_scene, value)`` (upstream scripts set these after construction)."""
@@ -135,6 +147,11 @@ class Blender(TableView):
     adaptive_sampling = _live_option("adaptive_sampling", _as_bool,
                                      _set_cycles("use_adaptive_sampling"))
     use_denoising = _live_option("use_denoising", _as_bool, _set_cycles("use_denoising"))
+    denoising_quality = _live_option("denoising_quality", _choice(("HIGH", "BALANCED", "FAST")),
+                                     _set_cycles("denoising_quality"))
+    denoising_prefilter = _live_option("denoising_prefilter",
+                                       _choice(("ACCURATE", "FAST", "NONE")),
+                                       _set_cycles("denoising_prefilter"))
     background_transparency = _live_option(
         "background_transparency", _as_bool,
         lambda bscene, value: setattr(bscene.render, "film_transparent", value))
@@ -186,12 +203,15 @@ class Blender(TableView):
 
     def __init__(self, scene, scratch_dir=None, adaptive_sampling=False, use_denoising=True,
                  samples_per_pixel=128, background_transparency=False, *, motion_blur=False,
-                 device=None, max_bounces=None, light_tree=False, verbose=False):
+                 device=None, max_bounces=None, light_tree=False, verbose=False,
+                 denoising_quality="HIGH", denoising_prefilter="ACCURATE"):
         self.bpy_scene = None
         self._options: dict = {}
         self.samples_per_pixel = samples_per_pixel
         self.adaptive_sampling = adaptive_sampling
         self.use_denoising = use_denoising
+        self.denoising_quality = denoising_quality
+        self.denoising_prefilter = denoising_prefilter
         self.background_transparency = background_transparency
         self.motion_blur = _motion_blur(motion_blur)
         self.device = _device(device)
@@ -449,13 +469,13 @@ class Blender(TableView):
             raise ValueError(f"Blender.render: unknown layers {unknown}; allowed: "
                              f"{list(bp.ALL_LAYERS)}")
         self._sync()
-        out: dict[str, list] = {k: [] for k in wanted}
+        out = _FrameStack(len(frames))
         if "rgba" in wanted:
             prefix = self.scratch_dir / "rgba_"
             self._configure_rgb(prefix)
             files = self._render_runs(sorted(set(frames)), str(prefix), ".png")
-            for f in frames:
-                out["rgba"].append(_read_png_rgba(files[f]))
+            for i, f in enumerate(frames):
+                out.put("rgba", i, _read_png_rgba(files[f]))
         ann = [k for k in wanted if k != "rgba"]
         if ann:
             labels, bounds = self._object_tables()
@@ -465,12 +485,13 @@ class Blender(TableView):
                 files = self._render_runs(sorted(set(frames)), str(prefix), ".exr")
             finally:
                 self._configure_rgb(self.scratch_dir / "rgba_")
-            for f in frames:
+            for i, f in enumerate(frames):
                 passes = bp.read_multilayer_exr(files[f])
                 layers = bp.decode(passes, self.scene.camera, f, labels, bounds, ann)
+                del passes
                 for k in ann:
-                    out[k].append(layers[k])
-        return {k: np.stack(v) for k, v in out.items()}
+                    out.put(k, i, layers.pop(k))
+        return {k: out.arrays[k] for k in wanted}
 
     def render_still(self, frame=None, return_layers=bp.ALL_LAYERS, ignore_missing_textures=False):
         """Render one frame (default: Blender's current frame) → {layer: (H, W, C) array}."""
@@ -518,6 +539,20 @@ class Blender(TableView):
     # upstream workers called these private names
     _set_ambient_light_hdri = set_ambient_light_hdri
     _set_background_hdri = set_background_hdri
+
+
+class _FrameStack:
+    """(T, H, W, C) arrays filled frame by frame: the frames are copied into one array per layer
+    as they are decoded, instead of being listed and stacked (which held every layer twice)."""
+
+    def __init__(self, num_frames: int):
+        self.num_frames = num_frames
+        self.arrays: dict[str, np.ndarray] = {}
+
+    def put(self, layer: str, index: int, frame: np.ndarray) -> None:
+        if layer not in self.arrays:
+            self.arrays[layer] = np.empty((self.num_frames,) + frame.shape, frame.dtype)
+        self.arrays[layer][index] = frame
 
 
 def missing_texture_files() -> list[str]:

@@ -147,5 +147,5 @@ def decode(passes, camera, frame, label_lut, bounds_lut, wanted) -> dict[str, np
         oc = np.clip((p - lo) / extent, 0.0, 1.0)
         out["object_coordinates"] = np.where(hit[..., None] & (index[..., None] > 0), oc,
                                              0.0).astype(np.float32)
-    return {k: v.astype(np.float32) if k != "segmentation" else v
+    return {k: v.astype(np.float32, copy=False) if k != "segmentation" else v
             for k, v in out.items() if k in wanted}
