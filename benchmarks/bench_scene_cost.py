@@ -1,0 +1,233 @@
+"""What one MOVi-A scene costs at each render quality, and what the quality is.
+
+For MOVi-A at its defaults (256², 24 frames; seed 3) and each quality profile (``final`` = the
+previous default, 64 spp + OIDN; ``default``, 16 spp; ``draft``, 4 spp) one whole worker process
+(``benchmarks/scene_profile.py``, a fresh interpreter as ``kubric worker``): its CPU seconds (user +
+sys, every thread) and peak RSS from ``wait4``, its wall time, and its profile by stage. Quality:
+RMSE of the RGB frames 1–4 (8-bit values) against a 1024-spp undenoised reference of the same
+frames rendered in the same run — over all pixels (the issue's measure), over object pixels and
+over a band of ±2 px around segmentation edges (where a denoiser blurs first). The exact layers of all
+profiles are compared byte for byte. Then throughput on this machine: two scenes at the default
+profile run one after the other with all cores each vs side by side with one render thread each
+(``KUBRIC_RENDER_THREADS=1``).
+
+Run: ``.venv/bin/python benchmarks/bench_scene_cost.py [--seed 3] [--json results.json]
+[--crops docs/images/render-cost-crops.png] [--no-throughput]``. About 10 min on 2 cores.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import pathlib
+import subprocess
+import sys
+import tempfile
+import time
+
+import numpy as np
+
+HERE = pathlib.Path(__file__).resolve().parent
+PROFILER = HERE / "scene_profile.py"
+PROFILES = (("final", "final (old default)"), ("default", "default"), ("draft", "draft"))
+EXACT = ("depth", "segmentation", "forward_flow", "backward_flow", "normal",
+         "object_coordinates", "uv")
+TARGET_CPU, TARGET_RMSE, TARGET_RSS_MB = 85.0, 1.07, 600.0
+
+
+def run_child(args: list[str], env=None) -> dict:
+    """Run scene_profile.py in a fresh process → {cpu, wall, rss_mib, profile}."""
+    with tempfile.NamedTemporaryFile(suffix=".json", delete=False) as f:
+        profile_path = f.name
+    cmd = [sys.executable, str(PROFILER), *args[:-1], profile_path, *args[-1]]
+    start = time.perf_counter()
+    proc = subprocess.Popen(cmd, cwd=HERE.parent, env=env, stdout=subprocess.DEVNULL,
+                            stderr=subprocess.PIPE, text=True)
+    _, status, usage = os.wait4(proc.pid, 0)
+    wall = time.perf_counter() - start
+    err = proc.stderr.read()
+    proc.stderr.close()
+    proc.returncode = os.waitstatus_to_exitcode(status)
+    if proc.returncode:
+        raise SystemExit(f"{' '.join(cmd)} failed ({proc.returncode}):\n{err[-2000:]}")
+    profile = json.loads(pathlib.Path(profile_path).read_text())
+    os.unlink(profile_path)
+    return {"cpu": usage.ru_utime + usage.ru_stime, "wall": wall,
+            "rss_mib": usage.ru_maxrss / 1024, "profile": profile}
+
+
+def scene_dir(root: pathlib.Path) -> pathlib.Path:
+    found = sorted(root.glob("scene_*"))
+    if len(found) != 1:
+        raise SystemExit(f"expected one scene in {root}, found {found}")
+    return found[0]
+
+
+def read_frames(directory: pathlib.Path, prefix: str, count: int) -> np.ndarray:
+    from PIL import Image
+    return np.stack([np.asarray(Image.open(directory / f"{prefix}_{i:05d}.png"))
+                     for i in range(count)])
+
+
+def edge_band(seg: np.ndarray, width: int = 1) -> np.ndarray:
+    """Pixels within ``width`` px of a label change (per frame), 4-neighbourhood."""
+    from scipy import ndimage
+    band = np.zeros(seg.shape, bool)
+    for t, s in enumerate(seg):
+        e = np.zeros(s.shape, bool)
+        dy, dx = s[:-1] != s[1:], s[:, :-1] != s[:, 1:]
+        e[:-1] |= dy
+        e[1:] |= dy
+        e[:, :-1] |= dx
+        e[:, 1:] |= dx
+        band[t] = ndimage.binary_dilation(e, iterations=width)
+    return band
+
+
+def rmse(img: np.ndarray, ref: np.ndarray, mask=None) -> float:
+    d2 = ((img.astype(np.float64) - ref.astype(np.float64)) ** 2).mean(-1)
+    return float(np.sqrt(d2[mask].mean() if mask is not None else d2.mean()))
+
+
+def exact_files(directory: pathlib.Path) -> dict[str, bytes]:
+    return {p.name: p.read_bytes() for p in sorted(directory.iterdir())
+            if p.name.split("_0")[0] in EXACT or p.name == "data_ranges.json"}
+
+
+def save_crops(path: pathlib.Path, images: list[tuple[str, np.ndarray]], seg: np.ndarray) -> None:
+    """Side-by-side crops (frame 1, around the largest object, 3× nearest-neighbour)."""
+    from PIL import Image, ImageDraw
+    labels, counts = np.unique(seg[0][seg[0] > 0], return_counts=True)
+    ys, xs = np.nonzero(seg[0] == labels[np.argmax(counts)]) if len(labels) else ([128], [128])
+    cy, cx, half = int(np.mean(ys)), int(np.mean(xs)), 32
+    h, w = seg.shape[1:]
+    y0, x0 = min(max(cy - half, 0), h - 2 * half), min(max(cx - half, 0), w - 2 * half)
+    scale, pad = 3, 18
+    tiles = []
+    for title, img in images:
+        crop = Image.fromarray(np.ascontiguousarray(img[0, y0:y0 + 2 * half, x0:x0 + 2 * half, :3]))
+        tile = Image.new("RGB", (2 * half * scale, 2 * half * scale + pad), "white")
+        tile.paste(crop.resize((2 * half * scale,) * 2, Image.NEAREST), (0, pad))
+        ImageDraw.Draw(tile).text((4, 3), title, fill="black")
+        tiles.append(tile)
+    sheet = Image.new("RGB", (sum(t.width for t in tiles) + 4 * (len(tiles) - 1), tiles[0].height),
+                      "white")
+    x = 0
+    for t in tiles:
+        sheet.paste(t, (x, 0))
+        x += t.width + 4
+    path.parent.mkdir(parents=True, exist_ok=True)
+    sheet.save(path)
+
+
+def throughput(work: pathlib.Path, seeds=(4, 5)) -> dict:
+    """Wall seconds for len(seeds) default scenes: sequential (all cores each) vs parallel (one
+    render thread each, one process per seed)."""
+    env = dict(os.environ)
+    env.pop("KUBRIC_RENDER_THREADS", None)
+    start = time.perf_counter()
+    for s in seeds:
+        run_child(["movi_a", str(s), str(work / f"seq_{s}"), []], env)
+    sequential = time.perf_counter() - start
+    env["KUBRIC_RENDER_THREADS"] = "1"
+    start = time.perf_counter()
+    procs = [subprocess.Popen([sys.executable, "-m", "kubric", "worker", "movi_a", "--seed",
+                               str(s), "--out", str(work / f"par_{s}")], cwd=HERE.parent, env=env,
+                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+             for s in seeds]
+    if any(p.wait() for p in procs):
+        raise SystemExit("a parallel throughput worker failed")
+    parallel = time.perf_counter() - start
+    return {"scenes": len(seeds), "sequential_wall": sequential, "parallel_wall": parallel}
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seed", type=int, default=3)
+    parser.add_argument("--reference-samples", type=int, default=1024)
+    parser.add_argument("--json", type=pathlib.Path, help="also write the numbers here")
+    parser.add_argument("--crops", type=pathlib.Path, help="write a crop comparison PNG here")
+    parser.add_argument("--no-throughput", action="store_true")
+    parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                        help="extra MOVi-A options for every run (smoke runs: resolution=64)")
+    args = parser.parse_args(argv)
+    os.environ.setdefault("KUBRIC_CACHE_DIR", str(HERE.parent / ".cache" / "kubric"))
+    frames = 4
+    results: dict = {"seed": args.seed, "profiles": {}}
+    with tempfile.TemporaryDirectory(prefix="bench_scene_cost_") as tmp:
+        work = pathlib.Path(tmp)
+        print(f"reference: {args.reference_samples} spp, no denoising, frames 1-{frames} of MOVi-A "
+              f"seed {args.seed} ...", flush=True)
+        ref_run = run_child(["--reference", f"1-{frames}", "movi_a", str(args.seed),
+                             str(work / "ref"), [f"samples={args.reference_samples}",
+                                                 "denoise=false", *args.set]])
+        ref = np.load(work / "ref" / "reference.npy")[..., :3]
+        print(f"  {ref_run['cpu']:.0f} CPU-s", flush=True)
+        exact, images, seg = {}, [(f"{args.reference_samples} spp reference", ref)], None
+        for quality, label in PROFILES:
+            run = run_child(["movi_a", str(args.seed), str(work / quality),
+                             [f"quality={quality}", *args.set]])
+            scene = scene_dir(work / quality)
+            rgb = read_frames(scene, "rgba", frames)[..., :3]
+            if seg is None:
+                seg = read_frames(scene, "segmentation", frames)
+                seg = seg[..., 0] if seg.ndim == 4 else seg
+            images.append((label, rgb))
+            meta = json.loads((scene / "metadata.json").read_text())["metadata"]["renderer"]
+            exact[quality] = exact_files(scene)
+            results["profiles"][quality] = {
+                "label": label, "samples": meta["samples_per_pixel"],
+                "denoiser": f"{meta['denoising_quality']}/{meta['denoising_prefilter']}"
+                if meta["denoising"] else "off",
+                "cpu": run["cpu"], "wall": run["wall"], "rss_mib": run["rss_mib"],
+                "rmse": rmse(rgb, ref), "rmse_objects": rmse(rgb, ref, seg > 0),
+                "rmse_edges": rmse(rgb, ref, edge_band(seg)),
+                "stages": run["profile"]["stages"]}
+            print(f"  {label}: {run['cpu']:.1f} CPU-s", flush=True)
+        identical = all(exact[q] == exact["final"] for q in exact)
+        results["exact_layers_identical"] = identical
+        results["exact_files"] = len(exact["final"])
+        if args.crops:
+            save_crops(args.crops, images, seg)
+        if not args.no_throughput:
+            print("throughput: 2 default scenes, sequential vs side by side ...", flush=True)
+            results["throughput"] = throughput(work)
+
+    p = results["profiles"]
+    old = p["final"]
+    shown = ", ".join(args.set) if args.set else "256², 24 frames"
+    print(f"\nMOVi-A seed {args.seed} ({shown}); RMSE of frames 1-{frames} (8-bit RGB) vs "
+          f"{args.reference_samples}-spp undenoised reference ({ref_run['cpu']:.0f} CPU-s)")
+    print(f"{'profile':22s} {'spp':>4s} {'denoiser':>16s} {'CPU-s':>7s} {'× old':>6s} "
+          f"{'wall s':>7s} {'peak RSS':>9s} {'RMSE':>6s} {'objects':>8s} {'edges':>6s}")
+    for q in p.values():
+        print(f"{q['label']:22s} {q['samples']:4d} {q['denoiser']:>16s} {q['cpu']:7.1f} "
+              f"{q['cpu'] / old['cpu']:6.2f} {q['wall']:7.1f} {q['rss_mib']:5.0f} MiB "
+              f"{q['rmse']:6.3f} {q['rmse_objects']:8.3f} {q['rmse_edges']:6.3f}")
+    new = p["default"]
+    print("\nprofile by stage (CPU-s), default vs old default:")
+    for stage, values in new["stages"].items():
+        print(f"  {stage:42s} {values[0]:7.2f}   {old['stages'].get(stage, [0])[0]:7.2f}")
+    print(f"\nexact layers ({results['exact_files']} files) byte-identical across profiles: "
+          f"{identical}")
+    rss_mb = new["rss_mib"] * 1.048576
+    print(f"targets: default CPU-s {new['cpu']:.1f} ≤ {TARGET_CPU} "
+          f"({'met' if new['cpu'] <= TARGET_CPU else 'NOT met'}); RMSE {new['rmse']:.3f} ≤ "
+          f"{TARGET_RMSE} ({'met' if new['rmse'] <= TARGET_RMSE else 'NOT met'}; old default "
+          f"{old['rmse']:.3f}); peak RSS {rss_mb:.0f} MB < {TARGET_RSS_MB:.0f} "
+          f"({'met' if rss_mb < TARGET_RSS_MB else 'NOT met'}); speed-up vs old default "
+          f"{old['cpu'] / new['cpu']:.2f}×")
+    t = results.get("throughput")
+    if t:
+        print(f"throughput on {os.cpu_count()} cores, {t['scenes']} default scenes: sequential "
+              f"(all threads each) {t['sequential_wall']:.1f} s, side by side (1 thread each) "
+              f"{t['parallel_wall']:.1f} s → {t['sequential_wall'] / t['parallel_wall']:.2f}× "
+              f"scenes per hour side by side")
+    if args.json:
+        args.json.write_text(json.dumps(results, indent=1))
+    return 0 if identical else 1
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,88 @@
+"""The ``quality`` option: profiles resolve to renderer settings, overrides win, and the exact
+layers are byte-identical under every profile (the render-cost issue's must-show), while RGB is
+not."""
+
+import concurrent.futures
+import json
+import pathlib
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from kubric.pipeline import OptionError, get_recipe
+from kubric.recipes.render_quality import PROFILES
+
+ROOT = pathlib.Path(__file__).resolve().parents[1]
+EXACT = ("depth", "segmentation", "forward_flow", "backward_flow", "normal",
+         "object_coordinates", "uv")
+
+
+@pytest.mark.parametrize("recipe", ["movi_a", "movi_e", "klevr", "vbr", "svr"])
+def test_profiles_resolve_to_renderer_settings(recipe):
+    for name, profile in PROFILES.items():
+        r = get_recipe(recipe).from_assignments([f"quality={name}"])
+        assert r.renderer_quality() == {
+            "samples_per_pixel": profile.samples, "use_denoising": profile.denoise,
+            "denoising_quality": profile.denoising_quality,
+            "denoising_prefilter": profile.denoising_prefilter}
+        settings = r.quality_settings()
+        assert settings["quality"] == name and settings["samples_per_pixel"] == profile.samples
+    default = get_recipe(recipe).from_assignments([])
+    assert default.quality == "default" and default.renderer_quality()["samples_per_pixel"] == 16
+
+
+def test_samples_and_denoise_override_the_profile():
+    r = get_recipe("movi_a").from_assignments(["quality=draft", "samples=12", "denoise=false"])
+    kw = r.renderer_quality()
+    assert kw["samples_per_pixel"] == 12 and kw["use_denoising"] is False
+    assert kw["denoising_quality"] == PROFILES["draft"].denoising_quality  # the rest stays
+    assert r.quality_settings()["quality"] == "draft"
+
+
+def test_bad_quality_is_one_line_naming_the_choices():
+    with pytest.raises(OptionError) as err:
+        get_recipe("movi_a").from_assignments(["quality=ultra"])
+    message = str(err.value)
+    assert "\n" not in message and "ultra" in message
+    assert all(name in message for name in PROFILES)
+
+
+def _worker(out, quality):
+    cmd = [sys.executable, "-m", "kubric", "worker", "movi_a", "--seed", "2", "--out", str(out)]
+    for o in ("resolution=40x32", "frame_end=3", "max_num_objects=4", f"quality={quality}"):
+        cmd += ["--set", o]
+    return subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=300)
+
+
+@pytest.mark.blender
+def test_exact_layers_identical_across_profiles(tmp_path):
+    get_recipe("movi_a").from_assignments([]).prepare()  # build KuBasic once
+    qualities = ("draft", "final")
+    with concurrent.futures.ThreadPoolExecutor(2) as pool:
+        procs = list(pool.map(lambda q: _worker(tmp_path / q, q), qualities))
+    for p in procs:
+        assert p.returncode == 0, p.stdout[-2000:] + p.stderr[-2000:]
+    scenes = {q: tmp_path / q / "scene_00000002" for q in qualities}
+    files = {q: sorted(f.name for f in s.iterdir()) for q, s in scenes.items()}
+    assert files["draft"] == files["final"]
+    exact = [n for n in files["draft"] if n.rsplit("_", 1)[0] in EXACT]
+    assert len(exact) == 3 * len(EXACT)
+    for name in exact + ["data_ranges.json", "events.json"]:
+        assert (scenes["draft"] / name).read_bytes() == (scenes["final"] / name).read_bytes(), name
+    meta = {q: json.loads((s / "metadata.json").read_text()) for q, s in scenes.items()}
+    assert meta["draft"]["instances"] == meta["final"]["instances"]
+    assert meta["draft"]["camera"] == meta["final"]["camera"]
+    for q in qualities:
+        renderer = meta[q]["metadata"]["renderer"]
+        assert renderer["quality"] == q
+        assert renderer["samples_per_pixel"] == PROFILES[q].samples
+        assert renderer["denoising_quality"] == PROFILES[q].denoising_quality
+        assert meta[q]["flags"]["quality"] == q
+    from PIL import Image
+    rgb = {q: np.stack([np.asarray(Image.open(s / f"rgba_{i:05d}.png"), np.int16)
+                        for i in range(3)]) for q, s in scenes.items()}
+    diff = np.abs(rgb["draft"] - rgb["final"])[..., :3]
+    assert diff.max() > 0  # the profiles really render differently ...
+    assert diff.mean() < 8  # ... the same scene
