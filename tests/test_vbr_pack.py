@@ -192,3 +192,26 @@ def test_missing_link_fields_need_the_default(packed):
         Feature("metadata/x", "str", (), "meta:x", "text", default="")
     with pytest.raises(SchemaError, match="default 3 is not a str"):
         Feature("instances/x", "str", (), "instance:x", "text", default=3)
+
+
+def test_an_instance_never_visible_packs_with_empty_boxes(packed, tmp_path):
+    """A part seen in no frame (V = 0): its boxes are (0, 4) in the scene reader and the loader
+    alike, so --verify holds (a copy of the articulated scene with one link hidden)."""
+    import shutil
+
+    from kubric.datasets import pack
+    from kubric.datasets.scene_reader import SceneReader
+    from kubric.io.schema import get_schema
+    scene = tmp_path / "scenes" / packed["articulated"]
+    shutil.copytree(packed["scenes"] / packed["articulated"], scene)
+    meta = json.loads((scene / "metadata.json").read_text())
+    meta["instances"][-1].update(bboxes=[], bbox_frames=[], visibility=[0] * T)
+    (scene / "metadata.json").write_text(json.dumps(meta))
+    boxes = SceneReader(scene, get_schema("vbr")).example(["instances/bboxes"])
+    assert boxes["instances/bboxes"][-1].shape == (0, 4)
+    result = pack(tmp_path / "scenes", tmp_path / "dataset", splits="train=1", progress=False,
+                  verify=True)
+    assert result.counts == {"train": 1} and not result.corrupt
+    ex = load(tmp_path / "dataset", "train")[0]
+    assert ex["instances"]["bboxes"][-1].shape == (0, 4)
+    assert list(ex["instances"]["bbox_frames"][-1]) == []
