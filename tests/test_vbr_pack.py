@@ -190,7 +190,7 @@ def test_missing_link_fields_need_the_default(packed):
         SceneReader(packed["scenes"] / packed["rigid"], bare).example()
     with pytest.raises(SchemaError, match="default"):
         Feature("metadata/x", "str", (), "meta:x", "text", default="")
-    with pytest.raises(SchemaError, match="default 3 is not a str"):
+    with pytest.raises(SchemaError, match="default 3 is not a value of dtype str"):
         Feature("instances/x", "str", (), "instance:x", "text", default=3)
 
 
@@ -215,3 +215,6 @@ def test_an_instance_never_visible_packs_with_empty_boxes(packed, tmp_path):
     ex = load(tmp_path / "dataset", "train")[0]
     assert ex["instances"]["bboxes"][-1].shape == (0, 4)
     assert list(ex["instances"]["bbox_frames"][-1]) == []
+    with pytest.raises(SchemaError, match="default True is not a value of dtype int32"):
+        Feature("instances/x", "int32", (), "instance:x", default=True)
+    assert Feature("instances/x", "float32", (), "instance:x", default=0).default == 0

@@ -136,11 +136,12 @@ class Feature:
         if self.source_kind not in ("instance", "collision") or self.shape or self.names:
             raise SchemaError(f"{what}: a default is allowed for scalar instance / collision "
                               f"features only (source {self.source!r}, shape {self.shape})")
-        text = isinstance(self.default, str)
-        if text != (self.dtype == "str") or (self.dtype == "bool") != isinstance(
-                self.default, bool) or (self.dtype[0] in "ui" and not isinstance(self.default,
-                                                                                 int)):
-            raise SchemaError(f"{what}: default {self.default!r} is not a {self.dtype} value")
+        value = self.default
+        number = isinstance(value, int | float) and not isinstance(value, bool)
+        fits = {"str": isinstance(value, str), "bool": isinstance(value, bool),
+                "float32": number}.get(self.dtype, number and isinstance(value, int))
+        if not fits:
+            raise SchemaError(f"{what}: default {value!r} is not a value of dtype {self.dtype}")
 
     @property
     def sequence(self) -> str | None:
