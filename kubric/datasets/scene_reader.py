@@ -17,7 +17,7 @@ from collections.abc import Mapping
 import numpy as np
 
 from kubric.io import json_io, layers
-from kubric.io.scene_writer import EVENTS_FILE, METADATA_FILE, lookup
+from kubric.io.scene_writer import EVENTS_FILE, METADATA_FILE, element_value, lookup
 from kubric.io.schema import Feature, Schema, SchemaError, layer_channels
 from kubric.pipeline.worker import SUCCESS, is_complete
 
@@ -99,6 +99,8 @@ def _cast(feature: Feature, value, dims: Mapping[str, int], what: str):
             raise SchemaError(f"{what}: non-integer values for dtype {target}")
     arr = arr.astype(target)
     expected = feature.concrete_shape(dims)
+    if arr.size == 0 and expected and expected[0] is None and None not in expected[1:]:
+        arr = arr.reshape((0, *expected[1:]))  # e.g. no boxes: [] → (0, 4), as the loader gives
     if len(expected) != arr.ndim or any(e is not None and e != s
                                         for e, s in zip(expected, arr.shape, strict=False)):
         if not (arr.size == 0 and expected and expected[0] is None):
@@ -213,7 +215,8 @@ class SceneReader:
             tree = self.metadata.get("metadata" if kind == "meta" else "camera", {})
             return [lookup(tree, arg, what)]
         if kind in ("instance", "collision"):
-            return [lookup(el, arg, f"{what} [{i}]") for i, el in enumerate(self._elements(kind))]
+            return [element_value(f, el, f"{what} [{i}]")
+                    for i, el in enumerate(self._elements(kind))]
         raise SchemaError(f"{what}: names are collected from metadata sources only, not "
                           f"{f.source!r}")
 
@@ -239,7 +242,8 @@ class SceneReader:
             tree = self.metadata.get("metadata" if kind == "meta" else "camera", {})
             value = self._converted(f, lookup(tree, arg, what), what)
             return _cast(f, value, self.dims, what)
-        values = [_cast(f, self._converted(f, lookup(el, arg, f"{what} [{i}]"), f"{what} [{i}]"),
+        values = [_cast(f, self._converted(f, element_value(f, el, f"{what} [{i}]"),
+                                           f"{what} [{i}]"),
                         self.dims, f"{what} [{i}]") for i, el in enumerate(self._elements(kind))]
         if f.dtype == "str" or (f.shape and f.shape[0] == "V"):
             return values

@@ -16,7 +16,7 @@ import numpy as np
 from kubric.io.json_io import write_json
 from kubric.io.layers import write_image_dict
 from kubric.io.paths import PathLike, as_path
-from kubric.io.schema import Schema, SchemaError, get_schema
+from kubric.io.schema import Feature, Schema, SchemaError, get_schema
 
 METADATA_FILE, EVENTS_FILE = "metadata.json", "events.json"
 
@@ -32,6 +32,18 @@ def lookup(tree, path: str, what: str):
         except (KeyError, IndexError, TypeError):
             raise SchemaError(f"{what}: no field {path!r}") from None
     return value
+
+
+def element_value(feature: Feature, element, what: str):
+    """The value of instance / collision ``feature`` in one ``element`` (a dict of
+    ``metadata.json["instances"]`` or ``events.json["collisions"]``): its field, or the
+    feature's ``default`` where the element lacks the field and the feature has one."""
+    try:
+        return lookup(element, feature.source_arg, what)
+    except SchemaError:
+        if feature.default is None:
+            raise
+        return feature.default
 
 
 def check_scene_content(schema: Schema, layers: Mapping[str, np.ndarray], metadata: Mapping,
@@ -52,10 +64,11 @@ def check_scene_content(schema: Schema, layers: Mapping[str, np.ndarray], metada
                    + tables[kind][1])
         elif kind == "instance":
             for n, inst in enumerate(metadata.get("instances", [])):
-                lookup(inst, arg, f"schema {schema.name!r} feature {f.name!r}: instance {n}")
+                element_value(f, inst, f"schema {schema.name!r} feature {f.name!r}: instance {n}")
         elif kind == "collision":
             for k, event in enumerate(events.get("collisions", [])):
-                lookup(event, arg, f"schema {schema.name!r} feature {f.name!r}: collision {k}")
+                element_value(f, event, f"schema {schema.name!r} feature {f.name!r}: "
+                              f"collision {k}")
 
 
 def write_scene(schema: Schema | str, out_dir: PathLike, layers: Mapping[str, np.ndarray],

@@ -38,6 +38,11 @@ Sources (``source`` strings):
 
 ``convert`` names a conversion applied after reading (:data:`CONVERSIONS`).
 
+``default`` (instance and collision sources only; a scalar of the feature's dtype) is the value
+of an element that lacks the field: fields a recipe writes for some instances only, e.g. the
+URDF link name of the parts of an articulated object (``vbr``'s ``instances/articulated_link``:
+``""`` for the base and for a rigid object). Without a default a missing field is an error.
+
 Text features (dtype ``str``) are one string, or with shape ``("C",)`` (any one named
 dimension) a list of strings. A class label whose ``names`` are :data:`NAMES_FROM_SCENES` gets
 its names when packing: the sorted distinct values of its source over the packed scenes (e.g.
@@ -95,6 +100,7 @@ class Feature:
     doc: str = ""
     names: tuple[str, ...] = ()      # class-label names (encoding "class_label")
     convert: str = ""
+    default: str | int | float | bool | None = None   # value where an element lacks the field
 
     def __post_init__(self):
         what = f"feature {self.name!r}"
@@ -123,6 +129,19 @@ class Feature:
             raise SchemaError(f"{what}: text features have shape () or one named dimension")
         if self.source_kind == "layer":
             layer_channels(self.source_arg, what)
+        if self.default is not None:
+            self._check_default(what)
+
+    def _check_default(self, what: str) -> None:
+        if self.source_kind not in ("instance", "collision") or self.shape or self.names:
+            raise SchemaError(f"{what}: a default is allowed for scalar instance / collision "
+                              f"features only (source {self.source!r}, shape {self.shape})")
+        value = self.default
+        number = isinstance(value, int | float) and not isinstance(value, bool)
+        fits = {"str": isinstance(value, str), "bool": isinstance(value, bool),
+                "float32": number}.get(self.dtype, number and isinstance(value, int))
+        if not fits:
+            raise SchemaError(f"{what}: default {value!r} is not a value of dtype {self.dtype}")
 
     @property
     def sequence(self) -> str | None:
@@ -243,7 +262,8 @@ def layer_channels(arg: str, what: str = "source") -> tuple[str, slice]:
 #: schemas by recipe name
 REGISTRY: dict[str, Schema] = {}
 #: modules that declare the built-in recipes' schemas (imported on first lookup)
-BUILTIN_SCHEMA_MODULES = ("kubric.recipes.movi_schema", "kubric.recipes.multiview_schema")
+BUILTIN_SCHEMA_MODULES = ("kubric.recipes.movi_schema", "kubric.recipes.multiview_schema",
+                          "kubric.recipes.vbr_schema")
 
 
 def register_schema(schema: Schema) -> Schema:
@@ -309,7 +329,8 @@ def schema_markdown(schema: Schema | str) -> str:
         dtype = ("class label (names: the sorted values found when packing)"
                  if f.names_from_scenes else
                  f"class label ({', '.join(f.names)})" if f.names else f.dtype)
-        source = f"`{f.source}`" + (f" → {f.convert}" if f.convert else "")
+        source = f"`{f.source}`" + (f" → {f.convert}" if f.convert else "") + \
+            (f" (missing: `{f.default!r}`)" if f.default is not None else "")
         doc = f.doc.replace("|", "\\|")
         lines.append(f"| `{f.name}` | {dtype} | {shape_text(f)} | {f.encoding} | {f.unit} | "
                      f"{source} | {doc} |")
