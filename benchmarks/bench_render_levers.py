@@ -22,6 +22,8 @@ import sys
 import tempfile
 import time
 
+import numpy as np
+
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
 from bench_scene_cost import edge_band, rmse  # noqa: E402
 
@@ -105,7 +107,9 @@ def main(argv=None) -> int:
 
         blender.Blender._configure_rgb = configure_with_extra
         seg = r.render(frames, ("segmentation",))["segmentation"][..., 0]
-        band, objects = edge_band(seg), seg > 0
+        background = [i for i, a in enumerate(r.scene.assets, start=1)
+                      if getattr(a, "background", False)]  # the renderer's labels: asset index
+        band, objects = edge_band(seg), (seg > 0) & ~np.isin(seg, background)
 
         def render(options, attrs):
             nonlocal extra

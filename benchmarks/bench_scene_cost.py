@@ -96,20 +96,26 @@ def exact_files(directory: pathlib.Path) -> dict[str, bytes]:
             if p.name.split("_0")[0] in EXACT or p.name == "data_ranges.json"}
 
 
-def save_crops(path: pathlib.Path, images: list[tuple[str, np.ndarray]], seg: np.ndarray) -> None:
-    """Side-by-side crops (frame 1, around the largest object, 3× nearest-neighbour)."""
+def save_crops(path: pathlib.Path, images: list[tuple[str, np.ndarray]], worst: np.ndarray
+               ) -> None:
+    """Side-by-side crops of frame 1 (64 px, 3× nearest-neighbour) where the RGB of ``worst``
+    (frames, H, W, 3) is farthest from the reference (the first image): the honest close-up."""
     from PIL import Image, ImageDraw
-    labels, counts = np.unique(seg[0][seg[0] > 0], return_counts=True)
-    ys, xs = np.nonzero(seg[0] == labels[np.argmax(counts)]) if len(labels) else ([128], [128])
-    cy, cx, half = int(np.mean(ys)), int(np.mean(xs)), 32
-    h, w = seg.shape[1:]
-    y0, x0 = min(max(cy - half, 0), h - 2 * half), min(max(cx - half, 0), w - 2 * half)
+    from scipy import ndimage
+    half = 32
+    err = ((worst[0].astype(np.float64) - images[0][1][0].astype(np.float64)) ** 2).mean(-1)
+    window = ndimage.uniform_filter(err, size=2 * half, mode="constant")
+    h, w = err.shape
+    window[:half, :] = window[h - half:, :] = window[:, :half] = window[:, w - half:] = -1
+    cy, cx = np.unravel_index(np.argmax(window), window.shape) if h > 2 * half and \
+        w > 2 * half else (h // 2, w // 2)
+    y0, x0 = max(0, min(cy - half, h - 2 * half)), max(0, min(cx - half, w - 2 * half))
     scale, pad = 3, 18
     tiles = []
     for title, img in images:
         crop = Image.fromarray(np.ascontiguousarray(img[0, y0:y0 + 2 * half, x0:x0 + 2 * half, :3]))
-        tile = Image.new("RGB", (2 * half * scale, 2 * half * scale + pad), "white")
-        tile.paste(crop.resize((2 * half * scale,) * 2, Image.NEAREST), (0, pad))
+        tile = Image.new("RGB", (crop.width * scale, crop.height * scale + pad), "white")
+        tile.paste(crop.resize((crop.width * scale, crop.height * scale), Image.NEAREST), (0, pad))
         ImageDraw.Draw(tile).text((4, 3), title, fill="black")
         tiles.append(tile)
     sheet = Image.new("RGB", (sum(t.width for t in tiles) + 4 * (len(tiles) - 1), tiles[0].height),
@@ -120,6 +126,7 @@ def save_crops(path: pathlib.Path, images: list[tuple[str, np.ndarray]], seg: np
         x += t.width + 4
     path.parent.mkdir(parents=True, exist_ok=True)
     sheet.save(path)
+    print(f"crops (frame 1, rows {y0}-{y0 + 2 * half}, columns {x0}-{x0 + 2 * half}) → {path}")
 
 
 def throughput(work: pathlib.Path, seeds=(4, 5)) -> dict:
@@ -199,7 +206,7 @@ def main(argv=None) -> int:
         results["exact_layers_identical"] = identical
         results["exact_files"] = len(exact["final"])
         if args.crops:
-            save_crops(args.crops, images, seg)
+            save_crops(args.crops, images, dict(images)["default"])
         if not args.no_throughput:
             print("throughput: 2 default scenes, sequential vs side by side ...", flush=True)
             results["throughput"] = throughput(work)

@@ -137,3 +137,16 @@ def test_pool_gives_each_scene_its_share_of_the_cores(tmp_path, monkeypatch):
                     "record_threads=true").returncode == 0
     assert threads(out) == ["3"]
     assert os.environ["KUBRIC_RENDER_THREADS"] == "3"
+
+
+def test_wait_exit_reaps_at_exit_and_times_out_otherwise():
+    from kubric.pipeline.runner import wait_exit
+    quick = subprocess.Popen([sys.executable, "-c", "import sys; sys.exit(3)"])
+    assert wait_exit(quick, 30.0) is True and quick.returncode == 3
+    slow = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(30)"])
+    try:
+        assert wait_exit(slow, 0.2) is False and slow.returncode is None
+    finally:
+        slow.kill()
+    assert wait_exit(slow, 30.0) is True and slow.returncode == -signal.SIGKILL
+    assert wait_exit(slow, 1.0) is True  # already reaped: still "exited"

@@ -20,6 +20,7 @@ from __future__ import annotations
 import abc
 import os
 import pathlib
+import select
 import signal
 import subprocess
 import sys
@@ -100,6 +101,32 @@ def worker_command(recipe_spec: str, seed: int, out_root, assignments: Sequence[
     return cmd
 
 
+def wait_exit(proc: subprocess.Popen, timeout: float | None) -> bool:
+    """Wait up to ``timeout`` seconds (None: for ever) for ``proc`` to exit and reap it; True when
+    it has exited. Wakes the moment it exits: on Linux through a pidfd, where ``Popen.wait(timeout)``
+    polls with sleeps of up to 50 ms (measured: +34 ms per scene for Dask tasks, which wait with a
+    timeout to poll their stop event, against the pool's plain wait)."""
+    if timeout is None:
+        proc.wait()
+        return True
+    try:
+        fd = os.pidfd_open(proc.pid)
+    except (AttributeError, OSError):  # not Linux ≥ 5.3, or the process is already reaped
+        try:
+            proc.wait(timeout=timeout)
+            return True
+        except subprocess.TimeoutExpired:
+            return False
+    try:
+        ready, _, _ = select.select([fd], [], [], timeout)
+    finally:
+        os.close(fd)
+    if ready:
+        proc.wait()
+        return True
+    return proc.poll() is not None
+
+
 def run_logged(cmd: Sequence[str], log: pathlib.Path, attempt: int, timeout: float | None = None,
                env: dict | None = None, start=None, should_stop=None, poll: float = 2.0,
                where: str = "") -> int | None:
@@ -121,24 +148,23 @@ def run_logged(cmd: Sequence[str], log: pathlib.Path, attempt: int, timeout: flo
             wait = None if deadline is None else max(0.0, deadline - time.monotonic())
             if should_stop is not None:
                 wait = poll if wait is None else min(wait, poll)
-            try:
-                rc = proc.wait(timeout=wait)
+            if wait_exit(proc, wait):
+                rc = proc.returncode
                 break
-            except subprocess.TimeoutExpired:
-                if deadline is not None and time.monotonic() >= deadline:
+            if deadline is not None and time.monotonic() >= deadline:
+                proc.kill()
+                rc = proc.wait()
+                fh.write(f"=== timed out after {timeout} s\n")
+                break
+            if should_stop is not None and should_stop():
+                proc.terminate()
+                try:
+                    rc = proc.wait(timeout=15)
+                except subprocess.TimeoutExpired:
                     proc.kill()
                     rc = proc.wait()
-                    fh.write(f"=== timed out after {timeout} s\n")
-                    break
-                if should_stop is not None and should_stop():
-                    proc.terminate()
-                    try:
-                        rc = proc.wait(timeout=15)
-                    except subprocess.TimeoutExpired:
-                        proc.kill()
-                        rc = proc.wait()
-                    fh.write("=== stopped: the run was interrupted\n")
-                    break
+                fh.write("=== stopped: the run was interrupted\n")
+                break
         fh.write(f"=== exit status {rc}\n")
     return rc
 
