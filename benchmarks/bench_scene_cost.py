@@ -9,8 +9,8 @@ frames rendered in the same run — over all pixels (the issue's measure), over 
 over a band of ±2 px around segmentation edges (where a denoiser blurs first). The exact layers of all
 profiles are compared byte for byte. Then throughput on this machine: two scenes at the default
 profile one after the other with all cores each, side by side with all cores each
-(oversubscribed), and side by side with cores // 2 render threads each (``KUBRIC_RENDER_THREADS``,
-what the process pool now sets).
+(oversubscribed: what the process pool does), and side by side with cores // 2 render threads
+each (``KUBRIC_RENDER_THREADS``, what Dask's ``--threads-per-scene 1`` does on 2 cores).
 
 Run: ``.venv/bin/python benchmarks/bench_scene_cost.py [--seed 3] [--json results.json]
 [--crops docs/images/render-cost-crops.png] [--no-throughput]``. About 10 min on 2 cores.
@@ -129,11 +129,11 @@ def save_crops(path: pathlib.Path, images: list[tuple[str, np.ndarray]], worst: 
     print(f"crops (frame 1, rows {y0}-{y0 + 2 * half}, columns {x0}-{x0 + 2 * half}) → {path}")
 
 
-def throughput(work: pathlib.Path, seeds=(4, 5)) -> dict:
+def throughput(work: pathlib.Path, seeds=(4, 4)) -> dict:
     """Wall seconds for len(seeds) default scenes (fresh ``kubric worker`` processes): one after
     the other with all cores each; side by side with all cores each (oversubscribed: the process
-    pool before it set the thread count); side by side with cores // scenes threads each (the
-    process pool now)."""
+    pool); side by side with cores // scenes threads each (one Dask slot per core). The same seed twice by default: side by side, two different scenes would
+    leave a core idle once the shorter one ends, which a long run's pool does not."""
     def workers(tag, threads, parallel):
         env = dict(os.environ)
         env.pop("KUBRIC_RENDER_THREADS", None)
@@ -141,10 +141,10 @@ def throughput(work: pathlib.Path, seeds=(4, 5)) -> dict:
             env["KUBRIC_RENDER_THREADS"] = str(threads)
         start = time.perf_counter()
         procs = []
-        for s in seeds:
+        for k, s in enumerate(seeds):
             procs.append(subprocess.Popen(
                 [sys.executable, "-m", "kubric", "worker", "movi_a", "--seed", str(s), "--out",
-                 str(work / f"{tag}_{s}")], cwd=HERE.parent, env=env,
+                 str(work / f"{tag}_{k}")], cwd=HERE.parent, env=env,
                 stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
             if not parallel and procs[-1].wait():
                 raise SystemExit(f"throughput worker {tag} seed {s} failed")
@@ -159,6 +159,15 @@ def throughput(work: pathlib.Path, seeds=(4, 5)) -> dict:
             "parallel_wall": workers("par", max(1, cores // len(seeds)), True)}
 
 
+def print_throughput(t: dict) -> None:
+    print(f"throughput, {t['scenes']} default scenes on {t['cores']} cores (wall s): one after "
+          f"the other, all threads each {t['sequential_wall']:.1f}; side by side, all threads "
+          f"each (oversubscribed) {t['oversubscribed_wall']:.1f}; side by side, "
+          f"{max(1, t['cores'] // t['scenes'])} thread(s) each {t['parallel_wall']:.1f} → "
+          f"{t['sequential_wall'] / t['parallel_wall']:.2f}× and "
+          f"{t['oversubscribed_wall'] / t['parallel_wall']:.2f}× the scenes per hour")
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seed", type=int, default=3)
@@ -166,12 +175,18 @@ def main(argv=None) -> int:
     parser.add_argument("--json", type=pathlib.Path, help="also write the numbers here")
     parser.add_argument("--crops", type=pathlib.Path, help="write a crop comparison PNG here")
     parser.add_argument("--no-throughput", action="store_true")
+    parser.add_argument("--throughput-only", action="store_true")
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                         help="extra MOVi-A options for every run (smoke runs: resolution=64)")
     args = parser.parse_args(argv)
     os.environ.setdefault("KUBRIC_CACHE_DIR", str(HERE.parent / ".cache" / "kubric"))
     frames = 4
     results: dict = {"seed": args.seed, "profiles": {}}
+    if args.throughput_only:
+        with tempfile.TemporaryDirectory(prefix="bench_scene_cost_") as tmp:
+            t = throughput(pathlib.Path(tmp))
+        print_throughput(t)
+        return 0
     with tempfile.TemporaryDirectory(prefix="bench_scene_cost_") as tmp:
         work = pathlib.Path(tmp)
         print(f"reference: {args.reference_samples} spp, no denoising, frames 1-{frames} of MOVi-A "
@@ -235,14 +250,8 @@ def main(argv=None) -> int:
           f"{old['rmse']:.3f}); peak RSS {rss_mb:.0f} MB < {TARGET_RSS_MB:.0f} "
           f"({'met' if rss_mb < TARGET_RSS_MB else 'NOT met'}); speed-up vs old default "
           f"{old['cpu'] / new['cpu']:.2f}×")
-    t = results.get("throughput")
-    if t:
-        print(f"throughput, {t['scenes']} default scenes on {t['cores']} cores (wall s): one after "
-              f"the other, all threads each {t['sequential_wall']:.1f}; side by side, all threads "
-              f"each (oversubscribed) {t['oversubscribed_wall']:.1f}; side by side, "
-              f"{max(1, t['cores'] // t['scenes'])} thread(s) each {t['parallel_wall']:.1f} → "
-              f"{t['sequential_wall'] / t['parallel_wall']:.2f}× and "
-              f"{t['oversubscribed_wall'] / t['parallel_wall']:.2f}× the scenes per hour")
+    if results.get("throughput"):
+        print_throughput(results["throughput"])
     if args.json:
         args.json.write_text(json.dumps(results, indent=1))
     return 0 if identical else 1

@@ -4,7 +4,6 @@ Options let tests make a scene slow (``sleep``), fail always (``fail``) or fail 
 attempt only (``flaky``: counts attempts in a file next to the scene directories)."""
 
 import json
-import os
 import pathlib
 import time
 
@@ -24,7 +23,6 @@ class Fake(Recipe, name="test_fake"):
     flaky = Option(False, "raise on the first attempt of each seed")
     assets = Option(None, "an asset directory that must exist", type=pathlib.Path,
                     must_exist=True)
-    record_threads = Option(False, "write the worker's KUBRIC_RENDER_THREADS into the metadata")
 
     def generate(self, seed, out_dir):
         if self.fail:
@@ -43,6 +41,4 @@ class Fake(Recipe, name="test_fake"):
             time.sleep(self.sleep)
         file_io.write_image_dict({"rgba": rgba, "segmentation": seg}, out_dir)
         meta = {"flags": self.flags(seed), "value": float(rng.rand())}
-        if self.record_threads:
-            meta["render_threads"] = os.environ.get("KUBRIC_RENDER_THREADS")
         (out_dir / "metadata.json").write_text(json.dumps(meta, sort_keys=True))

@@ -112,33 +112,6 @@ def test_demo_wiring_with_a_fast_recipe(tmp_path, monkeypatch, capsys):
     assert "2 generated" in out and (tmp_path / "test_fake" / "scene_00000001" / "_SUCCESS").exists()
 
 
-def test_pool_gives_each_scene_its_share_of_the_cores(tmp_path, monkeypatch):
-    """cores // concurrent scenes render threads per worker; a value in the environment wins."""
-    import json
-    import os
-
-    from kubric.pipeline.runner import usable_cores
-    cores = usable_cores()
-
-    def threads(out):
-        return sorted({json.loads((p / "metadata.json").read_text())["render_threads"]
-                       for p in out.glob("scene_*")})
-
-    monkeypatch.delenv("KUBRIC_RENDER_THREADS", raising=False)
-    for scenes, workers in ((2, 2), (1, 2), (3, 1)):
-        out = tmp_path / f"s{scenes}w{workers}"
-        proc = generate(out, "--scenes", str(scenes), "--workers", str(workers),
-                        "--set", "record_threads=true")
-        assert proc.returncode == 0, proc.stdout + proc.stderr
-        assert threads(out) == [str(max(1, cores // min(scenes, workers)))]
-    monkeypatch.setenv("KUBRIC_RENDER_THREADS", "3")
-    out = tmp_path / "given"
-    assert generate(out, "--scenes", "2", "--workers", "2", "--set",
-                    "record_threads=true").returncode == 0
-    assert threads(out) == ["3"]
-    assert os.environ["KUBRIC_RENDER_THREADS"] == "3"
-
-
 def test_wait_exit_reaps_at_exit_and_times_out_otherwise():
     from kubric.pipeline.runner import wait_exit
     quick = subprocess.Popen([sys.executable, "-c", "import sys; sys.exit(3)"])

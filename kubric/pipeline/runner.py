@@ -36,8 +36,6 @@ from kubric.pipeline.worker import SUCCESS, remove_stale, scene_name
 
 #: environment variable telling a worker to die with the runner that started it.
 PARENT_ENV = "KUBRIC_RUNNER_PID"
-#: environment variable fixing a worker's render thread count (kubric.renderer.blender)
-RENDER_THREADS_ENV = "KUBRIC_RENDER_THREADS"
 
 
 def usable_cores() -> int:
@@ -316,10 +314,11 @@ class LocalRunner(Runner):
     ``assignments`` are ``key=value`` option strings passed to every worker; validate them
     (build the recipe once) before calling :meth:`run`.
 
-    Render threads: each worker renders with ``cores // concurrent scenes`` threads
-    (``KUBRIC_RENDER_THREADS``, unless the environment already sets it), so the pool never runs
-    more render threads than cores (measured by bench_scene_cost's throughput arms:
-    docs/render-cost.md).
+    Render threads: every worker renders with Blender's automatic count (all cores) unless
+    ``KUBRIC_RENDER_THREADS`` is set: on the 2-core machine two scenes side by side with all
+    threads each finished 1.15× faster than with one thread each (bench_scene_cost's throughput
+    arms, docs/render-cost.md): a scene's single-threaded phases leave the other scene's threads
+    the cores.
     """
 
     def __init__(self, recipe_spec: str, out_root, seeds: Sequence[int],
@@ -329,7 +328,6 @@ class LocalRunner(Runner):
             raise ValueError(f"workers must be ≥ 1, got {workers}")
         super().__init__(recipe_spec, out_root, seeds, assignments, retries, timeout, progress)
         self.workers = workers or usable_cores()
-        self.render_threads = 1
         self._procs: set[subprocess.Popen] = set()
 
     # ------------------------------------------------------------------ one scene
@@ -344,7 +342,6 @@ class LocalRunner(Runner):
     def _attempt(self, seed: int, attempt: int) -> bool:
         # KUBRIC_DEBUG: the traceback of a failure goes into the scene's log
         env = dict(os.environ, **{PARENT_ENV: str(os.getpid()), "KUBRIC_DEBUG": "1"})
-        env.setdefault(RENDER_THREADS_ENV, str(self.render_threads))
         try:
             rc = run_logged(self.command(seed), self.logs.path(seed), attempt, self.timeout, env,
                             start=self._start)
@@ -389,9 +386,7 @@ class LocalRunner(Runner):
 
     # ------------------------------------------------------------------ all scenes
     def _execute(self, todo: list[int], summary: RunSummary, bar) -> None:
-        concurrent = min(self.workers, max(1, len(todo)))
-        self.render_threads = max(1, usable_cores() // concurrent)
-        with ThreadPoolExecutor(max_workers=concurrent) as pool:
+        with ThreadPoolExecutor(max_workers=min(self.workers, max(1, len(todo)))) as pool:
             futures = [pool.submit(self._run_one, s, summary, bar) for s in todo]
             while any(not f.done() for f in futures):
                 time.sleep(0.1)

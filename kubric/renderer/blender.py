@@ -26,8 +26,7 @@ Options:
   small lamp-lit scenes), verbose (bool: show Blender's console output), scratch_dir (where frames
   are written; default a new temporary directory).
 Render threads: Blender's automatic count (all cores), or exactly N when the environment variable
-KUBRIC_RENDER_THREADS is N ≥ 1 (set by ``kubric generate``: cores // concurrent scenes in the
-process pool, ``--threads-per-scene`` on Dask).
+KUBRIC_RENDER_THREADS is N ≥ 1 (set by ``kubric generate --threads-per-scene`` on Dask).
 Depth of field comes from the perspective camera's ``use_dof`` / ``focus_distance`` /
 ``aperture_fstop`` (RGB only).
 """
