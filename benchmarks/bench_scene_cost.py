@@ -13,7 +13,7 @@ profile one after the other with all cores each, side by side with all cores eac
 each (``KUBRIC_RENDER_THREADS``, what Dask's ``--threads-per-scene 1`` does on 2 cores).
 
 Run: ``.venv/bin/python benchmarks/bench_scene_cost.py [--seed 3] [--json results.json]
-[--crops docs/images/render-cost-crops.png] [--no-throughput]``. About 10 min on 2 cores.
+[--crops docs/img/render_cost_crops.png] [--no-throughput]``. About 10 min on 2 cores.
 """
 
 from __future__ import annotations

@@ -8,9 +8,9 @@ exact layers (depth, segmentation, flow, normals, object coordinates, UV) come f
 The profiles were chosen from the cost/quality curve measured on MOVi-A (256², 24 frames, seed 3)
 by ``benchmarks/bench_scene_cost.py``: RGB RMSE (8-bit values) against a 1024-spp undenoised
 reference of frames 1–4, and CPU-seconds per scene on the 2-core reference machine; the measured
-table is in docs/render-cost.md. Path tracing costs ~0.11 CPU-s per sample per 256² frame and
-OIDN (HIGH quality, ACCURATE prefilter) ~0.6 CPU-s per 256² frame, so at 16 samples the denoiser
-is a quarter of the frame's cost; below 16 samples the RMSE of object and edge pixels grows fast.
+table is in docs/render-cost.md. Path tracing costs ~0.10 CPU-s per sample per 256² frame and
+OIDN (HIGH quality, ACCURATE prefilter) ~0.8 CPU-s per 256² frame, so at 16 samples the denoiser
+is a third of the frame's cost; below 16 samples the RMSE of object and edge pixels grows fast.
 
 * ``draft``: 4 spp, OIDN BALANCED with FAST prefilter — previews and pipeline debugging.
 * ``default``: 16 spp, OIDN HIGH / ACCURATE — datasets.
