@@ -16,6 +16,15 @@ from kubric.io.schema import Feature, Schema, register_schema
 F = Feature
 _T3, _T4 = ("T", 3), ("T", 4)
 ADD = "Addition: "
+#: the camera's lens features, the same in every schema (MOVi, multi-view, vbr)
+CAMERA_LENS = (
+    F("camera/focal_length", "float32", (), "camera:focal_length", unit="mm",
+      doc="lens focal length"),
+    F("camera/sensor_width", "float32", (), "camera:sensor_width", unit="mm",
+      doc="sensor width"),
+    F("camera/field_of_view", "float32", (), "camera:field_of_view", unit="rad",
+      doc="horizontal"),
+)
 
 MOVI_BASE = Schema("movi", (
     # ---------------------------------------------------------------- metadata
@@ -59,12 +68,7 @@ MOVI_BASE = Schema("movi", (
     F("instances/visibility", "uint16", ("T",), "instance:visibility", unit="px",
       doc="visible pixels per frame"),
     # ---------------------------------------------------------------- camera
-    F("camera/focal_length", "float32", (), "camera:focal_length", unit="mm",
-      doc="lens focal length"),
-    F("camera/sensor_width", "float32", (), "camera:sensor_width", unit="mm",
-      doc="sensor width"),
-    F("camera/field_of_view", "float32", (), "camera:field_of_view", unit="rad",
-      doc="horizontal"),
+    *CAMERA_LENS,
     F("camera/positions", "float32", _T3, "camera:positions", unit="m",
       doc="camera centre per frame, world frame"),
     F("camera/quaternions", "float32", _T4, "camera:quaternions", doc="WXYZ"),

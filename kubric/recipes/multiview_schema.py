@@ -19,6 +19,7 @@ from __future__ import annotations
 
 from kubric.io.layers import LayerFormat
 from kubric.io.schema import NAMES_FROM_SCENES, Feature, Schema, register_schema
+from kubric.recipes.movi_schema import CAMERA_LENS
 
 F = Feature
 _T3, _T4 = ("T", 3), ("T", 4)
@@ -45,12 +46,7 @@ MULTIVIEW_BASE = Schema("multiview", (
     F("views/split", "uint8", ("T",), "meta:views", convert="split_index",
       doc="split of each view: 0 train, 1 val, 2 test (as transforms_{train,val,test}.json)"),
     # ---------------------------------------------------------------- camera
-    F("camera/focal_length", "float32", (), "camera:focal_length", unit="mm",
-      doc="lens focal length"),
-    F("camera/sensor_width", "float32", (), "camera:sensor_width", unit="mm",
-      doc="sensor width"),
-    F("camera/field_of_view", "float32", (), "camera:field_of_view", unit="rad",
-      doc="horizontal"),
+    *CAMERA_LENS,
     F("camera/positions", "float32", _T3, "camera:positions", unit="m",
       doc="camera centre per view, world frame"),
     F("camera/quaternions", "float32", _T4, "camera:quaternions",
