@@ -12,7 +12,9 @@ profile one after the other with all cores each, side by side with all cores eac
 (oversubscribed: what the process pool does), and side by side with cores // 2 render threads
 each (``KUBRIC_RENDER_THREADS``, what Dask's ``--threads-per-scene 1`` does on 2 cores).
 
-Run: ``.venv/bin/python benchmarks/bench_scene_cost.py [--seed 3] [--json results.json]
+Any MOVi recipe with ``--recipe`` (e.g. ``movi_c``: textured objects, HDRI light).
+
+Run: ``.venv/bin/python benchmarks/bench_scene_cost.py [--recipe movi_a] [--seed 3] [--json F]
 [--crops docs/img/render_cost_crops.png] [--no-throughput]``. About 10 min on 2 cores.
 """
 
@@ -129,11 +131,12 @@ def save_crops(path: pathlib.Path, images: list[tuple[str, np.ndarray]], worst: 
     print(f"crops (frame 1, rows {y0}-{y0 + 2 * half}, columns {x0}-{x0 + 2 * half}) → {path}")
 
 
-def throughput(work: pathlib.Path, seeds=(4, 4)) -> dict:
+def throughput(work: pathlib.Path, recipe: str = "movi_a", seeds=(4, 4)) -> dict:
     """Wall seconds for len(seeds) default scenes (fresh ``kubric worker`` processes): one after
     the other with all cores each; side by side with all cores each (oversubscribed: the process
-    pool); side by side with cores // scenes threads each (one Dask slot per core). The same seed twice by default: side by side, two different scenes would
-    leave a core idle once the shorter one ends, which a long run's pool does not."""
+    pool); side by side with cores // scenes threads each (one Dask slot per core). The same
+    seed twice by default: side by side, two different scenes would leave a core idle once the
+    shorter one ends, which a long run's pool does not."""
     def workers(tag, threads, parallel):
         env = dict(os.environ)
         env.pop("KUBRIC_RENDER_THREADS", None)
@@ -143,7 +146,7 @@ def throughput(work: pathlib.Path, seeds=(4, 4)) -> dict:
         procs = []
         for k, s in enumerate(seeds):
             procs.append(subprocess.Popen(
-                [sys.executable, "-m", "kubric", "worker", "movi_a", "--seed", str(s), "--out",
+                [sys.executable, "-m", "kubric", "worker", recipe, "--seed", str(s), "--out",
                  str(work / f"{tag}_{k}")], cwd=HERE.parent, env=env,
                 stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
             if not parallel and procs[-1].wait():
@@ -171,34 +174,35 @@ def print_throughput(t: dict) -> None:
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seed", type=int, default=3)
+    parser.add_argument("--recipe", default="movi_a", help="any MOVi recipe (default movi_a)")
     parser.add_argument("--reference-samples", type=int, default=1024)
     parser.add_argument("--json", type=pathlib.Path, help="also write the numbers here")
     parser.add_argument("--crops", type=pathlib.Path, help="write a crop comparison PNG here")
     parser.add_argument("--no-throughput", action="store_true")
     parser.add_argument("--throughput-only", action="store_true")
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                        help="extra MOVi-A options for every run (smoke runs: resolution=64)")
+                        help="extra recipe options for every run (smoke runs: resolution=64)")
     args = parser.parse_args(argv)
     os.environ.setdefault("KUBRIC_CACHE_DIR", str(HERE.parent / ".cache" / "kubric"))
     frames = 4
     results: dict = {"seed": args.seed, "profiles": {}}
     if args.throughput_only:
         with tempfile.TemporaryDirectory(prefix="bench_scene_cost_") as tmp:
-            t = throughput(pathlib.Path(tmp))
+            t = throughput(pathlib.Path(tmp), args.recipe)
         print_throughput(t)
         return 0
     with tempfile.TemporaryDirectory(prefix="bench_scene_cost_") as tmp:
         work = pathlib.Path(tmp)
-        print(f"reference: {args.reference_samples} spp, no denoising, frames 1-{frames} of MOVi-A "
-              f"seed {args.seed} ...", flush=True)
-        ref_run = run_child(["--reference", f"1-{frames}", "movi_a", str(args.seed),
+        print(f"reference: {args.reference_samples} spp, no denoising, frames 1-{frames} of "
+              f"{args.recipe} seed {args.seed} ...", flush=True)
+        ref_run = run_child(["--reference", f"1-{frames}", args.recipe, str(args.seed),
                              str(work / "ref"), [f"samples={args.reference_samples}",
                                                  "denoise=false", *args.set]])
         ref = np.load(work / "ref" / "reference.npy")[..., :3]
         print(f"  {ref_run['cpu']:.0f} CPU-s", flush=True)
         exact, images, seg = {}, [(f"{args.reference_samples} spp reference", ref)], None
         for quality, label in PROFILES:
-            run = run_child(["movi_a", str(args.seed), str(work / quality),
+            run = run_child([args.recipe, str(args.seed), str(work / quality),
                              [f"quality={quality}", *args.set]])
             scene = scene_dir(work / quality)
             rgb = read_frames(scene, "rgba", frames)[..., :3]
@@ -224,12 +228,12 @@ def main(argv=None) -> int:
             save_crops(args.crops, images, dict(images)["default"])
         if not args.no_throughput:
             print("throughput: 2 default scenes, sequential vs side by side ...", flush=True)
-            results["throughput"] = throughput(work)
+            results["throughput"] = throughput(work, args.recipe)
 
     p = results["profiles"]
     old = p["final"]
-    shown = ", ".join(args.set) if args.set else "256², 24 frames"
-    print(f"\nMOVi-A seed {args.seed} ({shown}); RMSE of frames 1-{frames} (8-bit RGB) vs "
+    shown = ", ".join(args.set) if args.set else "defaults"
+    print(f"\n{args.recipe} seed {args.seed} ({shown}); RMSE of frames 1-{frames} (8-bit RGB) vs "
           f"{args.reference_samples}-spp undenoised reference ({ref_run['cpu']:.0f} CPU-s)")
     print(f"{'profile':22s} {'spp':>4s} {'denoiser':>16s} {'CPU-s':>7s} {'× old':>6s} "
           f"{'wall s':>7s} {'peak RSS':>9s} {'RMSE':>6s} {'objects':>8s} {'edges':>6s}")
