@@ -248,12 +248,13 @@ def main(argv=None) -> int:
     print(f"\nexact layers ({results['exact_files']} files) byte-identical across profiles: "
           f"{identical}")
     rss_mb = new["rss_mib"] * 1.048576
-    print(f"targets: default CPU-s {new['cpu']:.1f} ≤ {TARGET_CPU} "
-          f"({'met' if new['cpu'] <= TARGET_CPU else 'NOT met'}); RMSE {new['rmse']:.3f} ≤ "
-          f"{TARGET_RMSE} ({'met' if new['rmse'] <= TARGET_RMSE else 'NOT met'}; old default "
-          f"{old['rmse']:.3f}); peak RSS {rss_mb:.0f} MB < {TARGET_RSS_MB:.0f} "
-          f"({'met' if rss_mb < TARGET_RSS_MB else 'NOT met'}); speed-up vs old default "
-          f"{old['cpu'] / new['cpu']:.2f}×")
+    if args.recipe == "movi_a":  # the render-cost issue's targets were set for MOVi-A
+        print(f"targets: default CPU-s {new['cpu']:.1f} ≤ {TARGET_CPU} "
+              f"({'met' if new['cpu'] <= TARGET_CPU else 'NOT met'}); RMSE {new['rmse']:.3f} ≤ "
+              f"{TARGET_RMSE} ({'met' if new['rmse'] <= TARGET_RMSE else 'NOT met'}; old default "
+              f"{old['rmse']:.3f}); peak RSS {rss_mb:.0f} MB < {TARGET_RSS_MB:.0f} "
+              f"({'met' if rss_mb < TARGET_RSS_MB else 'NOT met'}); speed-up vs old default "
+              f"{old['cpu'] / new['cpu']:.2f}×")
     if results.get("throughput"):
         print_throughput(results["throughput"])
     if args.json:
