@@ -4,8 +4,8 @@ Usage: ``python benchmarks/scene_profile.py RECIPE SEED OUT_DIR PROFILE_JSON [KE
 
 Writes the scene like ``kubric worker`` (through :func:`kubric.pipeline.worker.run_scene`) and
 PROFILE_JSON: CPU seconds (process-wide, every thread) and wall seconds per stage, measured by
-wrapping the pipeline's own functions, plus the RGB render's CPU time per frame (Blender's
-render_pre / render_post handlers) and the peak RSS. With ``--reference FRAMES`` (e.g. ``1-4``)
+wrapping the pipeline's own functions (with the resident and peak memory after each stage), and
+the process's peak RSS. With ``--reference FRAMES`` (e.g. ``1-4``)
 nothing is written but ``OUT_DIR/reference.npy``: those frames' RGBA rendered with the given
 options (used for the 1024-spp reference).
 """
@@ -21,7 +21,6 @@ import time
 
 _T0 = (time.process_time(), time.perf_counter())
 STAGES: dict[str, list[float]] = {}
-FRAMES: list[float] = []
 
 
 def _cpu_wall():
@@ -46,8 +45,7 @@ def _add(stage, c0, w0):
 
 
 def wrap(owner, name, stage):
-    """Replace ``owner.name`` by a version that adds its CPU and wall time to ``stage``; a stage
-    nested in another is subtracted from the outer one by the report (``inner`` markers)."""
+    """Replace ``owner.name`` by a version that adds its CPU and wall time to ``stage``."""
     fn = getattr(owner, name)
 
     @functools.wraps(fn)
@@ -63,11 +61,11 @@ def wrap(owner, name, stage):
 
 def install():
     """Wrap the stages of a MOVi scene (imports done here count as start-up)."""
+    # ``write_outputs`` writes the files too: recipes import write_scene by name, so it is
+    # timed within that stage, not on its own.
     c0, w0 = _T0
-    import bpy
 
     import kubric as kb
-    from kubric.io import scene_writer
     from kubric.recipes import movi_base
     from kubric.renderer import blender, blender_passes
     _add("start-up (python, kubric, bpy import)", c0, w0)
@@ -82,25 +80,13 @@ def install():
     wrap(blender, "_read_png_rgba", "PNG read-back")
     wrap(blender_passes, "read_multilayer_exr", "EXR read-back")
     wrap(blender_passes, "decode", "EXR decode to layers")
-    wrap(scene_writer, "write_scene", "encode + write files")
-    wrap(movi_base.MoviBase, "write_outputs", "annotations + metadata (outer)")
-
-    def pre(*_):
-        FRAMES.append(time.process_time())
-
-    def post(*_):
-        FRAMES[-1] = time.process_time() - FRAMES[-1]
-
-    bpy.app.handlers.render_pre.append(pre)
-    bpy.app.handlers.render_post.append(post)
-    return kb
+    wrap(movi_base.MoviBase, "write_outputs", "annotations + metadata + writing files")
 
 
 def reference(recipe, seed, frames, out_dir):
     """Render ``frames`` of scene ``seed`` (RGB only) with the recipe's options → reference.npy."""
     import numpy as np
 
-    import kubric as kb
     from kubric.renderer import blender
     original = blender.Blender.render
 
@@ -114,7 +100,6 @@ def reference(recipe, seed, frames, out_dir):
         recipe.generate(seed, out_dir)
     except _Done:
         pass
-    assert kb  # imported for the recipe's registry
 
 
 class _Done(Exception):
@@ -126,7 +111,7 @@ def main(argv) -> int:
     if argv and argv[0] == "--reference":
         ref, argv = argv[1], argv[2:]
     recipe_name, seed, out_dir, profile_path, *assignments = argv
-    kb = install()
+    install()
     from kubric.pipeline.recipe import get_recipe
     from kubric.pipeline.worker import run_scene
     recipe = get_recipe(recipe_name).from_assignments(assignments)
@@ -139,19 +124,10 @@ def main(argv) -> int:
     else:
         run_scene(recipe, int(seed), out_dir)
     _add("whole scene (after start-up)", c0, w0)
-    inner = ("encode + write files",)
-    outer = STAGES.get("annotations + metadata (outer)")
-    if outer:
-        for name in inner:
-            if name in STAGES:
-                outer[0] -= STAGES[name][0]
-                outer[1] -= STAGES[name][1]
-        STAGES["annotations + metadata"] = STAGES.pop("annotations + metadata (outer)")
     usage = resource.getrusage(resource.RUSAGE_SELF)
     pathlib.Path(profile_path).write_text(json.dumps({
-        "stages": STAGES, "rgb_frame_cpu": FRAMES, "peak_rss_mb": usage.ru_maxrss / 1024,
+        "stages": STAGES, "peak_rss_mb": usage.ru_maxrss / 1024,
         "cpu_total": usage.ru_utime + usage.ru_stime}, indent=1))
-    assert kb
     return 0
 
 

@@ -4,17 +4,14 @@ not."""
 
 import concurrent.futures
 import json
-import pathlib
-import subprocess
-import sys
 
 import numpy as np
 import pytest
+from collection_fixtures import run_worker
 
 from kubric.pipeline import OptionError, get_recipe
 from kubric.recipes.render_quality import PROFILES
 
-ROOT = pathlib.Path(__file__).resolve().parents[1]
 EXACT = ("depth", "segmentation", "forward_flow", "backward_flow", "normal",
          "object_coordinates", "uv")
 
@@ -49,21 +46,14 @@ def test_bad_quality_is_one_line_naming_the_choices():
     assert all(name in message for name in PROFILES)
 
 
-def _worker(out, quality):
-    cmd = [sys.executable, "-m", "kubric", "worker", "movi_a", "--seed", "2", "--out", str(out)]
-    for o in ("resolution=40x32", "frame_end=3", "max_num_objects=4", f"quality={quality}"):
-        cmd += ["--set", o]
-    return subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=300)
-
-
 @pytest.mark.blender
 def test_exact_layers_identical_across_profiles(tmp_path):
     get_recipe("movi_a").from_assignments([]).prepare()  # build KuBasic once
     qualities = ("draft", "final")
-    with concurrent.futures.ThreadPoolExecutor(2) as pool:
-        procs = list(pool.map(lambda q: _worker(tmp_path / q, q), qualities))
-    for p in procs:
-        assert p.returncode == 0, p.stdout[-2000:] + p.stderr[-2000:]
+    options = ("resolution=40x32", "frame_end=3", "max_num_objects=4")
+    with concurrent.futures.ThreadPoolExecutor(2) as pool:  # run_worker fails the test on error
+        list(pool.map(lambda q: run_worker("movi_a", 2, tmp_path / q, (*options, f"quality={q}")),
+                      qualities))
     scenes = {q: tmp_path / q / "scene_00000002" for q in qualities}
     files = {q: sorted(f.name for f in s.iterdir()) for q, s in scenes.items()}
     assert files["draft"] == files["final"]

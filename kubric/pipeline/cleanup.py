@@ -20,7 +20,7 @@ import signal
 import tempfile
 import threading
 
-#: prefix of a process's private temporary folder: ``kubric-tmp-{pid}-XXXXXXXX``
+#: prefix of a process's private temporary folder: ``kubric-tmp-{pid}-`` + a random suffix (mkdtemp's)
 PRIVATE_PREFIX = "kubric-tmp-"
 _PRIVATE_RE = re.compile(rf"^{PRIVATE_PREFIX}(\d+)-")
 
@@ -99,7 +99,7 @@ def remove_stale_private(parent) -> list[pathlib.Path]:
 
 
 def private_tmpdir() -> pathlib.Path:
-    """Give this process its own temporary folder ``$TMPDIR/kubric-tmp-{pid}-XXXXXXXX``, owned
+    """Give this process its own temporary folder ``$TMPDIR/kubric-tmp-{pid}-<random>``, owned
     (removed at exit), and point ``TMPDIR`` and :mod:`tempfile` at it, so that whatever this
     process and its children put in temporary space — Blender's ``blender_*`` session folders
     included — goes with it. Stale folders of dead processes are removed first."""
