@@ -21,6 +21,7 @@ from kubric.assets import clevr
 from kubric.core.color import Color
 from kubric.core.objects import PhysicalObject
 from kubric.core.quaternion import Quaternion
+from kubric.errors import KubricError
 
 
 class WorkerRandomState(np.random.RandomState):
@@ -107,7 +108,7 @@ def rotation_sampler(axis=None) -> Callable[[PhysicalObject, Any], None]:
     return sample
 
 
-class DoesNotFitError(ValueError):
+class DoesNotFitError(KubricError, ValueError):
     """The object's rotated bounding box is larger than the sampling region on some axis."""
 
 

@@ -13,8 +13,8 @@ import pytest
 from PIL import Image
 from viewer_helpers import CAMERA_TO_WORLD, FOCAL_PX, H, W, get_json, request, serving, synthetic_scene
 
+from kubric.annotations import pictures as render
 from kubric.io.png_io import decode_png
-from kubric.viewer import render
 from kubric.viewer.service import LRUCache
 from kubric.viewer.source import DirectorySource
 

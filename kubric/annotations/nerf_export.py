@@ -33,8 +33,10 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 
 from kubric.core import camera_geometry as geo
+from kubric.errors import InputError
+from kubric.io.schema import VIEW_SPLITS
 
-SPLITS = ("train", "val", "test")
+SPLITS = VIEW_SPLITS  # declared with the schema conversion that indexes them
 
 
 def split_ratio(value) -> tuple[int, int, int]:
@@ -45,9 +47,9 @@ def split_ratio(value) -> tuple[int, int, int]:
     try:
         parts = [int(str(v).strip()) for v in value]
     except (TypeError, ValueError):
-        raise ValueError("expected three integers train,val,test") from None
+        raise InputError("expected three integers train,val,test") from None
     if len(parts) != 3 or min(parts) < 0 or parts[0] < 1:
-        raise ValueError("expected three integers train,val,test ≥ 0 with train ≥ 1")
+        raise InputError("expected three integers train,val,test ≥ 0 with train ≥ 1")
     return tuple(parts)
 
 
@@ -113,10 +115,10 @@ def nerf_transforms(camera, frames: Sequence[int], resolution, splits: Sequence[
       extra: fields added at the top level of every file (e.g. ``split_ratio``).
     """
     if len(frames) != len(splits):
-        raise ValueError(f"nerf_transforms: {len(frames)} frames but {len(splits)} split names")
+        raise InputError(f"nerf_transforms: {len(frames)} frames but {len(splits)} split names")
     unknown = sorted(set(splits) - set(SPLITS))
     if unknown:
-        raise ValueError(f"nerf_transforms: unknown split(s) {unknown}; allowed: {list(SPLITS)}")
+        raise InputError(f"nerf_transforms: unknown split(s) {unknown}; allowed: {list(SPLITS)}")
     shared = intrinsics_entry(camera, resolution)
     out = {s: {**shared, **dict(extra or {}), "split": s, "frames": []} for s in SPLITS}
     matrices = geo.camera_to_world_matrices(camera, list(frames))
@@ -153,7 +155,7 @@ def iter_views(scene_dir, split: str = "train"):
     from kubric.io import png_io, tiff_io
 
     if split not in SPLITS:
-        raise ValueError(f"iter_views: unknown split {split!r}; allowed: {list(SPLITS)}")
+        raise InputError(f"iter_views: unknown split {split!r}; allowed: {list(SPLITS)}")
     scene_dir = pathlib.Path(scene_dir)
     path = scene_dir / f"transforms_{split}.json"
     if not path.is_file():

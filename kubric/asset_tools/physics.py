@@ -19,6 +19,8 @@ from pathlib import Path
 
 import numpy as np
 
+from kubric.errors import InputError
+
 #: V-HACD settings used for every non-convex mesh (pybullet.vhacd keyword arguments); see
 #: benchmarks/bench_assets.py for the speed / tightness trade-off that chose them.
 VHACD_PARAMS = {"resolution": 200000, "depth": 16, "concavity": 0.001,
@@ -49,7 +51,7 @@ def mass_properties(parts) -> dict:
         inertias.append(np.asarray(props["inertia"], dtype=np.float64))
     total = float(sum(vols))
     if not total > 0.0:
-        raise ValueError(f"mesh volume must be positive, got {total!r} (open or inverted mesh)")
+        raise InputError(f"mesh volume must be positive, got {total!r} (open or inverted mesh)")
     com = sum(v * c for v, c in zip(vols, coms, strict=True)) / total
     inertia = np.zeros((3, 3))
     for v, c, i in zip(vols, coms, inertias, strict=True):
@@ -161,7 +163,7 @@ def decompose(mesh, method: str = "auto") -> tuple[list, str]:
     ``"vhacd"`` or ``"coacd"`` (always decompose with that tool).
     """
     if method not in DECOMPOSITION_METHODS:
-        raise ValueError(f"decomposition method must be one of {list(DECOMPOSITION_METHODS)}, "
+        raise InputError(f"decomposition method must be one of {list(DECOMPOSITION_METHODS)}, "
                          f"got {method!r}")
     if method == "auto":
         parts = convex_parts_if_any(mesh)

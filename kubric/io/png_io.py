@@ -32,6 +32,7 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
+from kubric.errors import InputError
 from kubric.io.palette import label_palette
 from kubric.io.paths import PathLike, as_path, atomic_write_bytes, read_bytes
 
@@ -302,7 +303,7 @@ def write_scaled_png(data: np.ndarray, filename: PathLike) -> dict[str, float]:
 def png_header(data: bytes, name: str = "data") -> dict:
     """Width, height, bitdepth and colour type from a PNG's IHDR chunk."""
     if len(data) < 33 or data[:8] != PNG_SIGNATURE or data[12:16] != b"IHDR":
-        raise ValueError(f"{name} is not a PNG file (bad signature or missing IHDR)")
+        raise InputError(f"{name} is not a PNG file (bad signature or missing IHDR)")
     width, height, bitdepth, color_type = struct.unpack(">IIBB", data[16:26])
     return {"width": width, "height": height, "bitdepth": bitdepth, "color_type": color_type}
 
@@ -312,9 +313,9 @@ def png_samples_layout(data: bytes, name: str = "data") -> tuple[tuple[int, int,
     header = png_header(data, name)
     bitdepth, color_type = header["bitdepth"], header["color_type"]
     if color_type not in CHANNELS_FOR_COLOR_TYPE:
-        raise ValueError(f"{name}: invalid PNG colour type {color_type}")
+        raise InputError(f"{name}: invalid PNG colour type {color_type}")
     if bitdepth not in (8, 16) and color_type != PALETTE_COLOR_TYPE:
-        raise ValueError(f"{name}: only 8- and 16-bit PNG samples are supported, got {bitdepth}")
+        raise InputError(f"{name}: only 8- and 16-bit PNG samples are supported, got {bitdepth}")
     shape = (header["height"], header["width"], CHANNELS_FOR_COLOR_TYPE[color_type])
     return shape, bitdepth, color_type
 
@@ -334,9 +335,9 @@ def decode_png(data: bytes, name: str = "data") -> tuple[np.ndarray, np.ndarray 
     try:
         arr = imagecodecs.png_decode(data)
     except Exception as err:  # PngError, or UnicodeDecodeError from libpng's message on garbage
-        raise ValueError(f"{name}: corrupt PNG data ({type(err).__name__}: {err})") from None
+        raise InputError(f"{name}: corrupt PNG data ({type(err).__name__}: {err})") from None
     if arr.dtype != (np.uint16 if bitdepth == 16 else np.uint8) or arr.size != np.prod(shape):
-        raise ValueError(f"{name}: decoded {arr.dtype} {arr.shape}, but the header says "
+        raise InputError(f"{name}: decoded {arr.dtype} {arr.shape}, but the header says "
                          f"{bitdepth}-bit {shape}")
     return arr.reshape(shape), None
 
@@ -350,7 +351,7 @@ def _decode_palette_png(data: bytes, shape: tuple, name: str) -> tuple[np.ndarra
             palette = np.array(img.getpalette() or [], dtype=np.uint8).reshape(-1, 3)
             arr = np.asarray(img)
     except (OSError, SyntaxError) as err:  # Pillow raises SyntaxError for some broken chunks
-        raise ValueError(f"{name}: corrupt PNG data ({err})") from None
+        raise InputError(f"{name}: corrupt PNG data ({err})") from None
     return arr.astype(np.uint8, copy=False).reshape(shape), palette
 
 
@@ -396,7 +397,7 @@ def read_scaled_png(filename: PathLike, value_range) -> np.ndarray:
     lo, hi = _range_pair(value_range, f"read_scaled_png({str(path)!r})")
     arr, _ = decode_png(read_bytes(path), repr(str(path)))
     if arr.dtype != np.uint16:
-        raise ValueError(f"read_scaled_png({str(path)!r}): expected a 16-bit PNG, got 8-bit")
+        raise InputError(f"read_scaled_png({str(path)!r}): expected a 16-bit PNG, got 8-bit")
     return unscale_from_uint16(arr, lo, hi)
 
 
@@ -409,7 +410,7 @@ def read_palette_png(filename: PathLike, return_palette: bool = False):
     path = as_path(filename)
     arr, palette = decode_png(read_bytes(path), repr(str(path)))
     if arr.shape[2] != 1:
-        raise ValueError(f"read_palette_png({str(path)!r}): a label PNG has 1 channel "
+        raise InputError(f"read_palette_png({str(path)!r}): a label PNG has 1 channel "
                          f"(palette or grey), this one has {arr.shape[2]}")
     labels = arr.astype(np.uint32)
     return (labels, palette) if return_palette else labels

@@ -29,9 +29,17 @@ import tempfile
 import numpy as np
 
 import kubric as kb
+from kubric.io.scene_dir import TRACKS_FILE
 from kubric.io.scene_writer import write_scene
 from kubric.pipeline import Option, OptionError, Recipe, resolution
-from kubric.recipes.common import check_min_max, check_source_options, kubasic_sources, source_location
+from kubric.recipes.common import (
+    annotate_instances,
+    check_min_max,
+    check_source_options,
+    kubasic_sources,
+    scene_documents,
+    source_location,
+)
 from kubric.recipes.render_quality import RenderQuality
 
 DYNAMIC_SPAWN_REGION = ((-5.0, -5.0, 1.0), (5.0, 5.0, 5.0))
@@ -213,16 +221,17 @@ class MoviBase(RenderQuality, Recipe):
                                render_settings)
             simulator.close()
 
-    def write_tracks(self, scene, layers, visible, seed, out_dir) -> None:
-        """tracks.npz (before the segmentation is relabelled); queries sampled with an rng
-        derived from the seed, so adding tracks changes nothing else in the scene."""
-        from kubric.annotations.track_files import TRACKS_FILE, write_tracks
+    def track_archive(self, scene, layers, visible, seed) -> dict:
+        """The point tracks of ``tracks.npz`` (computed before the segmentation is relabelled);
+        queries sampled with an rng derived from the seed, so adding tracks changes nothing else
+        in the scene."""
+        from kubric.annotations.track_files import tracks_archive
         from kubric.annotations.tracks import scene_tracks
         rng = np.random.RandomState([int(seed), 0x7472616B])
         tracks = scene_tracks(scene, layers, visible, rng, num_tracks=self.tracks,
                               queries=getattr(self, "_queries", None), stride=self.track_stride,
                               max_fraction=self.track_max_fraction)
-        write_tracks(tracks, out_dir / TRACKS_FILE)
+        return tracks_archive(tracks)
 
     def write_outputs(self, scene, layers, collisions, seed, out_dir, background,
                       render_settings) -> list:
@@ -230,18 +239,14 @@ class MoviBase(RenderQuality, Recipe):
         candidates = [a for a in scene.foreground_assets if isinstance(a, kb.PhysicalObject)]
         if "uv" in layers:
             render_settings = {**render_settings, "uv": "wrapped modulo 1 (textures repeat)"}
-        kb.compute_visibility(layers["segmentation"], scene.assets)
-        visible = kb.post_processing.visible_sorted(candidates)
+        files = {}
         if self.tracks or self.track_queries is not None:
-            self.write_tracks(scene, layers, visible, seed, out_dir)
-        layers["segmentation"] = kb.adjust_segmentation_idxs(layers["segmentation"],
-                                                             scene.assets, visible)
-        kb.compute_bboxes(layers["segmentation"], visible)
-        meta = kb.get_scene_metadata(scene, seed=int(seed), num_instances=len(visible),
-                                     background=background, renderer=render_settings)
-        metadata = {"flags": self.flags(seed), "metadata": meta,
-                    "camera": kb.get_camera_info(scene.camera),
-                    "instances": kb.get_instance_info(scene, visible)}
-        events = {"collisions": kb.process_collisions(collisions, scene, visible)}
-        write_scene(self.schema, out_dir, layers, metadata, events)  # checked against the schema
+            def add_tracks(visible):
+                files[TRACKS_FILE] = self.track_archive(scene, layers, visible, seed)
+        else:
+            add_tracks = None
+        visible = annotate_instances(scene, layers, candidates, before_relabel=add_tracks)
+        metadata, events = scene_documents(self, scene, seed, visible, collisions,
+                                           background=background, renderer=render_settings)
+        write_scene(self.schema, out_dir, layers, metadata, events, files=files)
         return visible

@@ -10,8 +10,8 @@ import threading
 
 import numpy as np
 
+from kubric.annotations import pictures as render
 from kubric.core.camera_geometry import BACKGROUND_DEPTH, CAMERA_TO_OPENCV
-from kubric.viewer import render
 from kubric.viewer.source import SceneError, SceneSource
 
 #: default cache size in bytes (decoded frames + PNG bytes)

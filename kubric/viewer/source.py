@@ -19,20 +19,22 @@ import time
 
 import numpy as np
 
+from kubric.errors import KubricError
 from kubric.io.json_io import read_json
 from kubric.io.layers import LAYERS, frame_filename, read_frame
+from kubric.io.scene_dir import EVENTS_FILE, METADATA_FILE, SUCCESS_FILE, TRACKS_FILE
+from kubric.io.scene_dir import looks_like_scene as _looks_like_scene
 
 #: a scene name: letters, digits, ``_ . -``, not starting with a dot (no separators, no ``..``)
 NAME_PATTERN = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.\-]{0,199}\Z")
 #: layers the viewer shows, in the selector's order
 VIEW_LAYERS = ("rgba", "rgb", "depth", "z", "forward_flow", "backward_flow", "normal",
                "object_coordinates", "uv", "segmentation")
-SUCCESS_FILE = "_SUCCESS"
 #: how often a folder is rescanned for new scenes (seconds)
 RESCAN_SECONDS = 2.0
 
 
-class SceneError(Exception):
+class SceneError(KubricError):
     """A scene that cannot be shown (incomplete, corrupt): the page shows the message."""
 
 
@@ -128,17 +130,17 @@ class DirectorySource(SceneSource):
                    num_frames=info.get("num_frames"), resolution=info.get("resolution"),
                    layers=[n for n in VIEW_LAYERS if (directory / frame_filename(
                        LAYERS[n].template, 0)).is_file()],
-                   has_tracks=(directory / "tracks.npz").is_file())
+                   has_tracks=(directory / TRACKS_FILE).is_file())
         if not (directory / SUCCESS_FILE).is_file():
             row["error"] = f"incomplete scene: {name} has no {SUCCESS_FILE} (still being " \
                            "written, or its worker failed)"
         return row
 
     def metadata(self, name: str) -> dict:
-        return self._json(name, "metadata.json", required=True)
+        return self._json(name, METADATA_FILE, required=True)
 
     def events(self, name: str) -> dict:
-        return self._json(name, "events.json", required=False) or {"collisions": []}
+        return self._json(name, EVENTS_FILE, required=False) or {"collisions": []}
 
     def _json(self, name: str, filename: str, required: bool):
         path = self.directory(name) / filename
@@ -166,7 +168,7 @@ class DirectorySource(SceneSource):
 
     def tracks(self, name: str) -> dict | None:
         directory = self.directory(name)
-        if not (directory / "tracks.npz").is_file():
+        if not (directory / TRACKS_FILE).is_file():
             return None
         from kubric.annotations.track_files import read_tracks
         try:
@@ -175,6 +177,3 @@ class DirectorySource(SceneSource):
             raise SceneError(f"{name}/tracks.npz is unreadable: {err}") from None
 
 
-def _looks_like_scene(path: pathlib.Path) -> bool:
-    return (path / "metadata.json").is_file() or (path / SUCCESS_FILE).is_file() or \
-        path.name.startswith("scene_")

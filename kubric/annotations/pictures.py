@@ -1,4 +1,5 @@
-"""Decoded layer frames → RGB(A) pictures for the page (then PNG bytes).
+"""Decoded layer frames → RGB(A) pictures: the one colouriser of layers, used by ``kubric view``
+and by ``kubric inspect``'s contact sheets.
 
 * ``rgba`` / ``rgb``: as stored (alpha kept).
 * ``depth`` / ``z``: a perceptual colour map (viridis-like: near = dark purple, far = yellow)
@@ -8,7 +9,7 @@
   beyond ``max_flow`` the colour darkens.
 * ``normal``: (n + 1) / 2 as RGB; ``object_coordinates`` and ``uv``: the values as RGB.
 * ``segmentation``: the label palette (:mod:`kubric.io.palette`: the colours of segmentation
-  PNGs and ``kubric inspect``; 0 black, then distinct hues);
+  PNGs; 0 black, then distinct hues);
   :func:`outline` draws only the label boundaries, transparent elsewhere, for the overlay.
 """
 
@@ -107,7 +108,8 @@ def picture(layer: str, frame: np.ndarray, lo: float | None = None,
         return (np.clip(frame, 0, 1) * 255 + 0.5).astype(np.uint8)
     if layer == "segmentation":
         return segmentation_picture(frame)
-    raise KeyError(f"no picture for layer {layer!r}")
+    raise KeyError(f"no picture for layer {layer!r}; allowed: rgba, rgb, depth, z, *flow, normal, "
+                   "object_coordinates, uv, segmentation")
 
 
 def depth_range(depth: np.ndarray, background: float = BACKGROUND_DEPTH) -> tuple[float, float]:
@@ -118,3 +120,20 @@ def depth_range(depth: np.ndarray, background: float = BACKGROUND_DEPTH) -> tupl
 
 def to_png(pixels: np.ndarray) -> bytes:
     return encode_png(np.ascontiguousarray(pixels))
+
+
+def layer_pictures(name: str, layer: np.ndarray,
+                   background: float = BACKGROUND_DEPTH) -> np.ndarray:
+    """(T, H, W, C) layer → (T, H, W, 3) uint8 pictures on one scale for all frames (depth over
+    the scene's nearest and farthest surface, flows saturated at the scene's largest
+    magnitude); RGBA is composited over black."""
+    if name in ("rgba", "rgb"):
+        rgb = layer[..., :3].astype(np.float32)
+        alpha = layer[..., 3:4].astype(np.float32) / 255.0 if layer.shape[-1] == 4 else 1.0
+        return (rgb * alpha).astype(np.uint8)
+    lo = hi = None
+    if name in ("depth", "z"):
+        lo, hi = depth_range(layer, background)
+    elif name.endswith("flow"):
+        hi = max(float(np.hypot(layer[..., 0], layer[..., 1]).max()), 1e-9)
+    return np.stack([picture(name, frame, lo, hi)[..., :3] for frame in layer])
