@@ -136,13 +136,8 @@ def pixel_rays_from_transforms(data: Mapping, entry: Mapping):
     """(origins (H, W, 3), unit directions (H, W, 3)) of every pixel-centre ray of one frame
     entry of a transforms file, built from the file's fields alone (see module doc)."""
     w, h = int(data["w"]), int(data["h"])
-    m = np.asarray(entry["transform_matrix"], np.float64)
-    cols, rows = np.meshgrid(np.arange(w) + 0.5, np.arange(h) + 0.5)
-    local = np.stack([(cols - data["cx"]) / data["fl_x"], -(rows - data["cy"]) / data["fl_y"],
-                      -np.ones_like(cols)], axis=-1)
-    local /= np.linalg.norm(local, axis=-1, keepdims=True)
-    directions = local @ m[:3, :3].T
-    return np.broadcast_to(m[:3, 3], directions.shape).copy(), directions
+    k = [[data["fl_x"], 0.0, data["cx"]], [0.0, data["fl_y"], data["cy"]], [0.0, 0.0, 1.0]]
+    return geo.pinhole_rays(k, entry["transform_matrix"], geo.pixel_centres(h, w))
 
 
 def iter_views(scene_dir, split: str = "train"):

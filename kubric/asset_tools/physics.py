@@ -193,13 +193,13 @@ def write_hulls_obj(hulls, path: str | os.PathLike) -> None:
     lines, offset = [], 1
     for k, hull in enumerate(hulls):
         lines.append(f"o hull_{k:03d}")
-        lines.extend("v " + " ".join(_fmt(x) for x in v) for v in hull.vertices)
+        lines.extend("v " + " ".join(fmt(x) for x in v) for v in hull.vertices)
         lines.extend("f " + " ".join(str(int(i) + offset) for i in f) for f in hull.faces)
         offset += len(hull.vertices)
     Path(path).write_text("\n".join(lines) + "\n")
 
 
-def _fmt(x: float) -> str:
+def fmt(x: float) -> str:
     """Fixed formatting of a coordinate: 9 significant digits, no '-0'."""
     s = f"{float(x):.9g}"
     return "0" if s in ("-0", "0") else s

@@ -82,11 +82,11 @@ class Collision:
 
 def _geometry_xml(col: Collision) -> str:
     if col.kind == "box":
-        return '<box size="{} {} {}"/>'.format(*(physics._fmt(v) for v in col.params))
+        return '<box size="{} {} {}"/>'.format(*(physics.fmt(v) for v in col.params))
     if col.kind == "sphere":
-        return f'<sphere radius="{physics._fmt(col.params[0])}"/>'
+        return f'<sphere radius="{physics.fmt(col.params[0])}"/>'
     if col.kind == "cylinder":
-        r, h = (physics._fmt(v) for v in col.params)
+        r, h = (physics.fmt(v) for v in col.params)
         return f'<cylinder radius="{r}" length="{h}"/>'
     if col.kind in ("hulls", "concave"):
         return '<mesh filename="collision_geometry.obj" scale="1 1 1"/>'
@@ -97,7 +97,7 @@ def _geometry_xml(col: Collision) -> str:
 def urdf_text(name: str, mass: float, inertia: np.ndarray, col: Collision,
               visual_file: str, friction: float = 0.5) -> str:
     """A one-link URDF: inertial at the origin (mesh centred on its centre of mass)."""
-    f = physics._fmt
+    f = physics.fmt
     i = np.asarray(inertia, dtype=np.float64)
     concave = ' concave="yes"' if col.kind == "concave" else ""
     return "\n".join([
@@ -140,7 +140,7 @@ def mtl_text(material_name: str) -> str:
 def _write_visual_obj(mesh, path: Path, material: str | None = None) -> None:
     """z-up OBJ with UVs when the mesh has them; ``material``: use that material of
     ``visual_geometry.mtl`` (written by the caller) for every face."""
-    f = physics._fmt
+    f = physics.fmt
     lines = [f"mtllib {MTL_NAME}"] if material else []
     lines += ["v " + " ".join(f(x) for x in v) for v in mesh.vertices]
     uv = getattr(mesh.visual, "uv", None)

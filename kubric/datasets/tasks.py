@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from kubric.core import camera_geometry as geo
 from kubric.datasets.layout import DatasetError
 from kubric.datasets.task_registry import (  # noqa: F401  (the registry's public names)
     TASKS,
@@ -96,14 +97,8 @@ def pixel_rays(intrinsics_pixels: np.ndarray, camera_to_world: np.ndarray, heigh
     (c + 0.5, r + 0.5)); ``camera_to_world`` maps Blender camera axes (x right, y up, −z
     forward) to the world.
     """
-    rows, cols = np.meshgrid(np.arange(height) + 0.5, np.arange(width) + 0.5, indexing="ij")
-    pixels = np.stack([cols, rows, np.ones_like(rows)], axis=-1)
-    cv_dirs = pixels @ np.linalg.inv(np.asarray(intrinsics_pixels, np.float64)).T
-    blender_dirs = cv_dirs * np.array([1.0, -1.0, -1.0])
-    matrix = np.asarray(camera_to_world, np.float64)
-    dirs = blender_dirs @ matrix[:3, :3].T
-    dirs /= np.linalg.norm(dirs, axis=-1, keepdims=True)
-    origins = np.broadcast_to(matrix[:3, 3], dirs.shape)
+    origins, dirs = geo.pinhole_rays(intrinsics_pixels, camera_to_world,
+                                     geo.pixel_centres(height, width))
     return origins.astype(np.float32), dirs.astype(np.float32)
 
 

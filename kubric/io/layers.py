@@ -283,20 +283,23 @@ def _layer_range(directory, name: str, value_range, fmt: LayerFormat):
         if name not in ranges:
             raise InputError(f"{str(range_path)!r} has no range for layer {name!r}")
         value_range = ranges[name]
-    return png_io._range_pair(value_range, f"read_layer({name!r})")
+    return png_io.range_pair(value_range, f"read_layer({name!r})")
 
 
 def read_frame(directory: PathLike, name: str, index: int, file_templates: Mapping[str, str]
-               | None = None, value_range=None) -> np.ndarray:
+               | None = None, value_range=None,
+               formats: Mapping[str, LayerFormat] | None = None) -> np.ndarray:
     """Frame ``index`` (0-based) of one layer as an (H, W, C) array, decoded like
-    :func:`read_layer` (which reads all frames); only that one file is read."""
+    :func:`read_layer` (which reads all frames); only that one file is read. ``formats`` adds
+    layers beyond :data:`LAYERS` (a recipe schema's ``layers``)."""
     directory = as_path(directory)
-    if name not in LAYERS:
-        raise ValueError(f"read_frame: unknown layer {name!r}; known: {sorted(LAYERS)}")
-    path = directory / frame_filename(_templates(file_templates, LAYERS)[name], int(index))
+    table = layer_table(formats)
+    if name not in table:
+        raise ValueError(f"read_frame: unknown layer {name!r}; known: {sorted(table)}")
+    path = directory / frame_filename(_templates(file_templates, table)[name], int(index))
     if not path.is_file():
         raise FileNotFoundError(f"{str(directory)!r} has no frame {index} of layer {name!r}")
-    fmt = LAYERS[name]
+    fmt = table[name]
     return _decode_frame(name, fmt, path, _layer_range(directory, name, value_range, fmt))
 
 

@@ -365,12 +365,12 @@ def read_png(filename: PathLike, rescale_range=None) -> np.ndarray:
     arr, _ = decode_png(read_bytes(path), repr(str(path)))
     if rescale_range is None:
         return arr
-    lo, hi = _range_pair(rescale_range, f"read_png({str(path)!r})")
+    lo, hi = range_pair(rescale_range, f"read_png({str(path)!r})")
     top = 255.0 if arr.dtype == np.uint8 else float(UINT16_MAX)
     return (arr.astype(np.float64) * ((hi - lo) / top) + lo).astype(np.float32)
 
 
-def _range_pair(value_range, what: str) -> tuple[float, float]:
+def range_pair(value_range, what: str) -> tuple[float, float]:
     if isinstance(value_range, Mapping):
         if "min" not in value_range or "max" not in value_range:
             raise ValueError(f"{what}: range dict needs 'min' and 'max', got {value_range!r}")
@@ -394,7 +394,7 @@ def read_scaled_png(filename: PathLike, value_range) -> np.ndarray:
     or a ``(min, max)`` pair. 2-channel data comes back with its zero padding channel (C = 3).
     """
     path = as_path(filename)
-    lo, hi = _range_pair(value_range, f"read_scaled_png({str(path)!r})")
+    lo, hi = range_pair(value_range, f"read_scaled_png({str(path)!r})")
     arr, _ = decode_png(read_bytes(path), repr(str(path)))
     if arr.dtype != np.uint16:
         raise InputError(f"read_scaled_png({str(path)!r}): expected a 16-bit PNG, got 8-bit")

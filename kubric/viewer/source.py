@@ -13,6 +13,7 @@ URL can reach a file outside the served folder. Every read is read-only.
 from __future__ import annotations
 
 import abc
+import functools
 import pathlib
 import re
 import time
@@ -21,7 +22,7 @@ import numpy as np
 
 from kubric.errors import KubricError
 from kubric.io.json_io import read_json
-from kubric.io.layers import LAYERS, frame_filename, read_frame
+from kubric.io.layers import LAYERS, LayerFormat, frame_filename, read_frame
 from kubric.io.scene_dir import EVENTS_FILE, METADATA_FILE, SUCCESS_FILE, TRACKS_FILE
 from kubric.io.scene_dir import looks_like_scene as _looks_like_scene
 
@@ -69,6 +70,10 @@ class SceneSource(abc.ABC):
     def output_root(self, name: str) -> str:
         """The ``--out`` that regenerates the scene in place (shown in its worker command)."""
         return "OUT"
+
+    def formats(self, name: str) -> dict[str, LayerFormat]:
+        """The layers a scene may hold and how they are stored (default: the standard ones)."""
+        return {n: LAYERS[n] for n in VIEW_LAYERS}
 
     def check_name(self, name: str) -> str:
         """``name`` when it is a scene of this source; KeyError otherwise."""
@@ -128,8 +133,8 @@ class DirectorySource(SceneSource):
                    split=flags.get("split") or info.get("split"),
                    num_instances=len(meta.get("instances", [])),
                    num_frames=info.get("num_frames"), resolution=info.get("resolution"),
-                   layers=[n for n in VIEW_LAYERS if (directory / frame_filename(
-                       LAYERS[n].template, 0)).is_file()],
+                   layers=[n for n, fmt in self.formats(name).items()
+                           if (directory / frame_filename(fmt.template, 0)).is_file()],
                    has_tracks=(directory / TRACKS_FILE).is_file())
         if not (directory / SUCCESS_FILE).is_file():
             row["error"] = f"incomplete scene: {name} has no {SUCCESS_FILE} (still being " \
@@ -156,11 +161,22 @@ class DirectorySource(SceneSource):
             raise SceneError(f"{name}/{filename} is not a JSON object")
         return data
 
-    def frame(self, name: str, layer: str, index: int) -> np.ndarray:
-        if layer not in VIEW_LAYERS:
-            raise KeyError(f"unknown layer {layer!r}; allowed: {', '.join(VIEW_LAYERS)}")
+    def formats(self, name: str) -> dict[str, LayerFormat]:
+        """The layers a scene may hold: the standard ones the viewer draws, then those its
+        recipe's schema declares (klevr's semantic labels, texture_nerf's bands, ...)."""
         try:
-            return read_frame(self.directory(name), layer, index)
+            recipe = self.metadata(name).get("flags", {}).get("recipe")
+        except SceneError:
+            recipe = None
+        own = _recipe_layers(recipe) if isinstance(recipe, str) else {}
+        return {**super().formats(name), **own}
+
+    def frame(self, name: str, layer: str, index: int) -> np.ndarray:
+        formats = self.formats(name)
+        if layer not in formats:
+            raise KeyError(f"unknown layer {layer!r}; allowed: {', '.join(formats)}")
+        try:
+            return read_frame(self.directory(name), layer, index, formats=formats)
         except FileNotFoundError as err:
             raise KeyError(str(err)) from None
         except (ValueError, OSError, RuntimeError) as err:  # truncated / corrupt files
@@ -177,3 +193,13 @@ class DirectorySource(SceneSource):
             raise SceneError(f"{name}/tracks.npz is unreadable: {err}") from None
 
 
+@functools.lru_cache(maxsize=64)
+def _recipe_layers(recipe: str) -> dict[str, LayerFormat]:
+    """The layers the schema of ``recipe`` declares beyond the standard ones ({} when the recipe
+    is unknown here: its scenes show their standard layers)."""
+    from kubric.io.schema import SchemaError
+    from kubric.pipeline.recipe import schema_of
+    try:
+        return dict(schema_of(recipe).layers)
+    except (SchemaError, ValueError, ImportError):
+        return {}
