@@ -1,0 +1,509 @@
+"""A CPU ray-casting renderer: the exact annotation layers from the scene model alone (no bpy).
+
+One ray per pixel centre (:func:`kubric.core.camera_geometry.pixel_rays`) is cast with Embree
+(``embreex`` through trimesh; ``pip install kubric[raycast]``) into the scene's meshes posed at
+the frame; Embree only finds the triangle, and the hit is then recomputed in float64 on that
+triangle, so every layer is the value at the surface point seen through the pixel centre, as the
+Blender backend's exact annotation render (:mod:`kubric.renderer.blender_passes`) defines it:
+
+* ``depth``: the distance from the camera centre along the ray; ``z`` = depth converted with
+  :func:`~kubric.core.camera_geometry.depth_to_z`; BACKGROUND_DEPTH (10000 m) where nothing is hit.
+* ``segmentation``: the object's ``segmentation_id``, else its position in ``scene.assets`` + 1.
+* ``normal``: world space, unit; flat faces: the posed triangle's normal; smooth meshes: the
+  vertex normals interpolated at the hit (angle-weighted, as Blender computes them); turned to face
+  the camera where the ray hits a back face (as Cycles does).
+* ``object_coordinates``: the hit in the object's unscaled local frame, (p − lo) / (hi − lo) over
+  the model's ``bounds``, clipped to [0, 1].
+* ``uv``: the mesh's texture coordinates at the hit, wrapped into [0, 1) (0 for meshes without).
+* ``forward_flow`` / ``backward_flow``: the hit point moves with its object's pose (position,
+  quaternion, scale at frame t ± 1, from the model's keyframes; held outside them) and is projected
+  with the camera of frame t ± 1; flow = that position − the pixel centre, as (Δrow, Δcol).
+* ``rgba``: NOT photoreal — base colour × (ambient + Lambert direct light from every lamp with a
+  hard shadow ray) / π, Standard view transform (sRGB, clipped): enough to look at a scene and
+  to make it complete against a recipe's schema; see docs/renderers.md for what it ignores.
+
+Geometry: ``Cube`` and ``Sphere`` are rebuilt exactly as the Blender backend builds them (cube:
+±1, Blender's cube UVs, flat; sphere: 128 × 64 UV sphere, smooth, Blender's UVs); a
+``FileBasedObject``'s ``render_filename`` is read with trimesh (OBJ, PLY, STL as they are; glTF /
+GLB converted from y-up to z-up as Blender's importer does); OBJ / PLY without vertex normals are
+flat shaded, with them smooth (Blender's importers' rule).
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+
+import numpy as np
+import trimesh
+
+from kubric.core import camera_geometry as geo
+from kubric.core import lights, materials, objects
+from kubric.core.color import Color, linear_to_srgb, srgb_to_linear
+from kubric.renderer.base import ALL_LAYERS, Renderer
+
+_SPHERE_SEGMENTS, _SPHERE_RINGS = 128, 64  # as kubric.renderer.blender_objects
+#: glTF's y-up → Blender's z-up: (x, y, z) → (x, −z, y)
+_GLTF_TO_Z_UP = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
+MESH_FORMATS = (".obj", ".glb", ".gltf", ".ply", ".stl")
+_GREY = (0.8, 0.8, 0.8)  # base colour of a mesh whose file gives none
+
+
+@dataclass
+class Mesh:
+    """One object's geometry in its unscaled local frame (triangles)."""
+    vertices: np.ndarray            # (V, 3) float64
+    faces: np.ndarray               # (F, 3) int64
+    normals: np.ndarray | None      # (V, 3) vertex normals of a smooth mesh; None = flat
+    corner_uv: np.ndarray | None    # (F, 3, 2) texture coordinates per triangle corner
+    texture: np.ndarray | None = None  # (h, w, 3) linear base-colour image (file materials)
+    color: tuple = _GREY            # linear base colour when there is no texture
+
+
+# ---------------------------------------------------------------------------------- geometry
+def _quads_to_triangles(quads):
+    """Blender's fixed quad split: corners (0, 1, 2) and (0, 2, 3)."""
+    q = np.asarray(quads)
+    return np.concatenate([q[:, [0, 1, 2]], q[:, [0, 2, 3]]])
+
+
+def cube_mesh() -> Mesh:
+    """The Blender backend's cube: vertices ±1, Blender's default cube UVs, flat."""
+    corners = [(-1, -1, -1), (-1, -1, 1), (-1, 1, 1), (-1, 1, -1), (1, 1, -1), (1, 1, 1),
+               (1, -1, 1), (1, -1, -1)]
+    quads = [(0, 1, 2, 3), (3, 2, 5, 4), (4, 5, 6, 7), (7, 6, 1, 0), (3, 4, 7, 0), (5, 2, 1, 6)]
+    uvs = [[(.375, 0), (.625, 0), (.625, .25), (.375, .25)],
+           [(.375, .25), (.625, .25), (.625, .5), (.375, .5)],
+           [(.375, .5), (.625, .5), (.625, .75), (.375, .75)],
+           [(.375, .75), (.625, .75), (.625, 1), (.375, 1)],
+           [(.125, .5), (.375, .5), (.375, .75), (.125, .75)],
+           [(.625, .5), (.875, .5), (.875, .75), (.625, .75)]]
+    corner_ids = np.arange(24).reshape(6, 4)
+    tri = _quads_to_triangles(corner_ids)
+    quad_vertices = np.asarray(quads).reshape(-1)
+    return Mesh(np.asarray(corners, np.float64), quad_vertices[tri], None,
+                np.asarray(uvs, np.float64).reshape(24, 2)[tri])
+
+
+def sphere_mesh(segments: int = _SPHERE_SEGMENTS, rings: int = _SPHERE_RINGS) -> Mesh:
+    """The Blender backend's UV sphere (radius 1): ring i at polar angle π·i/rings, segment j at
+    azimuth 2π·j/segments − π; UV u = j / segments, v = 1 − i / rings (pole corners at the
+    segment's middle u); smooth, with angle-weighted vertex normals."""
+    theta = np.pi * np.arange(1, rings) / rings
+    phi = 2 * np.pi * np.arange(segments) / segments - np.pi
+    ring = np.stack([np.sin(theta)[:, None] * np.cos(phi), np.sin(theta)[:, None] * np.sin(phi),
+                     np.broadcast_to(np.cos(theta)[:, None], (rings - 1, segments))], axis=-1)
+    vertices = np.concatenate([[[0.0, 0.0, 1.0]], ring.reshape(-1, 3), [[0.0, 0.0, -1.0]]])
+    bottom = len(vertices) - 1
+
+    def vid(i, j):  # ring i in 1 .. rings−1, segment j (wraps)
+        return 1 + (i - 1) * segments + j % segments
+
+    faces, uvs = [], []
+    j = np.arange(segments)
+    u0, u1, um = j / segments, (j + 1) / segments, (j + 0.5) / segments
+    for i in range(rings):
+        v0, v1 = 1 - i / rings, 1 - (i + 1) / rings
+        if i == 0:
+            faces.append(np.stack([np.zeros_like(j), vid(1, j), vid(1, j + 1)], -1))
+            uvs.append(np.stack([np.stack([um, np.full_like(um, v0)], -1),
+                                 np.stack([u0, np.full_like(u0, v1)], -1),
+                                 np.stack([u1, np.full_like(u1, v1)], -1)], 1))
+        elif i == rings - 1:
+            faces.append(np.stack([vid(i, j), np.full_like(j, bottom), vid(i, j + 1)], -1))
+            uvs.append(np.stack([np.stack([u0, np.full_like(u0, v0)], -1),
+                                 np.stack([um, np.full_like(um, v1)], -1),
+                                 np.stack([u1, np.full_like(u1, v0)], -1)], 1))
+        else:
+            quads = np.stack([vid(i, j), vid(i + 1, j), vid(i + 1, j + 1), vid(i, j + 1)], -1)
+            quv = np.stack([np.stack([u0, np.full_like(u0, v0)], -1),
+                            np.stack([u0, np.full_like(u0, v1)], -1),
+                            np.stack([u1, np.full_like(u1, v1)], -1),
+                            np.stack([u1, np.full_like(u1, v0)], -1)], 1)
+            faces.append(_quads_to_triangles(quads))
+            uvs.append(np.concatenate([quv[:, [0, 1, 2]], quv[:, [0, 2, 3]]]))
+    faces = np.concatenate(faces)
+    uv = np.concatenate(uvs)
+    tri = vertices[faces]
+    outward = np.einsum("ij,ij->i", np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]),
+                        tri.mean(axis=1)) > 0
+    faces = np.where(outward[:, None], faces, faces[:, ::-1])
+    uv = np.where(outward[:, None, None], uv, uv[:, ::-1])
+    normals = trimesh.Trimesh(vertices, faces, process=False).vertex_normals
+    return Mesh(vertices, faces, np.asarray(normals, np.float64), uv)
+
+
+def _file_has_normals(path: str, ext: str, loaded) -> bool:
+    if ext == ".obj":
+        with open(path, encoding="utf-8", errors="replace") as f:
+            return any(line.startswith("vn ") for line in f)
+    if ext in (".glb", ".gltf"):
+        return True  # glTF meshes carry normals; Blender's importer shades them smooth
+    if ext == ".ply":
+        return "vertex_normals" in loaded._cache  # the file's nx, ny, nz
+    return False
+
+
+def file_mesh(asset) -> Mesh:
+    """The geometry of a FileBasedObject's ``render_filename`` (see module doc)."""
+    path = asset.render_filename
+    if not path:
+        raise ValueError(f"{asset.uid}: FileBasedObject.render_filename is not set; the raycast "
+                         f"renderer needs a mesh file ({', '.join(MESH_FORMATS)})")
+    ext = os.path.splitext(path)[1].lower()
+    if ext not in MESH_FORMATS:
+        raise ValueError(f"{asset.uid}: the raycast renderer cannot read render_filename {path!r}: "
+                         f"extension {ext!r} is not one of {list(MESH_FORMATS)}")
+    if asset.render_import_kwargs:
+        raise ValueError(f"{asset.uid}: the raycast renderer takes no render_import_kwargs, got "
+                         f"{sorted(asset.render_import_kwargs)}")
+    if not os.path.isfile(path):
+        raise FileNotFoundError(f"{asset.uid}: render_filename {path!r} does not exist")
+    loaded = trimesh.load(path, force="mesh", process=False)
+    if not isinstance(loaded, trimesh.Trimesh) or len(loaded.faces) == 0:
+        raise ValueError(f"{asset.uid}: {path!r} contains no triangle mesh")
+    vertices = np.asarray(loaded.vertices, np.float64)
+    normals = np.asarray(loaded.vertex_normals, np.float64) \
+        if _file_has_normals(path, ext, loaded) else None
+    if ext in (".glb", ".gltf"):
+        vertices = vertices @ _GLTF_TO_Z_UP.T
+        normals = normals @ _GLTF_TO_Z_UP.T
+    faces = np.asarray(loaded.faces, np.int64)
+    visual = loaded.visual
+    uv = getattr(visual, "uv", None)
+    corner_uv = np.asarray(uv, np.float64)[faces] if uv is not None and len(uv) == len(
+        vertices) else None
+    texture, color = _file_appearance(visual)
+    return Mesh(vertices, faces, normals, corner_uv, texture if corner_uv is not None else None,
+                color)
+
+
+def _file_appearance(visual):
+    """(linear texture image or None, linear base colour) of a trimesh visual."""
+    material = getattr(visual, "material", None)
+    image = getattr(material, "baseColorTexture", None) or getattr(material, "image", None)
+    factor = getattr(material, "baseColorFactor", None)
+    color = _GREY if factor is None else tuple(srgb_to_linear(np.asarray(factor[:3]) / 255.0))
+    if image is not None:
+        pixels = np.asarray(image.convert("RGB"), np.float64) / 255.0
+        return srgb_to_linear(pixels), color
+    return None, color
+
+
+# ---------------------------------------------------------------------------------- ray casting
+def _intersect(origins, dirs, tri):
+    """Möller–Trumbore in float64: (t, barycentric (b1, b2)) of rays (N, 3) with triangles
+    (N, 3, 3) known to be hit (embree found them)."""
+    e1, e2 = tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]
+    p = np.cross(dirs, e2)
+    det = np.einsum("ij,ij->i", e1, p)
+    det = np.where(np.abs(det) > 1e-300, det, 1e-300)
+    s = origins - tri[:, 0]
+    b1 = np.einsum("ij,ij->i", s, p) / det
+    q = np.cross(s, e1)
+    b2 = np.einsum("ij,ij->i", dirs, q) / det
+    t = np.einsum("ij,ij->i", e2, q) / det
+    return t, b1, b2
+
+
+class _PosedScene:
+    """Every mesh object posed at one frame, joined into one embree-searchable mesh."""
+
+    def __init__(self, entries, frame):
+        self.entries = entries  # [(index, asset, Mesh)]
+        verts, faces, owner, offsets = [], [], [], [0]
+        self.rot, self.trans, self.scale = [], [], []
+        base = 0
+        for k, (_, asset, mesh) in enumerate(entries):
+            with asset.at_frame(frame):
+                m = asset.matrix_world
+                s = np.asarray(asset.scale, np.float64)
+            self.rot.append(m[:3, :3])
+            self.trans.append(m[:3, 3])
+            self.scale.append(s)
+            verts.append((mesh.vertices * s) @ m[:3, :3].T + m[:3, 3])
+            faces.append(mesh.faces + base)
+            owner.append(np.full(len(mesh.faces), k))
+            base += len(mesh.vertices)
+            offsets.append(offsets[-1] + len(mesh.faces))
+        self.owner = np.concatenate(owner) if owner else np.zeros(0, np.int64)
+        self.offsets = np.asarray(offsets)
+        self.world = trimesh.Trimesh(np.concatenate(verts) if verts else np.zeros((0, 3)),
+                                     np.concatenate(faces) if faces else np.zeros((0, 3), int),
+                                     process=False)
+        self.triangles = np.asarray(self.world.triangles, np.float64)
+        self._ray = None
+
+    def first_hits(self, origins, dirs):
+        """Index of the first triangle hit by each ray (−1: none)."""
+        if len(self.triangles) == 0:
+            return np.full(len(origins), -1)
+        if self._ray is None:
+            from trimesh.ray.ray_pyembree import RayMeshIntersector
+            self._ray = RayMeshIntersector(self.world)
+        return np.asarray(self._ray.intersects_first(origins, dirs), np.int64)
+
+
+class Raycast(Renderer):
+    """Embree ray-casting backend of the renderer protocol (see module doc).
+
+    Settings: ``background_transparency`` (bool: rgba alpha 0 where no surface is hit; default
+    False, the background colour is opaque). ``scratch_dir`` is accepted for the protocol and
+    unused (nothing is written).
+    """
+
+    def __init__(self, scene, scratch_dir=None, *, background_transparency=False):
+        if not isinstance(background_transparency, (bool, np.bool_)):
+            raise TypeError("Raycast option background_transparency must be True or False, got "
+                            f"{background_transparency!r}")
+        self.scene = scene
+        self.scratch_dir = scratch_dir
+        self.background_transparency = bool(background_transparency)
+        self._meshes: dict = {}
+
+    def settings(self) -> dict:
+        return {"engine": "RAYCAST", "view_transform": "Standard",
+                "rgba": "base colour x (ambient + Lambert direct light, hard shadows) / pi; "
+                        "not photoreal"}
+
+    # ------------------------------------------------------------------ scene → meshes
+    def _mesh_of(self, asset) -> Mesh:
+        if asset not in self._meshes:
+            if isinstance(asset, objects.Cube):
+                mesh = cube_mesh()
+            elif isinstance(asset, objects.Sphere):
+                mesh = sphere_mesh()
+            elif isinstance(asset, objects.FileBasedObject):
+                mesh = file_mesh(asset)
+            else:
+                raise ValueError(f"{asset.uid}: the raycast renderer has no geometry for "
+                                 f"{type(asset).__name__} (Cube, Sphere, FileBasedObject)")
+            self._meshes[asset] = mesh
+        return self._meshes[asset]
+
+    def _entries(self):
+        """[(segmentation label, asset, Mesh)] of every physical object, labelled as the Blender
+        backend labels them (segmentation_id, else position in scene.assets + 1)."""
+        out = []
+        for i, asset in enumerate(self.scene.assets, start=1):
+            if isinstance(asset, objects.PhysicalObject):
+                seg = asset.segmentation_id
+                out.append((i if seg is None else int(seg), asset, self._mesh_of(asset)))
+        return out
+
+    # ------------------------------------------------------------------ rendering
+    def render(self, frames=None, return_layers=ALL_LAYERS) -> dict[str, np.ndarray]:
+        """Render ``frames`` → {layer: (T, H, W, C) array} (see module doc)."""
+        frames, wanted = self.check_request(frames, return_layers)
+        camera = self.scene.camera
+        if camera is None:
+            raise ValueError("the scene has no camera: add a PerspectiveCamera or "
+                             "OrthographicCamera before rendering")
+        entries = self._entries()
+        out: dict[str, np.ndarray] = {}
+        for i, frame in enumerate(frames):
+            layers = self.render_frame(camera, entries, frame, wanted)
+            for name in wanted:
+                if name not in out:
+                    out[name] = np.empty((len(frames),) + layers[name].shape, layers[name].dtype)
+                out[name][i] = layers[name]
+        return out
+
+    def render_frame(self, camera, entries, frame, wanted) -> dict[str, np.ndarray]:
+        w, h = self.scene.resolution
+        cols, rows = np.meshgrid(np.arange(w) + 0.5, np.arange(h) + 0.5)
+        centres = np.stack([cols, rows], -1).reshape(-1, 2)
+        origins, dirs = geo.pixel_rays(camera, centres, frame=frame, resolution=(w, h))
+        posed = _PosedScene(entries, frame)
+        tri_id = posed.first_hits(origins, dirs)
+        hit = tri_id >= 0
+        idx = np.flatnonzero(hit)
+        tid = tri_id[idx]
+        t, b1, b2 = _intersect(origins[idx], dirs[idx], posed.triangles[tid])
+        owner = posed.owner[tid]
+        local_face = tid - posed.offsets[owner]
+        bary = np.stack([1 - b1 - b2, b1, b2], -1)
+        n = h * w
+        res: dict[str, np.ndarray] = {}
+
+        def image(values, channels, dtype=np.float32, fill=0.0):
+            img = np.full((n, channels), fill, dtype)
+            img[idx] = np.asarray(values).reshape(len(idx), channels)
+            return img.reshape(h, w, channels)
+
+        depth = image(t, 1, np.float64, geo.BACKGROUND_DEPTH)
+        if "depth" in wanted:
+            res["depth"] = depth.astype(np.float32)
+        if "z" in wanted:
+            z = geo.depth_to_z(camera, np.where(hit.reshape(h, w, 1), depth, 0.0))
+            res["z"] = np.where(hit.reshape(h, w, 1), z, geo.BACKGROUND_DEPTH).astype(np.float32)
+        labels = np.asarray([e[0] for e in entries], np.uint32)
+        if "segmentation" in wanted:
+            res["segmentation"] = image(labels[owner] if len(idx) else [], 1, np.uint32, 0)
+        local = self._per_object(entries, owner, local_face,
+                                 lambda m, f: np.einsum("nk,nkj->nj", bary[f], m.vertices[
+                                     m.faces[local_face[f]]]), 3)
+        if {"normal", "rgba"} & set(wanted):
+            normals = self._normals(posed, entries, owner, local_face, bary, dirs[idx])
+            res["normal"] = image(normals, 3)
+        if "object_coordinates" in wanted:
+            bounds = np.stack([np.asarray(e[1].bounds, np.float64) for e in entries]) \
+                if entries else np.zeros((0, 2, 3))
+            lo, hi = bounds[owner, 0], bounds[owner, 1]
+            extent = np.where(hi - lo > 0, hi - lo, 1.0)
+            res["object_coordinates"] = image(np.clip((local - lo) / extent, 0, 1), 3)
+        uv = self._per_object(entries, owner, local_face, lambda m, f: np.einsum(
+            "nk,nkj->nj", bary[f], m.corner_uv[local_face[f]]) if m.corner_uv is not None
+            else np.zeros((len(f), 2)), 2)
+        if "uv" in wanted:
+            res["uv"] = image(np.concatenate([np.mod(uv, 1.0), np.zeros((len(idx), 1))], 1), 3)
+        for name, step in (("forward_flow", 1), ("backward_flow", -1)):
+            if name in wanted:
+                res[name] = image(self._flow(posed, entries, owner, local, camera, frame + step,
+                                             centres[idx], (w, h)), 2)
+        if "rgba" in wanted:
+            points = origins[idx] + dirs[idx] * t[:, None]
+            res["rgba"] = self._shade(posed, entries, owner, uv, points, normals, frame, hit,
+                                      (h, w))
+        return {k: res[k] for k in wanted}
+
+    @staticmethod
+    def _per_object(entries, owner, local_face, fn, channels):
+        """Evaluate ``fn(mesh, positions in the hit list)`` per object → (N, channels)."""
+        out = np.zeros((len(owner), channels))
+        for k, (_, _, mesh) in enumerate(entries):
+            sel = np.flatnonzero(owner == k)
+            if len(sel):
+                out[sel] = fn(mesh, sel)
+        return out
+
+    @staticmethod
+    def _normals(posed, entries, owner, local_face, bary, dirs):
+        tri = posed.triangles[posed.offsets[owner] + local_face]
+        geometric = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+        normals = geometric.copy()
+        for k, (_, _, mesh) in enumerate(entries):
+            sel = np.flatnonzero(owner == k)
+            if len(sel) and mesh.normals is not None:
+                n_local = np.einsum("nk,nkj->nj", bary[sel], mesh.normals[mesh.faces[
+                    local_face[sel]]])
+                n_local = n_local / posed.scale[k]  # normals transform by the inverse scale
+                normals[sel] = n_local @ posed.rot[k].T
+        normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+        back = np.einsum("ij,ij->i", geometric, dirs) > 0
+        return np.where(back[:, None], -normals, normals)
+
+    @staticmethod
+    def _flow(posed, entries, owner, local, camera, frame, centres, resolution):
+        """(Δrow, Δcol) from the pixel centres to the hit points projected at ``frame``."""
+        world = np.zeros_like(local)
+        for k, (_, asset, _) in enumerate(entries):
+            sel = np.flatnonzero(owner == k)
+            if len(sel):
+                with asset.at_frame(frame):
+                    m = asset.matrix_world
+                    s = np.asarray(asset.scale, np.float64)
+                world[sel] = (local[sel] * s) @ m[:3, :3].T + m[:3, 3]
+        xy, _ = geo.project_to_pixels(camera, world, frame=frame, resolution=resolution)
+        return np.stack([xy[:, 1] - centres[:, 1], xy[:, 0] - centres[:, 0]], -1)
+
+    # ------------------------------------------------------------------ rgba
+    def _albedo(self, asset, mesh, uv):
+        """Linear base colour (N, 3) of ``asset``'s hits with texture coordinates ``uv``."""
+        material = asset.material
+        color = getattr(material, "color", None)
+        if isinstance(material, materials.UndefinedMaterial):
+            if mesh.texture is not None:
+                return _sample(mesh.texture, uv)
+            return np.broadcast_to(np.asarray(mesh.color[:3], np.float64), (len(uv), 3))
+        if isinstance(color, Color):
+            return np.broadcast_to(np.asarray(color.rgb, np.float64), (len(uv), 3))
+        if isinstance(color, materials.Texture) and color.mapping == "uv" and color.filename:
+            return _sample(_load_texture(color.filename), uv) * color.strength
+        return np.broadcast_to(np.asarray(_GREY), (len(uv), 3))
+
+    def _shade(self, posed, entries, owner, uv, points, normals, frame, hit, hw):
+        h, w = hw
+        radiance = np.zeros((len(points), 3))
+        ambient = self.scene.ambient_illumination
+        ambient = np.asarray(ambient.rgb) if isinstance(ambient, Color) else np.zeros(3)
+        irradiance = np.broadcast_to(np.pi * ambient, (len(points), 3)).copy()
+        eps = 1e-4 * max(1.0, float(np.abs(posed.triangles).max())) if len(points) else 0.0
+        start = points + normals * eps
+        for light in self.scene.assets:
+            if isinstance(light, lights.Light) and not isinstance(light, lights.UndefinedLight):
+                irradiance += self._light(light, posed, start, normals, frame)
+        for k, (_, asset, mesh) in enumerate(entries):
+            sel = np.flatnonzero(owner == k)
+            if not len(sel):
+                continue
+            albedo = self._albedo(asset, mesh, uv[sel])
+            if isinstance(asset.material, materials.FlatMaterial):
+                radiance[sel] = albedo  # unlit: the colour itself
+            else:
+                radiance[sel] = albedo * irradiance[sel] / np.pi
+        rgba = np.zeros((h * w, 4), np.uint8)
+        background = self.scene.background
+        if isinstance(background, Color) and not self.background_transparency:
+            rgba[:, :3] = np.round(linear_to_srgb(background.rgb) * 255)
+            rgba[:, 3] = 255
+        flat_hit = hit.reshape(-1)
+        rgba[flat_hit, :3] = np.round(linear_to_srgb(radiance) * 255)
+        rgba[flat_hit, 3] = 255
+        return rgba.reshape(h, w, 4)
+
+    @staticmethod
+    def _light(light, posed, start, normals, frame):
+        """Irradiance (N, 3) from one lamp, with a hard shadow ray per point."""
+        with light.at_frame(frame):
+            m = light.matrix_world
+            color = np.asarray(light.color.rgb) * float(light.intensity)
+            axis = -m[:3, 2]  # lights shine along local −z
+            if isinstance(light, lights.DirectionalLight):
+                to_light = np.broadcast_to(-axis, start.shape)
+                dist = np.full(len(start), np.inf)
+                falloff = np.ones(len(start))
+            else:
+                vec = m[:3, 3] - start
+                dist = np.linalg.norm(vec, axis=1)
+                to_light = vec / np.maximum(dist, 1e-12)[:, None]
+                falloff = 1.0 / (4 * np.pi * np.maximum(dist, 1e-6) ** 2)
+                if isinstance(light, lights.SpotLight):
+                    cos = np.einsum("ij,j->i", -to_light, axis)
+                    half = np.cos(float(light.spot_size) / 2)
+                    blend = max(float(light.spot_blend) * (1 - half), 1e-9)
+                    falloff = falloff * np.clip((cos - half) / blend, 0, 1)
+                elif isinstance(light, lights.RectAreaLight):
+                    falloff = falloff * 4 * np.clip(np.einsum("ij,j->i", -to_light, axis), 0, 1)
+        cos = np.clip(np.einsum("ij,ij->i", normals, to_light), 0, None)
+        lit = np.flatnonzero(cos * falloff > 0)
+        if len(lit):
+            blocker = posed.first_hits(start[lit], np.ascontiguousarray(to_light[lit]))
+            blocked = blocker >= 0
+            if blocked.any():
+                b = lit[blocked]
+                t, _, _ = _intersect(start[b], to_light[b], posed.triangles[blocker[blocked]])
+                shadowed = (t > 0) & (t < dist[b])
+                cos[b[shadowed]] = 0.0
+        return (cos * falloff)[:, None] * color
+
+
+_TEXTURES: dict[str, np.ndarray] = {}
+
+
+def _load_texture(path: str) -> np.ndarray:
+    """A texture file as a linear (h, w, 3) float image (cached per path)."""
+    if path not in _TEXTURES:
+        from PIL import Image
+        with Image.open(path) as im:
+            _TEXTURES[path] = srgb_to_linear(np.asarray(im.convert("RGB"), np.float64) / 255.0)
+    return _TEXTURES[path]
+
+
+def _sample(image, uv):
+    """Nearest-texel lookup of (N, 2) texture coordinates (repeating; v up, as Blender)."""
+    th, tw = image.shape[:2]
+    u, v = np.mod(uv[:, 0], 1.0), np.mod(uv[:, 1], 1.0)
+    cols = np.minimum((u * tw).astype(int), tw - 1)
+    rows = np.minimum(((1 - v) * th).astype(int), th - 1)
+    return image[rows, cols]
