@@ -25,8 +25,9 @@ Blender backend's exact annotation render (:mod:`kubric.renderer.blender_passes`
 Geometry: ``Cube`` and ``Sphere`` are rebuilt exactly as the Blender backend builds them (cube:
 ±1, Blender's cube UVs, flat; sphere: 128 × 64 UV sphere, smooth, Blender's UVs); a
 ``FileBasedObject``'s ``render_filename`` is read with trimesh (OBJ, PLY, STL as they are; glTF /
-GLB converted from y-up to z-up as Blender's importer does); OBJ / PLY without vertex normals are
-flat shaded, with them smooth (Blender's importers' rule).
+GLB converted from y-up to z-up as Blender's importer does); files without vertex normals (OBJ
+``vn``, PLY ``nx ny nz``, glTF ``NORMAL``) are flat shaded, with them smooth with the file's
+normals (Blender's importers' rule; STL is always flat).
 """
 
 from __future__ import annotations
@@ -137,11 +138,36 @@ def _file_has_normals(path: str, ext: str, loaded) -> bool:
     if ext == ".obj":
         with open(path, encoding="utf-8", errors="replace") as f:
             return any(line.startswith("vn ") for line in f)
+    # glTF NORMAL / PLY nx ny nz: trimesh's loaders hand the file's normals to the mesh, which
+    # caches them; without them (and for STL) Blender's importers shade flat
+    return ext != ".stl" and "vertex_normals" in loaded._cache
+
+
+def _axis(name: str) -> np.ndarray:
+    vec = np.zeros(3)
+    vec["XYZ".index(name[-1])] = -1.0 if name.startswith("NEGATIVE_") else 1.0
+    return vec
+
+
+def _import_axes(asset, ext) -> np.ndarray:
+    """(3, 3) file → local frame rotation: glTF's y-up → z-up; OBJ / PLY / STL by their
+    ``render_import_kwargs`` ``forward_axis`` / ``up_axis`` (Blender's importer options: the
+    file's forward axis becomes +y, its up axis +z; default Y / Z, unchanged)."""
+    kwargs = dict(asset.render_import_kwargs)
+    allowed = {"forward_axis", "up_axis"} if ext in (".obj", ".ply", ".stl") else set()
+    names = ("X", "Y", "Z", "NEGATIVE_X", "NEGATIVE_Y", "NEGATIVE_Z")
+    bad = sorted(set(kwargs) - allowed)
+    if bad or any(v not in names for v in kwargs.values()):
+        raise ValueError(f"{asset.uid}: the raycast renderer reads render_import_kwargs "
+                         f"{sorted(allowed) or 'none'} for {ext} files (values {list(names)}), "
+                         f"got {kwargs}")
     if ext in (".glb", ".gltf"):
-        return True  # glTF meshes carry normals; Blender's importer shades them smooth
-    if ext == ".ply":
-        return "vertex_normals" in loaded._cache  # the file's nx, ny, nz
-    return False
+        return _GLTF_TO_Z_UP
+    forward, up = _axis(kwargs.get("forward_axis", "Y")), _axis(kwargs.get("up_axis", "Z"))
+    if abs(forward @ up) > 0:
+        raise ValueError(f"{asset.uid}: render_import_kwargs forward_axis and up_axis must be "
+                         f"different axes, got {kwargs}")
+    return np.stack([np.cross(forward, up), forward, up])
 
 
 def file_mesh(asset) -> Mesh:
@@ -154,9 +180,7 @@ def file_mesh(asset) -> Mesh:
     if ext not in MESH_FORMATS:
         raise ValueError(f"{asset.uid}: the raycast renderer cannot read render_filename {path!r}: "
                          f"extension {ext!r} is not one of {list(MESH_FORMATS)}")
-    if asset.render_import_kwargs:
-        raise ValueError(f"{asset.uid}: the raycast renderer takes no render_import_kwargs, got "
-                         f"{sorted(asset.render_import_kwargs)}")
+    axes = _import_axes(asset, ext)
     if not os.path.isfile(path):
         raise FileNotFoundError(f"{asset.uid}: render_filename {path!r} does not exist")
     loaded = trimesh.load(path, force="mesh", process=False)
@@ -165,9 +189,8 @@ def file_mesh(asset) -> Mesh:
     vertices = np.asarray(loaded.vertices, np.float64)
     normals = np.asarray(loaded.vertex_normals, np.float64) \
         if _file_has_normals(path, ext, loaded) else None
-    if ext in (".glb", ".gltf"):
-        vertices = vertices @ _GLTF_TO_Z_UP.T
-        normals = normals @ _GLTF_TO_Z_UP.T
+    vertices = vertices @ axes.T
+    normals = None if normals is None else normals @ axes.T
     faces = np.asarray(loaded.faces, np.int64)
     visual = loaded.visual
     uv = getattr(visual, "uv", None)
