@@ -271,14 +271,19 @@ class Raycast(Renderer):
     """Embree ray-casting backend of the renderer protocol (see module doc).
 
     Settings: ``background_transparency`` (bool: rgba alpha 0 where no surface is hit; default
-    False, the background colour is opaque). ``scratch_dir`` is accepted for the protocol and
-    unused (nothing is written).
+    False, the background colour is opaque); ``motion_blur`` only 0 / False (a recipe passes its
+    shutter; this backend renders none). ``scratch_dir`` is accepted for the protocol and unused
+    (nothing is written).
     """
 
-    def __init__(self, scene, scratch_dir=None, *, background_transparency=False):
+    def __init__(self, scene, scratch_dir=None, *, background_transparency=False,
+                 motion_blur=0.0):
         if not isinstance(background_transparency, (bool, np.bool_)):
             raise TypeError("Raycast option background_transparency must be True or False, got "
                             f"{background_transparency!r}")
+        if motion_blur:
+            raise ValueError(f"Raycast option motion_blur must be 0 or False (the raycast "
+                             f"renderer renders no motion blur), got {motion_blur!r}")
         self.scene = scene
         self.scratch_dir = scratch_dir
         self.background_transparency = bool(background_transparency)
