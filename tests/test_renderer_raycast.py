@@ -19,7 +19,7 @@ import pytest
 from scipy.ndimage import maximum_filter, minimum_filter
 
 import kubric as kb
-from kubric import file_io
+from kubric import docgen, file_io
 from kubric.core import camera_geometry as geo
 from kubric.pipeline import OptionError, get_recipe
 from kubric.renderer import base
@@ -169,6 +169,7 @@ def test_movi_a_scene_with_raycast_needs_no_bpy(tmp_path):
     # every instance is seen, the lamps light them (not black), the dome is lit too
     assert set(np.unique(seg)) - {0} == set(range(1, len(meta["instances"]) + 1))
     assert layers["rgba"][..., :3][seg > 0].mean() > 20
+    assert docgen.undocumented_scene_fields(scene_dir) == []
 
 
 # ---------------------------------------------------------------------------------- the oracle
