@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import abc
 import importlib
+
 import numpy as np
 
 #: the exact annotation layers (one value per pixel centre; docs/conventions.md)

@@ -44,6 +44,7 @@ import numpy as np
 
 from kubric.core import camera_geometry as geo
 from kubric.renderer.base import ALL_LAYERS, ANNOTATION_LAYERS  # noqa: F401  (their old home)
+
 AOV_NAME = "object_coordinates"
 #: Cycles writes 1e10 where a ray hits nothing; anything beyond this is background.
 _NO_HIT = 1e9
