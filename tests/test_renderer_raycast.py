@@ -54,6 +54,20 @@ def test_raycast_is_a_renderer_and_checks_its_requests():
     assert empty["forward_flow"].shape == (2, 6, 8, 2) and not empty["forward_flow"].any()
 
 
+@pytest.mark.blender
+def test_blender_implements_the_protocol_and_records_given_options(tmp_path):
+    scene = kb.Scene(resolution=(8, 6))
+    r = base.create("blender", scene, tmp_path, samples_per_pixel=3, max_bounces=2,
+                    motion_blur=0.0)
+    assert isinstance(r, base.Renderer) and r.layers == base.ALL_LAYERS
+    assert r.settings() == {"engine": "CYCLES", "view_transform": "Standard",
+                            "samples_per_pixel": 3, "denoising": True, "denoising_quality": "HIGH",
+                            "denoising_prefilter": "ACCURATE", "max_bounces": 2,
+                            "motion_blur": 0.0}
+    with pytest.raises(ValueError, match=r"Blender.render: unknown layers \['colour'\]"):
+        r.render(return_layers=("colour",))
+
+
 def test_import_needs_no_bpy():
     code = ("import sys, kubric.renderer as r, kubric.renderer.raycast; "
             "assert 'bpy' not in sys.modules; print(sorted(r.BACKENDS))")
