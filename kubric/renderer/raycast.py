@@ -229,32 +229,60 @@ def _intersect(origins, dirs, tri):
     return t, b1, b2
 
 
-class _PosedScene:
-    """Every mesh object posed at one frame, joined into one embree-searchable mesh."""
+class _Geometry:
+    """Every physical object's mesh joined in local coordinates (one render's worth): per vertex
+    and per face the owning object ``k`` (its position in ``entries``)."""
 
-    def __init__(self, entries, frame):
-        self.entries = entries  # [(index, asset, Mesh)]
-        verts, faces, owner, offsets = [], [], [], [0]
-        self.rot, self.trans, self.scale = [], [], []
-        base = 0
-        for k, (_, asset, mesh) in enumerate(entries):
+    def __init__(self, entries):
+        self.entries = entries  # [(label, asset, Mesh)]
+        meshes = [e[2] for e in entries]
+        counts = [len(m.vertices) for m in meshes]
+        starts = np.cumsum([0] + counts)[:-1]
+        self.labels = np.asarray([e[0] for e in entries], np.uint32)
+        self.bounds = np.asarray([e[1].bounds for e in entries], np.float64).reshape(-1, 2, 3)
+        self.vertex_owner = np.repeat(np.arange(len(meshes)), counts)
+        self.vertices = _join([m.vertices for m in meshes], (0, 3))
+        self.faces = _join([m.faces + s for m, s in zip(meshes, starts, strict=True)],
+                           (0, 3)).astype(np.int64)
+        self.face_owner = np.repeat(np.arange(len(meshes)), [len(m.faces) for m in meshes])
+        self.smooth = np.asarray([m.normals is not None for m in meshes], bool)
+        self.normals = _join([m.vertices * 0 if m.normals is None else m.normals
+                              for m in meshes], (0, 3))
+        self.corner_uv = _join([np.zeros((len(m.faces), 3, 2)) if m.corner_uv is None
+                                else m.corner_uv for m in meshes], (0, 3, 2))
+
+    def poses(self, frame):
+        """(K, 3, 3) rotations, (K, 3) translations and (K, 3) scales of the objects at
+        ``frame`` (the model's keyframes, held outside them)."""
+        rot, trans, scale = [], [], []
+        for _, asset, _ in self.entries:
             with asset.at_frame(frame):
                 m = asset.matrix_world
-                s = np.asarray(asset.scale, np.float64)
-            self.rot.append(m[:3, :3])
-            self.trans.append(m[:3, 3])
-            self.scale.append(s)
-            verts.append((mesh.vertices * s) @ m[:3, :3].T + m[:3, 3])
-            faces.append(mesh.faces + base)
-            owner.append(np.full(len(mesh.faces), k))
-            base += len(mesh.vertices)
-            offsets.append(offsets[-1] + len(mesh.faces))
-        self.owner = np.concatenate(owner) if owner else np.zeros(0, np.int64)
-        self.offsets = np.asarray(offsets)
-        self.world = trimesh.Trimesh(np.concatenate(verts) if verts else np.zeros((0, 3)),
-                                     np.concatenate(faces) if faces else np.zeros((0, 3), int),
-                                     process=False)
-        self.triangles = np.asarray(self.world.triangles, np.float64)
+                rot.append(m[:3, :3])
+                trans.append(m[:3, 3])
+                scale.append(np.asarray(asset.scale, np.float64))
+        if not rot:
+            return np.zeros((0, 3, 3)), np.zeros((0, 3)), np.zeros((0, 3))
+        return np.stack(rot), np.stack(trans), np.stack(scale)
+
+    def to_world(self, points, owner, poses):
+        """Local points (N, 3) of objects ``owner`` (N,) → world, with ``poses``."""
+        rot, trans, scale = poses
+        return np.einsum("nij,nj->ni", rot[owner], points * scale[owner]) + trans[owner]
+
+
+def _join(arrays, empty_shape):
+    return np.concatenate(arrays) if len(arrays) else np.zeros(empty_shape)
+
+
+class _PosedScene:
+    """The joined meshes posed at one frame, searchable by Embree."""
+
+    def __init__(self, geometry: _Geometry, frame):
+        self.poses = geometry.poses(frame)
+        world = geometry.to_world(geometry.vertices, geometry.vertex_owner, self.poses)
+        self.mesh = trimesh.Trimesh(world, geometry.faces, process=False)
+        self.triangles = world[geometry.faces]
         self._ray = None
 
     def first_hits(self, origins, dirs):
@@ -263,7 +291,7 @@ class _PosedScene:
             return np.full(len(origins), -1)
         if self._ray is None:
             from trimesh.ray.ray_pyembree import RayMeshIntersector
-            self._ray = RayMeshIntersector(self.world)
+            self._ray = RayMeshIntersector(self.mesh)
         return np.asarray(self._ray.intersects_first(origins, dirs), np.int64)
 
 
@@ -309,15 +337,15 @@ class Raycast(Renderer):
             self._meshes[asset] = mesh
         return self._meshes[asset]
 
-    def _entries(self):
-        """[(segmentation label, asset, Mesh)] of every physical object, labelled as the Blender
-        backend labels them (segmentation_id, else position in scene.assets + 1)."""
-        out = []
+    def geometry(self) -> _Geometry:
+        """Every physical object's mesh, labelled as the Blender backend labels them
+        (segmentation_id, else position in scene.assets + 1)."""
+        entries = []
         for i, asset in enumerate(self.scene.assets, start=1):
             if isinstance(asset, objects.PhysicalObject):
                 seg = asset.segmentation_id
-                out.append((i if seg is None else int(seg), asset, self._mesh_of(asset)))
-        return out
+                entries.append((i if seg is None else int(seg), asset, self._mesh_of(asset)))
+        return _Geometry(entries)
 
     # ------------------------------------------------------------------ rendering
     def render(self, frames=None, return_layers=ALL_LAYERS) -> dict[str, np.ndarray]:
@@ -327,116 +355,81 @@ class Raycast(Renderer):
         if camera is None:
             raise ValueError("the scene has no camera: add a PerspectiveCamera or "
                              "OrthographicCamera before rendering")
-        entries = self._entries()
+        geometry = self.geometry()
         out: dict[str, np.ndarray] = {}
         for i, frame in enumerate(frames):
-            layers = self.render_frame(camera, entries, frame, wanted)
+            layers = self.render_frame(camera, geometry, frame, wanted)
             for name in wanted:
                 if name not in out:
                     out[name] = np.empty((len(frames),) + layers[name].shape, layers[name].dtype)
                 out[name][i] = layers[name]
         return out
 
-    def render_frame(self, camera, entries, frame, wanted) -> dict[str, np.ndarray]:
+    def render_frame(self, camera, geometry, frame, wanted) -> dict[str, np.ndarray]:
+        """One frame's layers ``wanted`` → {layer: (H, W, C)}."""
         w, h = self.scene.resolution
         cols, rows = np.meshgrid(np.arange(w) + 0.5, np.arange(h) + 0.5)
         centres = np.stack([cols, rows], -1).reshape(-1, 2)
         origins, dirs = geo.pixel_rays(camera, centres, frame=frame, resolution=(w, h))
-        posed = _PosedScene(entries, frame)
+        posed = _PosedScene(geometry, frame)
         tri_id = posed.first_hits(origins, dirs)
         hit = tri_id >= 0
         idx = np.flatnonzero(hit)
         tid = tri_id[idx]
         t, b1, b2 = _intersect(origins[idx], dirs[idx], posed.triangles[tid])
-        owner = posed.owner[tid]
-        local_face = tid - posed.offsets[owner]
+        owner = geometry.face_owner[tid]
         bary = np.stack([1 - b1 - b2, b1, b2], -1)
-        n = h * w
+        corners = geometry.faces[tid]
+        local = np.einsum("nk,nkj->nj", bary, geometry.vertices[corners])
+        uv = np.einsum("nk,nkj->nj", bary, geometry.corner_uv[tid])
         res: dict[str, np.ndarray] = {}
 
         def image(values, channels, dtype=np.float32, fill=0.0):
-            img = np.full((n, channels), fill, dtype)
+            img = np.full((h * w, channels), fill, dtype)
             img[idx] = np.asarray(values).reshape(len(idx), channels)
             return img.reshape(h, w, channels)
 
         depth = image(t, 1, np.float64, geo.BACKGROUND_DEPTH)
-        if "depth" in wanted:
-            res["depth"] = depth.astype(np.float32)
-        if "z" in wanted:
-            z = geo.depth_to_z(camera, np.where(hit.reshape(h, w, 1), depth, 0.0))
-            res["z"] = np.where(hit.reshape(h, w, 1), z, geo.BACKGROUND_DEPTH).astype(np.float32)
-        labels = np.asarray([e[0] for e in entries], np.uint32)
-        if "segmentation" in wanted:
-            res["segmentation"] = image(labels[owner] if len(idx) else [], 1, np.uint32, 0)
-        local = self._per_object(entries, owner, local_face,
-                                 lambda m, f: np.einsum("nk,nkj->nj", bary[f], m.vertices[
-                                     m.faces[local_face[f]]]), 3)
-        if {"normal", "rgba"} & set(wanted):
-            normals = self._normals(posed, entries, owner, local_face, bary, dirs[idx])
-            res["normal"] = image(normals, 3)
-        if "object_coordinates" in wanted:
-            bounds = np.stack([np.asarray(e[1].bounds, np.float64) for e in entries]) \
-                if entries else np.zeros((0, 2, 3))
-            lo, hi = bounds[owner, 0], bounds[owner, 1]
-            extent = np.where(hi - lo > 0, hi - lo, 1.0)
-            res["object_coordinates"] = image(np.clip((local - lo) / extent, 0, 1), 3)
-        uv = self._per_object(entries, owner, local_face, lambda m, f: np.einsum(
-            "nk,nkj->nj", bary[f], m.corner_uv[local_face[f]]) if m.corner_uv is not None
-            else np.zeros((len(f), 2)), 2)
-        if "uv" in wanted:
-            res["uv"] = image(np.concatenate([np.mod(uv, 1.0), np.zeros((len(idx), 1))], 1), 3)
+        res["depth"] = depth.astype(np.float32)
+        mask = hit.reshape(h, w, 1)
+        res["z"] = np.where(mask, geo.depth_to_z(camera, np.where(mask, depth, 0.0)),
+                            geo.BACKGROUND_DEPTH).astype(np.float32)
+        res["segmentation"] = image(geometry.labels[owner], 1, np.uint32, 0)
+        normals = self._normals(geometry, posed, tid, owner, bary, dirs[idx])
+        res["normal"] = image(normals, 3)
+        lo, hi = geometry.bounds[owner, 0], geometry.bounds[owner, 1]
+        extent = np.where(hi - lo > 0, hi - lo, 1.0)
+        res["object_coordinates"] = image(np.clip((local - lo) / extent, 0, 1), 3)
+        res["uv"] = image(np.concatenate([np.mod(uv, 1.0), np.zeros((len(idx), 1))], 1), 3)
         for name, step in (("forward_flow", 1), ("backward_flow", -1)):
             if name in wanted:
-                res[name] = image(self._flow(posed, entries, owner, local, camera, frame + step,
-                                             centres[idx], (w, h)), 2)
+                world = geometry.to_world(local, owner, geometry.poses(frame + step))
+                xy, _ = geo.project_to_pixels(camera, world, frame=frame + step,
+                                              resolution=(w, h))
+                res[name] = image(xy[:, ::-1] - centres[idx, ::-1], 2)  # (Δrow, Δcol)
         if "rgba" in wanted:
             points = origins[idx] + dirs[idx] * t[:, None]
-            res["rgba"] = self._shade(posed, entries, owner, uv, points, normals, frame, hit,
+            res["rgba"] = self._shade(geometry, posed, owner, uv, points, normals, frame, hit,
                                       (h, w))
         return {k: res[k] for k in wanted}
 
     @staticmethod
-    def _per_object(entries, owner, local_face, fn, channels):
-        """Evaluate ``fn(mesh, positions in the hit list)`` per object → (N, channels)."""
-        out = np.zeros((len(owner), channels))
-        for k, (_, _, mesh) in enumerate(entries):
-            sel = np.flatnonzero(owner == k)
-            if len(sel):
-                out[sel] = fn(mesh, sel)
-        return out
-
-    @staticmethod
-    def _normals(posed, entries, owner, local_face, bary, dirs):
-        tri = posed.triangles[posed.offsets[owner] + local_face]
+    def _normals(geometry, posed, tid, owner, bary, dirs):
+        """World unit normals at the hits, facing the camera."""
+        tri = posed.triangles[tid]
         geometric = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-        normals = geometric.copy()
-        for k, (_, _, mesh) in enumerate(entries):
-            sel = np.flatnonzero(owner == k)
-            if len(sel) and mesh.normals is not None:
-                n_local = np.einsum("nk,nkj->nj", bary[sel], mesh.normals[mesh.faces[
-                    local_face[sel]]])
-                n_local = n_local / posed.scale[k]  # normals transform by the inverse scale
-                normals[sel] = n_local @ posed.rot[k].T
+        rot, _, scale = posed.poses
+        smooth_local = np.einsum("nk,nkj->nj", bary, geometry.normals[geometry.faces[tid]])
+        # normals transform with the inverse scale
+        smooth = np.einsum("nij,nj->ni", rot[owner], smooth_local / scale[owner])
+        normals = np.where(geometry.smooth[owner][:, None], smooth, geometric)
         normals /= np.linalg.norm(normals, axis=1, keepdims=True)
         back = np.einsum("ij,ij->i", geometric, dirs) > 0
         return np.where(back[:, None], -normals, normals)
 
-    @staticmethod
-    def _flow(posed, entries, owner, local, camera, frame, centres, resolution):
-        """(Δrow, Δcol) from the pixel centres to the hit points projected at ``frame``."""
-        world = np.zeros_like(local)
-        for k, (_, asset, _) in enumerate(entries):
-            sel = np.flatnonzero(owner == k)
-            if len(sel):
-                with asset.at_frame(frame):
-                    m = asset.matrix_world
-                    s = np.asarray(asset.scale, np.float64)
-                world[sel] = (local[sel] * s) @ m[:3, :3].T + m[:3, 3]
-        xy, _ = geo.project_to_pixels(camera, world, frame=frame, resolution=resolution)
-        return np.stack([xy[:, 1] - centres[:, 1], xy[:, 0] - centres[:, 0]], -1)
-
     # ------------------------------------------------------------------ rgba
-    def _albedo(self, asset, mesh, uv):
+    @staticmethod
+    def _albedo(asset, mesh, uv):
         """Linear base colour (N, 3) of ``asset``'s hits with texture coordinates ``uv``."""
         material = asset.material
         color = getattr(material, "color", None)
@@ -450,9 +443,8 @@ class Raycast(Renderer):
             return _sample(_load_texture(color.filename), uv) * color.strength
         return np.broadcast_to(np.asarray(_GREY), (len(uv), 3))
 
-    def _shade(self, posed, entries, owner, uv, points, normals, frame, hit, hw):
+    def _shade(self, geometry, posed, owner, uv, points, normals, frame, hit, hw):
         h, w = hw
-        radiance = np.zeros((len(points), 3))
         ambient = self.scene.ambient_illumination
         ambient = np.asarray(ambient.rgb) if isinstance(ambient, Color) else np.zeros(3)
         irradiance = np.broadcast_to(np.pi * ambient, (len(points), 3)).copy()
@@ -460,60 +452,56 @@ class Raycast(Renderer):
         start = points + normals * eps
         for light in self.scene.assets:
             if isinstance(light, lights.Light) and not isinstance(light, lights.UndefinedLight):
-                irradiance += self._light(light, posed, start, normals, frame)
-        for k, (_, asset, mesh) in enumerate(entries):
+                irradiance += _irradiance(light, posed, start, normals, frame)
+        radiance = np.zeros((len(points), 3))
+        for k, (_, asset, mesh) in enumerate(geometry.entries):
             sel = np.flatnonzero(owner == k)
-            if not len(sel):
-                continue
-            albedo = self._albedo(asset, mesh, uv[sel])
-            if isinstance(asset.material, materials.FlatMaterial):
-                radiance[sel] = albedo  # unlit: the colour itself
-            else:
-                radiance[sel] = albedo * irradiance[sel] / np.pi
+            if len(sel):
+                albedo = self._albedo(asset, mesh, uv[sel])
+                unlit = isinstance(asset.material, materials.FlatMaterial)
+                radiance[sel] = albedo if unlit else albedo * irradiance[sel] / np.pi
         rgba = np.zeros((h * w, 4), np.uint8)
         background = self.scene.background
         if isinstance(background, Color) and not self.background_transparency:
             rgba[:, :3] = np.round(linear_to_srgb(background.rgb) * 255)
             rgba[:, 3] = 255
-        flat_hit = hit.reshape(-1)
-        rgba[flat_hit, :3] = np.round(linear_to_srgb(radiance) * 255)
-        rgba[flat_hit, 3] = 255
+        rgba[hit, :3] = np.round(linear_to_srgb(radiance) * 255)
+        rgba[hit, 3] = 255
         return rgba.reshape(h, w, 4)
 
-    @staticmethod
-    def _light(light, posed, start, normals, frame):
-        """Irradiance (N, 3) from one lamp, with a hard shadow ray per point."""
-        with light.at_frame(frame):
-            m = light.matrix_world
-            color = np.asarray(light.color.rgb) * float(light.intensity)
-            axis = -m[:3, 2]  # lights shine along local −z
-            if isinstance(light, lights.DirectionalLight):
-                to_light = np.broadcast_to(-axis, start.shape)
-                dist = np.full(len(start), np.inf)
-                falloff = np.ones(len(start))
-            else:
-                vec = m[:3, 3] - start
-                dist = np.linalg.norm(vec, axis=1)
-                to_light = vec / np.maximum(dist, 1e-12)[:, None]
-                falloff = 1.0 / (4 * np.pi * np.maximum(dist, 1e-6) ** 2)
-                if isinstance(light, lights.SpotLight):
-                    cos = np.einsum("ij,j->i", -to_light, axis)
-                    half = np.cos(float(light.spot_size) / 2)
-                    blend = max(float(light.spot_blend) * (1 - half), 1e-9)
-                    falloff = falloff * np.clip((cos - half) / blend, 0, 1)
-                elif isinstance(light, lights.RectAreaLight):
-                    falloff = falloff * 4 * np.clip(np.einsum("ij,j->i", -to_light, axis), 0, 1)
-        cos = np.clip(np.einsum("ij,ij->i", normals, to_light), 0, None)
-        lit = np.flatnonzero(cos * falloff > 0)
-        if len(lit):
-            blocker = posed.first_hits(start[lit], np.ascontiguousarray(to_light[lit]))
-            blocked = blocker >= 0
-            if blocked.any():
-                b = lit[blocked]
-                t, _, _ = _intersect(start[b], to_light[b], posed.triangles[blocker[blocked]])
-                shadowed = (t > 0) & (t < dist[b])
-                cos[b[shadowed]] = 0.0
-        return (cos * falloff)[:, None] * color
+
+def _irradiance(light, posed, start, normals, frame):
+    """Irradiance (N, 3) at ``start`` from one lamp, with a hard shadow ray per point."""
+    with light.at_frame(frame):
+        m = light.matrix_world
+        color = np.asarray(light.color.rgb) * float(light.intensity)
+        axis = -m[:3, 2]  # lights shine along local −z
+        if isinstance(light, lights.DirectionalLight):
+            to_light = np.broadcast_to(-axis, start.shape)
+            dist = np.full(len(start), np.inf)
+            falloff = np.ones(len(start))
+        else:
+            vec = m[:3, 3] - start
+            dist = np.linalg.norm(vec, axis=1)
+            to_light = vec / np.maximum(dist, 1e-12)[:, None]
+            falloff = 1.0 / (4 * np.pi * np.maximum(dist, 1e-6) ** 2)
+            if isinstance(light, lights.SpotLight):
+                cos = np.einsum("ij,j->i", -to_light, axis)
+                half = np.cos(float(light.spot_size) / 2)
+                blend = max(float(light.spot_blend) * (1 - half), 1e-9)
+                falloff = falloff * np.clip((cos - half) / blend, 0, 1)
+            elif isinstance(light, lights.RectAreaLight):
+                falloff = falloff * 4 * np.clip(np.einsum("ij,j->i", -to_light, axis), 0, 1)
+    cos = np.clip(np.einsum("ij,ij->i", normals, to_light), 0, None)
+    lit = np.flatnonzero(cos * falloff > 0)
+    if len(lit):
+        blocker = posed.first_hits(start[lit], np.ascontiguousarray(to_light[lit]))
+        blocked = blocker >= 0
+        if blocked.any():
+            b = lit[blocked]
+            t, _, _ = _intersect(start[b], to_light[b], posed.triangles[blocker[blocked]])
+            cos[b[(t > 0) & (t < dist[b])]] = 0.0
+    return (cos * falloff)[:, None] * color
 
 
 _TEXTURES: dict[str, np.ndarray] = {}
