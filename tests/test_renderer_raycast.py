@@ -2,8 +2,9 @@
 
 * Without Blender: layers of a box scene against geometry derived here (ray–slab intersection,
   orthographic projection); a ``renderer=raycast`` MOVi-A scene written with bpy blocked.
-* With Blender (the oracle): Cycles' exact layers of real MOVi-A (static camera) and MOVi-E
-  (moving camera) scenes against the raycast backend's, pixel by pixel.
+* With Blender (the oracle): Cycles' exact layers of real MOVi-A (static camera, KuBasic OBJ
+  shapes), MOVi-E (moving camera, GLB objects) and MOVi-C (HDRI dome, articulated URDF links)
+  scenes against the raycast backend's, pixel by pixel.
 """
 
 import json
@@ -247,6 +248,8 @@ TOLERANCES = {"depth": 5e-5, "z": 5e-5, "forward_flow": 5e-4, "backward_flow": 5
     ("movi_a", ["resolution=64", "frame_end=3"]),
     ("movi_e", ["resolution=64", "frame_end=3", "min_num_objects=4", "max_num_objects=5",
                 "settle_frames=20", "collection_limit=8"]),
+    ("movi_c", ["resolution=64", "frame_end=3", "collection_limit=8", "articulated_objects=2",
+                "min_num_objects=3", "max_num_objects=3"]),
 ])
 def test_cycles_exact_layers_agree_with_raycast(name, options):
     """Cycles' exact layers of a real MOVi scene checked against the raycast backend: labels
