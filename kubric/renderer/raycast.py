@@ -441,12 +441,13 @@ class Raycast(Renderer):
             return np.broadcast_to(np.asarray(color.rgb, np.float64), (len(uv), 3))
         if isinstance(color, materials.Texture) and color.mapping == "uv" and color.filename:
             return _sample(_load_texture(color.filename), uv) * color.strength
+        if isinstance(color, materials.Texture) and color.filename:  # environment-mapped
+            return np.broadcast_to(_ambient_radiance(color), (len(uv), 3))
         return np.broadcast_to(np.asarray(_GREY), (len(uv), 3))
 
     def _shade(self, geometry, posed, owner, uv, points, normals, frame, hit, hw):
         h, w = hw
-        ambient = self.scene.ambient_illumination
-        ambient = np.asarray(ambient.rgb) if isinstance(ambient, Color) else np.zeros(3)
+        ambient = _ambient_radiance(self.scene.ambient_illumination)
         irradiance = np.broadcast_to(np.pi * ambient, (len(points), 3)).copy()
         eps = 1e-4 * max(1.0, float(np.abs(posed.triangles).max())) if len(points) else 0.0
         start = points + normals * eps
@@ -507,12 +508,34 @@ def _irradiance(light, posed, start, normals, frame):
 _TEXTURES: dict[str, np.ndarray] = {}
 
 
+def _ambient_radiance(ambient) -> np.ndarray:
+    """(3,) radiance of the light from all directions: a Color, or an environment Texture's mean
+    over the sphere (equirectangular rows weighted by cos(latitude)) × its strength."""
+    if isinstance(ambient, Color):
+        return np.asarray(ambient.rgb, np.float64)
+    image = _load_texture(ambient.filename)
+    rows = image.shape[0]
+    weight = np.cos((np.arange(rows) + 0.5) / rows * np.pi - np.pi / 2)
+    mean = np.einsum("r,rc->c", weight, image.mean(axis=1)) / weight.sum()
+    return mean * float(ambient.strength)
+
+
 def _load_texture(path: str) -> np.ndarray:
-    """A texture file as a linear (h, w, 3) float image (cached per path)."""
+    """A texture file as a linear (h, w, 3) float image (cached per path): OpenEXR files as
+    stored (linear), other images through PIL, sRGB-decoded."""
     if path not in _TEXTURES:
-        from PIL import Image
-        with Image.open(path) as im:
-            _TEXTURES[path] = srgb_to_linear(np.asarray(im.convert("RGB"), np.float64) / 255.0)
+        if path.lower().endswith(".exr"):
+            import OpenEXR
+            with OpenEXR.File(path) as f:
+                channels = f.channels()
+                rgb = channels["RGB"].pixels if "RGB" in channels else np.stack(
+                    [channels[c].pixels for c in "RGB"], -1)
+            _TEXTURES[path] = np.asarray(rgb, np.float64)[..., :3]
+        else:
+            from PIL import Image
+            with Image.open(path) as im:
+                pixels = np.asarray(im.convert("RGB"), np.float64) / 255.0
+            _TEXTURES[path] = srgb_to_linear(pixels)
     return _TEXTURES[path]
 
 
