@@ -19,7 +19,7 @@ is a third of the frame's cost; below 16 samples the RMSE of object and edge pix
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 
 from kubric.pipeline import Option
 
@@ -92,9 +92,3 @@ class RenderQuality:
         if self.renderer == "blender":
             settings["quality"] = self.quality
         return settings
-
-    def quality_settings(self) -> dict:
-        """``metadata["renderer"]`` fields: the profile's name and its resolved settings."""
-        p = asdict(self.quality_profile())
-        return {"quality": self.quality, "samples_per_pixel": p.pop("samples"),
-                "denoising": p.pop("denoise"), **p}
