@@ -12,6 +12,9 @@ kept between frames (``render.use_persistent_data``). The result is a dict of (T
 arrays (see blender_passes and the output contract): rgba uint8, depth/z float32 (metres),
 segmentation uint32, forward/backward_flow float32 (Δrow, Δcol in pixels), normal, uv,
 object_coordinates float32.
+It implements the renderer protocol of :mod:`kubric.renderer.base` (registered as ``blender``;
+recipes build it with ``kubric.renderer.create``); :meth:`Blender.settings` is what a scene's
+``metadata["renderer"]`` records.
 
 Options:
   samples_per_pixel (int ≥ 1), adaptive_sampling (bool), use_denoising (bool, OIDN),
