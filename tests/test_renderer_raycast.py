@@ -164,9 +164,9 @@ def test_raycast_recipe_options_are_checked():
         get_recipe("movi_f").from_assignments(["renderer=raycast"])
 
 
-def test_movi_a_scene_with_raycast_needs_no_bpy(tmp_path):
+def test_movi_a_scene_with_raycast_needs_no_bpy_and_packs(tmp_path):
     """A complete scene (written through write_scene, so checked against MOVi-A's schema) with
-    bpy blocked in the worker."""
+    bpy blocked in the worker, and packed with ``kubric pack --verify``."""
     env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(NO_BPY), str(ROOT)]))
     cmd = [sys.executable, "-m", "kubric", "worker", "movi_a", "--seed", "5", "--out",
            str(tmp_path), "--set", "resolution=48", "--set", "frame_end=3", "--set",
@@ -185,6 +185,12 @@ def test_movi_a_scene_with_raycast_needs_no_bpy(tmp_path):
     assert set(np.unique(seg)) - {0} == set(range(1, len(meta["instances"]) + 1))
     assert layers["rgba"][..., :3][seg > 0].mean() > 20
     assert docgen.undocumented_scene_fields(scene_dir) == []
+    pack = subprocess.run([sys.executable, "-m", "kubric", "pack", str(tmp_path), "--out",
+                           str(tmp_path / "dataset"), "--splits", "train=1", "--verify",
+                           "--no-progress"], cwd=ROOT, env=env, capture_output=True, text=True,
+                          timeout=300)
+    assert pack.returncode == 0, pack.stdout[-2000:] + pack.stderr[-2000:]
+    assert "verified: every example equals its scene directory (1 examples)" in pack.stdout
 
 
 # ---------------------------------------------------------------------------------- the oracle
