@@ -16,7 +16,7 @@ use, so naming a backend never imports bpy or embree). It is constructed as
   background (depth / z: 10000).
 * ``settings()`` → the JSON-able dict recorded as ``metadata["renderer"]``: ``engine`` (the
   backend's name for itself) and the settings that decide its pixels.
-* ``layers``: the subset of :data:`ALL_LAYERS` the backend can produce.
+* ``layers``: the subset of :data:`ALL_LAYERS` the backend can produce; ``scene``: the scene.
 
 Adding a backend = one new module with the class + one row in :data:`BACKENDS`.
 """
@@ -46,6 +46,8 @@ class Renderer(abc.ABC):
 
     #: the layers this backend can produce (a subset of ALL_LAYERS)
     layers: tuple[str, ...] = ALL_LAYERS
+    #: the scene it renders (a :class:`kubric.core.scene.Scene`), set by the constructor
+    scene = None
 
     @abc.abstractmethod
     def render(self, frames=None, return_layers=ALL_LAYERS) -> dict[str, np.ndarray]:

@@ -315,7 +315,8 @@ class Raycast(Renderer):
         self.scene = scene
         self.scratch_dir = scratch_dir
         self.background_transparency = bool(background_transparency)
-        self._meshes: dict = {}
+        self._meshes: dict = {}  # asset → Mesh, read once per renderer
+        self._textures: dict = {}  # path → linear image, read once per renderer
 
     def settings(self) -> dict:
         return {"engine": "RAYCAST", "view_transform": "Standard",
@@ -428,8 +429,7 @@ class Raycast(Renderer):
         return np.where(back[:, None], -normals, normals)
 
     # ------------------------------------------------------------------ rgba
-    @staticmethod
-    def _albedo(asset, mesh, uv):
+    def _albedo(self, asset, mesh, uv):
         """Linear base colour (N, 3) of ``asset``'s hits with texture coordinates ``uv``."""
         material = asset.material
         color = getattr(material, "color", None)
@@ -440,14 +440,14 @@ class Raycast(Renderer):
         if isinstance(color, Color):
             return np.broadcast_to(np.asarray(color.rgb, np.float64), (len(uv), 3))
         if isinstance(color, materials.Texture) and color.mapping == "uv" and color.filename:
-            return _sample(_load_texture(color.filename), uv) * color.strength
+            return _sample(_load_texture(color.filename, self._textures), uv) * color.strength
         if isinstance(color, materials.Texture) and color.filename:  # environment-mapped
-            return np.broadcast_to(_ambient_radiance(color), (len(uv), 3))
+            return np.broadcast_to(_ambient_radiance(color, self._textures), (len(uv), 3))
         return np.broadcast_to(np.asarray(_GREY), (len(uv), 3))
 
     def _shade(self, geometry, posed, owner, uv, points, normals, frame, hit, hw):
         h, w = hw
-        ambient = _ambient_radiance(self.scene.ambient_illumination)
+        ambient = _ambient_radiance(self.scene.ambient_illumination, self._textures)
         irradiance = np.broadcast_to(np.pi * ambient, (len(points), 3)).copy()
         eps = 1e-4 * max(1.0, float(np.abs(posed.triangles).max())) if len(points) else 0.0
         start = points + normals * eps
@@ -505,38 +505,35 @@ def _irradiance(light, posed, start, normals, frame):
     return (cos * falloff)[:, None] * color
 
 
-_TEXTURES: dict[str, np.ndarray] = {}
-
-
-def _ambient_radiance(ambient) -> np.ndarray:
+def _ambient_radiance(ambient, cache) -> np.ndarray:
     """(3,) radiance of the light from all directions: a Color, or an environment Texture's mean
     over the sphere (equirectangular rows weighted by cos(latitude)) × its strength."""
     if isinstance(ambient, Color):
         return np.asarray(ambient.rgb, np.float64)
-    image = _load_texture(ambient.filename)
+    image = _load_texture(ambient.filename, cache)
     rows = image.shape[0]
     weight = np.cos((np.arange(rows) + 0.5) / rows * np.pi - np.pi / 2)
     mean = np.einsum("r,rc->c", weight, image.mean(axis=1)) / weight.sum()
     return mean * float(ambient.strength)
 
 
-def _load_texture(path: str) -> np.ndarray:
-    """A texture file as a linear (h, w, 3) float image (cached per path): OpenEXR files as
-    stored (linear), other images through PIL, sRGB-decoded."""
-    if path not in _TEXTURES:
+def _load_texture(path: str, cache: dict) -> np.ndarray:
+    """A texture file as a linear (h, w, 3) float image (kept in ``cache`` by path): OpenEXR
+    files as stored (linear), other images through PIL, sRGB-decoded."""
+    if path not in cache:
         if path.lower().endswith(".exr"):
             import OpenEXR
             with OpenEXR.File(path) as f:
                 channels = f.channels()
                 rgb = channels["RGB"].pixels if "RGB" in channels else np.stack(
                     [channels[c].pixels for c in "RGB"], -1)
-            _TEXTURES[path] = np.asarray(rgb, np.float64)[..., :3]
+            cache[path] = np.asarray(rgb, np.float64)[..., :3]
         else:
             from PIL import Image
             with Image.open(path) as im:
                 pixels = np.asarray(im.convert("RGB"), np.float64) / 255.0
-            _TEXTURES[path] = srgb_to_linear(pixels)
-    return _TEXTURES[path]
+            cache[path] = srgb_to_linear(pixels)
+    return cache[path]
 
 
 def _sample(image, uv):
