@@ -202,14 +202,15 @@ def file_mesh(asset) -> Mesh:
 
 
 def _file_appearance(visual):
-    """(linear texture image or None, linear base colour) of a trimesh visual."""
+    """(linear texture image × base colour factor or None, linear base colour) of a trimesh
+    visual."""
     material = getattr(visual, "material", None)
     image = getattr(material, "baseColorTexture", None) or getattr(material, "image", None)
     factor = getattr(material, "baseColorFactor", None)
     color = _GREY if factor is None else tuple(srgb_to_linear(np.asarray(factor[:3]) / 255.0))
-    if image is not None:
+    if image is not None:  # the factor multiplies the texture, as in glTF and Blender
         pixels = np.asarray(image.convert("RGB"), np.float64) / 255.0
-        return srgb_to_linear(pixels), color
+        return srgb_to_linear(pixels) * (1.0 if factor is None else np.asarray(color)), color
     return None, color
 
 
