@@ -248,9 +248,8 @@ def srgb_bytes(linear):
     """Linear values in [0, 1] → 8-bit sRGB-encoded values (the inverse of an image import)."""
     import numpy as np
 
-    c = np.clip(np.asarray(linear, dtype=np.float64), 0.0, 1.0)
-    s = np.where(c <= 0.0031308, 12.92 * c, 1.055 * c ** (1 / 2.4) - 0.055)
-    return np.round(s * 255.0).astype(np.uint8)
+    from kubric.core.color import linear_to_srgb
+    return np.round(linear_to_srgb(linear) * 255.0).astype(np.uint8)
 
 
 def _pack_atlas(parts, looks, fallback):
@@ -300,10 +299,8 @@ def _pack_atlas(parts, looks, fallback):
 
 def srgb_to_linear(srgb):
     """sRGB-encoded values in [0, 1] → linear values (the decoding an image import applies)."""
-    import numpy as np
-
-    c = np.clip(np.asarray(srgb, dtype=np.float64), 0.0, 1.0)
-    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+    from kubric.core.color import srgb_to_linear as decode
+    return decode(srgb)
 
 
 def _with_appearance(parts, fallback, color_from: str):

@@ -41,6 +41,7 @@ from kubric.recipes.common import (
     source_location,
 )
 from kubric.recipes.render_quality import RenderQuality
+from kubric.renderer.base import BACKENDS
 
 DYNAMIC_SPAWN_REGION = ((-5.0, -5.0, 1.0), (5.0, 5.0, 5.0))
 STATIC_SPAWN_REGION = ((-7.0, -7.0, 0.0), (7.0, 7.0, 10.0))
@@ -97,6 +98,9 @@ class MoviBase(RenderQuality, Recipe):
                             type=source_location)
     save_state = Option(False, "also write scene.blend (animated) and scene.bullet (initial "
                         "physics state)")
+    renderer = Option("blender", "rendering backend (docs/renderers.md): blender = Cycles; "
+                      "raycast = embree, exact layers without bpy, RGB not photoreal",
+                      choices=tuple(BACKENDS))
     tracks = Option(0, "point tracks to sample and write to tracks.npz (0 = none; docs/tracks.md)",
                     low=0)
     track_queries = Option(None, "file of given track queries, rows (t, y, x) in pixels (.npy, "
@@ -115,8 +119,25 @@ class MoviBase(RenderQuality, Recipe):
             raise OptionError(f"{self.name}: option step_rate={self.step_rate} must be a multiple "
                               f"of frame_rate={self.frame_rate}")
         check_source_options(self)
+        self.check_renderer()
         self.check_tracks()
         check_min_max(self)
+
+    def check_renderer(self) -> None:
+        """Options that only the Blender backend honours fail here for another backend."""
+        if self.renderer == "blender":
+            return
+        given = [f"{name}={getattr(self, name)}" for name in ("samples", "denoise")
+                 if getattr(self, name) is not None]
+        if self.quality != "default":
+            given.append(f"quality={self.quality}")
+        if self.save_state:
+            given.append("save_state=True")
+        if getattr(self, "max_motion_blur", 0.0) > 0:
+            given.append(f"max_motion_blur={self.max_motion_blur}")
+        if given:
+            raise OptionError(f"{self.name}: renderer={self.renderer} has no {', '.join(given)}; "
+                              "these need renderer=blender")
 
     def check_tracks(self) -> None:
         """Bad track options fail here, before anything renders (one line)."""
@@ -210,13 +231,12 @@ class MoviBase(RenderQuality, Recipe):
             if self.save_state:  # the initial state, before the simulation (as upstream)
                 simulator.save_state(out_dir / "scene.bullet")
             _, collisions = simulator.run(frame_start=0, frame_end=scene.frame_end + 1)
-            renderer = kb.renderer.Blender(scene, scratch, motion_blur=blur,
-                                           **self.renderer_quality())
+            renderer = kb.renderer.create(self.renderer, scene, scratch,
+                                          **self.renderer_settings(motion_blur=blur))
             layers = renderer.render()
             if self.save_state:
                 renderer.save_state(out_dir / "scene.blend")
-            render_settings = {"engine": "CYCLES", "view_transform": "Standard",
-                               **self.quality_settings(), "motion_blur": blur}
+            render_settings = self.render_metadata(renderer)
             self.write_outputs(scene, layers, collisions, seed, out_dir, background,
                                render_settings)
             simulator.close()

@@ -291,11 +291,10 @@ class MultiviewBase(RenderQuality, Recipe):
             self.add_objects(scene, rng, sources)
             self.key_camera(scene, self.camera_positions(rng))
             self.animate(scene, rng, splits, sources)
-            renderer = kb.renderer.Blender(scene, self.scratch / "render",
-                                           **self.renderer_quality(), **self.renderer_options())
+            renderer = kb.renderer.create(self.renderer, scene, self.scratch / "render",
+                                          **self.renderer_settings(**self.renderer_options()))
             layers = renderer.render(return_layers=RENDERED_LAYERS)
-        render_settings = {"engine": "CYCLES", "view_transform": "Standard",
-                           **self.quality_settings(), **self.renderer_options()}
+        render_settings = self.render_metadata(renderer)
         self.write_outputs(scene, layers, seed, out_dir, background, render_settings, splits)
 
     def write_outputs(self, scene, layers, seed, out_dir, background, render_settings,

@@ -232,10 +232,10 @@ class Vbr(RenderQuality, Recipe, name="vbr"):
             _, collisions = simulator.run(frame_start=0, frame_end=scene.frame_end + 1)
             if self.camera == "follow":
                 self.follow(scene, camera, base, centre)
-            renderer = kb.renderer.Blender(scene, scratch, **self.renderer_quality())
+            renderer = kb.renderer.create(self.renderer, scene, scratch,
+                                          **self.renderer_settings())
             layers = renderer.render()
-            settings = {"engine": "CYCLES", "view_transform": "Standard",
-                        **self.quality_settings()}
+            settings = self.render_metadata(renderer)
             order = annotate_instances(scene, layers, parts, order=by_visible_pixels)
             metadata, events = scene_documents(
                 self, scene, seed, order, collisions, background=background, renderer=settings,

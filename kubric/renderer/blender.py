@@ -12,6 +12,9 @@ kept between frames (``render.use_persistent_data``). The result is a dict of (T
 arrays (see blender_passes and the output contract): rgba uint8, depth/z float32 (metres),
 segmentation uint32, forward/backward_flow float32 (Δrow, Δcol in pixels), normal, uv,
 object_coordinates float32.
+It implements the renderer protocol of :mod:`kubric.renderer.base` (registered as ``blender``;
+recipes build it with ``kubric.renderer.create``); :meth:`Blender.settings` is what a scene's
+``metadata["renderer"]`` records.
 
 Options:
   samples_per_pixel (int ≥ 1), adaptive_sampling (bool), use_denoising (bool, OIDN),
@@ -50,6 +53,7 @@ from kubric.renderer import blender_objects as bo
 from kubric.renderer import blender_passes as bp
 from kubric.renderer import blender_shadows as bs
 from kubric.renderer import blender_world as bw
+from kubric.renderer.base import Renderer
 
 
 @contextlib.contextmanager
@@ -139,8 +143,9 @@ def render_threads() -> int | None:
     return int(value)
 
 
-class Blender(TableView):
-    """Cycles renderer view (see module doc for options and output)."""
+class Blender(TableView, Renderer):
+    """Cycles renderer view (see module doc for options and output); implements the renderer
+    protocol of :mod:`kubric.renderer.base`."""
 
     samples_per_pixel = _live_option("samples_per_pixel", lambda n, v: _as_int(n, v, 1),
                                      _set_cycles("samples"))
@@ -207,6 +212,11 @@ class Blender(TableView):
                  denoising_quality="HIGH", denoising_prefilter="ACCURATE"):
         self.bpy_scene = None
         self._options: dict = {}
+        self._given = {name for name, value, default in (
+            ("motion_blur", motion_blur, False), ("max_bounces", max_bounces, None),
+            ("background_transparency", background_transparency, False),
+            ("adaptive_sampling", adaptive_sampling, False), ("light_tree", light_tree, False))
+            if value is not default}
         self.samples_per_pixel = samples_per_pixel
         self.adaptive_sampling = adaptive_sampling
         self.use_denoising = use_denoising
@@ -454,20 +464,7 @@ class Blender(TableView):
             if missing:
                 raise FileNotFoundError(f"Blender.render: missing texture file(s) {missing}; "
                                         "pass ignore_missing_textures=True to render anyway")
-        frames = list(self.scene.frames if frames is None else frames)
-        if not frames:
-            raise ValueError("Blender.render: frames is empty")
-        for f in frames:
-            if isinstance(f, bool) or not isinstance(f, (int, np.integer)):
-                raise TypeError(f"Blender.render: frames must be integers, got {f!r}")
-        frames = [int(f) for f in frames]
-        if min(frames) < 0:
-            raise ValueError(f"Blender.render: Blender renders frames ≥ 0 only, got {min(frames)}")
-        wanted = tuple(return_layers)
-        unknown = sorted(set(wanted) - set(bp.ALL_LAYERS))
-        if unknown:
-            raise ValueError(f"Blender.render: unknown layers {unknown}; allowed: "
-                             f"{list(bp.ALL_LAYERS)}")
+        frames, wanted = self.check_request(frames, return_layers)
         self._sync()
         out = _FrameStack(len(frames))
         if "rgba" in wanted:
@@ -492,6 +489,18 @@ class Blender(TableView):
                 for k in ann:
                     out.put(k, i, layers.pop(k))
         return {k: out.arrays[k] for k in wanted}
+
+    def settings(self) -> dict:
+        """``metadata["renderer"]``: engine, view transform and the RGB quality settings, plus
+        every option of motion_blur, max_bounces, background_transparency, adaptive_sampling and
+        light_tree that was given to the constructor (device and verbosity never change pixels
+        beyond float noise and are not recorded)."""
+        out = {"engine": "CYCLES", "view_transform": "Standard",
+               "samples_per_pixel": self.samples_per_pixel, "denoising": self.use_denoising,
+               "denoising_quality": self.denoising_quality,
+               "denoising_prefilter": self.denoising_prefilter}
+        out.update({name: getattr(self, name) for name in sorted(self._given)})
+        return out
 
     def render_still(self, frame=None, return_layers=bp.ALL_LAYERS, ignore_missing_textures=False):
         """Render one frame (default: Blender's current frame) → {layer: (H, W, C) array}."""
