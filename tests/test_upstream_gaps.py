@@ -257,3 +257,31 @@ def test_write_flow_batch_with_name_keys_its_range_and_decodes(tmp_path):
         kb.file_io.write_flow_batch(forward[..., :1], tmp_path, name="x")
     with pytest.raises(ValueError, match="name must be a non-empty str"):
         kb.file_io.write_flow_batch(forward, tmp_path, name="")
+
+
+# ------------------------------------------------------------------ observers
+def test_observe_reports_changes_and_keyframes_like_upstreams_traitlets():
+    """Upstream assets were traitlets objects: obj.observe(handler, "position",
+    type="keyframe") got one change per keyframe_insert with name, owner, frame and type."""
+    obj = kb.Cube()
+    changes, keys, everything = [], [], []
+    obj.observe(changes.append, "position")
+    obj.observe(keys.append, ["position"], type="keyframe")
+    obj.observe(everything.append)
+    obj.position = (3, 3, 3)
+    obj.keyframe_insert("position", 7)
+    obj.scale = 2
+    obj.keyframe_insert("scale", 2)
+    assert [(c.name, c.type) for c in changes] == [("position", "change")]
+    np.testing.assert_array_equal(changes[0].old, (0, 0, 0))
+    np.testing.assert_array_equal(changes[0].new, (3, 3, 3))
+    assert changes[0].owner is obj
+    assert [(k.name, k.owner, k.frame, k.type) for k in keys] == [("position", obj, 7, "keyframe")]
+    assert [c.name for c in everything] == ["position", "scale"]
+    obj.unobserve(changes.append, "position")
+    obj.position = (1, 1, 1)
+    assert len(changes) == 1 and len(everything) == 3
+    with pytest.raises(KeyError, match="doesnotexist"):
+        obj.observe(changes.append, "doesnotexist")
+    with pytest.raises(ValueError, match="type must be 'change' or 'keyframe'"):
+        obj.observe(changes.append, "position", type="other")
