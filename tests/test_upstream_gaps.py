@@ -200,6 +200,14 @@ def test_every_public_value_type_round_trips_through_pickle_and_copy(protocol, t
     assert tuple(back["background"]["background_color"]) == (0.1, 0.2, 0.3, 1.0)
 
 
+def test_assets_and_scenes_refuse_pickling_with_one_clear_line():
+    for entity, name in ((kb.Cube(name="box"), "Cube 'box'"), (kb.Scene(), "Scene")):
+        for attempt in (pickle.dumps, copy.deepcopy, copy.copy):
+            with pytest.raises(TypeError, match=rf"^{name} cannot be pickled or copied .*"
+                                                r"kb.get_instance_info"):
+                attempt(entity)
+
+
 # ------------------------------------------------------------------ batch writers
 def test_multi_write_image_with_a_palette_and_write_png(tmp_path):
     """video_based_reconstruction/worker.py: multi_write_image(segmentation, "<dir>/{:05d}.png",
