@@ -18,9 +18,10 @@ Upstream scripts sometimes omit ``rng``. For them, ``rng=None`` means, in this o
 
 :func:`default_rng` is upstream's helper of that name: a fresh unseeded ``RandomState``.
 
-Recipes never use the unseeded generator: :func:`kubric.pipeline.worker.run_scene` runs every
-recipe inside :func:`forbid_unseeded`, where reaching step 2 or calling :func:`default_rng` raises
-``RuntimeError`` naming the function.
+Recipes pass ``rng`` explicitly and never use the unseeded generator:
+:func:`kubric.pipeline.worker.run_scene` runs every recipe inside :func:`explicit_rng_only`, where
+``rng=None`` (even with a worker rng bound) and :func:`default_rng` raise ``RuntimeError`` naming
+the function.
 """
 
 from __future__ import annotations
@@ -79,13 +80,13 @@ class UnseededRandomnessWarning(UserWarning):
 
 _unseeded: np.random.RandomState | None = None
 _warned: set[str] = set()
-_forbidden = threading.local()  # .reasons: list of active forbid_unseeded() reasons
+_forbidden = threading.local()  # .reasons: list of active explicit_rng_only() reasons
 
 
 @contextlib.contextmanager
-def forbid_unseeded(reason: str) -> Iterator[None]:
-    """Inside this block (in this thread) the unseeded generator is an error: a sampling function
-    called without ``rng`` (and no worker rng bound) or :func:`default_rng` raises
+def explicit_rng_only(reason: str) -> Iterator[None]:
+    """Inside this block (in this thread) every sampling function needs an explicit ``rng``:
+    ``rng=None`` (whether or not a worker rng is bound) and :func:`default_rng` raise
     ``RuntimeError`` naming the function and ``reason``. Recipe runs use it."""
     reasons = _forbidden.__dict__.setdefault("reasons", [])
     reasons.append(str(reason))
@@ -98,8 +99,8 @@ def forbid_unseeded(reason: str) -> Iterator[None]:
 def _check_unseeded_allowed(where: str) -> None:
     reasons = getattr(_forbidden, "reasons", None)
     if reasons:
-        raise RuntimeError(f"{where} would use an unseeded random generator inside "
-                           f"{reasons[-1]}; pass rng= explicitly (results must follow the seed)")
+        raise RuntimeError(f"{where} was called without an explicit rng inside {reasons[-1]}; "
+                           "pass rng= (results must follow the scene's seed)")
 
 
 def default_rng() -> np.random.RandomState:
@@ -124,6 +125,7 @@ def _unseeded_rng(where: str) -> np.random.RandomState:
 
 def _require_rng(rng, where: str):
     if rng is None:
+        _check_unseeded_allowed(where)
         bound = worker_rng()
         if bound is not None:
             return bound

@@ -71,14 +71,22 @@ def test_functions_upstream_never_defaulted_still_need_rng():
     assert defaulted == randomness.UPSTREAM_DEFAULTED - {"kb.assets.utils.get_clevr_lights"}
 
 
-def test_forbid_unseeded_names_the_function_and_the_run():
-    with randomness.forbid_unseeded("recipe 'x'"):
-        with pytest.raises(RuntimeError, match=r"move_until_no_overlap .* inside recipe 'x'"):
+def test_explicit_rng_only_names_the_function_and_the_run():
+    with randomness.explicit_rng_only("recipe 'x'"):
+        with pytest.raises(RuntimeError, match=r"move_until_no_overlap .*explicit rng inside "
+                                               r"recipe 'x'"):
             kb.move_until_no_overlap(kb.Cube(), simulator=None)
         with pytest.raises(RuntimeError, match=r"default_rng\(\) .* inside recipe 'x'"):
             randomness.default_rng()
         # an explicit rng is fine
         assert isinstance(kb.random_hue_color(rng=np.random.RandomState(0)), kb.Color)
+        # rng=None is refused even while a kb.setup rng is bound: recipes pass theirs
+        worker = randomness.WorkerRandomState(0)
+        randomness.bind_worker_rng(worker)
+        with pytest.raises(RuntimeError, match="random_clevr_color was called without an "
+                                               "explicit rng inside recipe 'x'"):
+            randomness.random_clevr_color()
+        del worker
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", randomness.UnseededRandomnessWarning)
         kb.random_hue_color()  # allowed again outside the block
@@ -121,7 +129,7 @@ def test_movi_scenes_set_every_friction_and_never_reach_the_unseeded_generator(
         scene = recipe.make_scene()
         simulator = kb.simulator.PyBullet(scene, tmp_path / f"scratch{seed}")
         try:
-            with randomness.forbid_unseeded(f"recipe {name!r}"):
+            with randomness.explicit_rng_only(f"recipe {name!r}"):
                 recipe.populate(scene, simulator, np.random.RandomState(seed), sources)
         finally:
             simulator.close()

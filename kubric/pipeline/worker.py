@@ -98,7 +98,7 @@ def run_scene(recipe, seed: int, out_root) -> SceneResult:
     work.mkdir()
     own(work)  # removed at exit even when Blender turns a signal into an immediate exit
     try:
-        with randomness.forbid_unseeded(f"recipe {recipe.name!r}"):  # rng= always explicit
+        with randomness.explicit_rng_only(f"recipe {recipe.name!r}"):  # rng= always explicit
             recipe.generate(seed, work)
         if is_complete(final):  # another process finished the same seed meanwhile
             shutil.rmtree(work, ignore_errors=True)
