@@ -63,6 +63,11 @@ class Color(tuple):
             values.append(f)
         return super().__new__(cls, values)
 
+    def __getnewargs__(self) -> tuple[float, float, float, float]:
+        # pickle / copy rebuild a tuple subclass by calling __new__ with these arguments; without
+        # this they would pass the whole tuple as ``r``
+        return tuple(self)
+
     r = property(lambda self: self[0])
     g = property(lambda self: self[1])
     b = property(lambda self: self[2])

@@ -6,7 +6,10 @@ Sample conventions (all images are ``(H, W, C)`` arrays, row 0 at the top):
   (grey), 3 (RGB) or 4 (RGBA). C = 2 is padded with a zero third channel and stored as RGB (as
   upstream Kubric did for flow), so it reads back with C = 3. Other integer dtypes must lie in
   [0, 65535] and are stored as 16-bit; floats must lie in [0, 1] and are stored as
-  ``round(x * 65535)`` in 16 bits. Nothing is ever wrapped or clipped: out-of-range values raise.
+  ``floor(x * 65535)`` in 16 bits — truncated exactly as upstream Kubric's ``write_png`` did, so
+  the same floats give the same file (docs/compatibility.md; the scene directory's 16-bit layers
+  and :func:`write_scaled_png` round instead). Nothing is ever wrapped or clipped: out-of-range
+  values raise.
 * :func:`write_palette_png` stores integer labels: an 8-bit palette PNG while the largest label is
   ≤ 255, otherwise a 16-bit grey PNG (labels > 65535 raise ``ValueError``).
 * :func:`write_scaled_png` maps floats to 16 bits as ``round((v - min) / (max - min) * 65535)``
@@ -142,13 +145,16 @@ def check_image(data, what: str, channels: Sequence[int] = (1, 2, 3, 4)) -> np.n
 
 
 def unit_float_to_uint16(arr: np.ndarray, what: str) -> np.ndarray:
-    """Floats in [0, 1] → ``round(x * 65535)`` uint16; NaN or values outside [0, 1] raise."""
+    """Floats in [0, 1] → ``floor(x * 65535)`` uint16 (upstream's truncation, computed in the
+    input's own precision as upstream did); NaN or values outside [0, 1] raise."""
     if not np.all(np.isfinite(arr)):
         raise ValueError(f"{what}: values must be finite, found NaN or inf")
     lo, hi = float(arr.min()), float(arr.max())
     if lo < 0.0 or hi > 1.0:
         raise ValueError(f"{what}: float values must lie in [0, 1], got range [{lo}, {hi}]")
-    return np.rint(arr.astype(np.float64) * UINT16_MAX).astype(np.uint16)
+    if arr.dtype.itemsize < 4:  # float16 cannot hold 65535 · x
+        arr = arr.astype(np.float32)
+    return (arr * UINT16_MAX).astype(np.uint16)  # astype truncates toward 0 (values are ≥ 0)
 
 
 def to_png_samples(data, what: str) -> np.ndarray:

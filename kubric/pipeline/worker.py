@@ -67,6 +67,7 @@ class SceneResult:
 def run_scene(recipe, seed: int, out_root) -> SceneResult:
     """Generate scene ``seed`` with ``recipe`` (a :class:`~kubric.pipeline.recipe.Recipe`
     instance) under ``out_root`` atomically (see module doc)."""
+    from kubric import randomness  # here, not at module level: it imports the asset sources
     start = time.time()
     out_root = pathlib.Path(out_root)
     final = out_root / scene_name(seed)
@@ -80,7 +81,8 @@ def run_scene(recipe, seed: int, out_root) -> SceneResult:
     work.mkdir()
     own(work)  # removed at exit even when Blender turns a signal into an immediate exit
     try:
-        recipe.generate(seed, work)
+        with randomness.explicit_rng_only(f"recipe {recipe.name!r}"):  # rng= always explicit
+            recipe.generate(seed, work)
         if is_complete(final):  # another process finished the same seed meanwhile
             shutil.rmtree(work, ignore_errors=True)
             return SceneResult(seed, final, "skipped", time.time() - start)

@@ -27,7 +27,10 @@ Options:
   environment variable KUBRIC_USE_GPU is 1/true, else "CPU"), max_bounces (None = Blender's
   defaults, or an int ≥ 0 limiting every bounce kind), light_tree (bool, default False: faster on
   small lamp-lit scenes), verbose (bool: show Blender's console output), scratch_dir (where frames
-  are written; default a new temporary directory).
+  are written; default a new temporary directory), custom_scene (upstream's option: the path of a
+  ``.blend`` file that Blender opens instead of an empty scene; its objects are rendered with the
+  model's assets — background (label 0) in segmentation, unknown to the model and the simulator —
+  while its world is replaced by the scene's background / ambient settings).
 Render threads: Blender's automatic count (all cores), or exactly N when the environment variable
 KUBRIC_RENDER_THREADS is N ≥ 1 (set by ``kubric generate --threads-per-scene`` on Dask).
 Depth of field comes from the perspective camera's ``use_dof`` / ``focus_distance`` /
@@ -209,7 +212,8 @@ class Blender(TableView, Renderer):
     def __init__(self, scene, scratch_dir=None, adaptive_sampling=False, use_denoising=True,
                  samples_per_pixel=128, background_transparency=False, *, motion_blur=False,
                  device=None, max_bounces=None, light_tree=False, verbose=False,
-                 denoising_quality="HIGH", denoising_prefilter="ACCURATE"):
+                 denoising_quality="HIGH", denoising_prefilter="ACCURATE", custom_scene=None):
+        custom_scene = _custom_scene(custom_scene)
         self.bpy_scene = None
         self._options: dict = {}
         self._given = {name for name, value, default in (
@@ -236,6 +240,10 @@ class Blender(TableView, Renderer):
         self.imported_materials: dict[str, list] = {}
         with self.quiet():
             bpy.ops.wm.read_factory_settings(use_empty=True)
+            if custom_scene is not None:  # a user's scene to render the model's assets into
+                bpy.ops.wm.open_mainfile(filepath=custom_scene)
+                for obj in bpy.data.objects:  # its objects are background in segmentation
+                    obj.pass_index = 0
             bpy.context.preferences.edit.keyframe_new_interpolation_type = "LINEAR"
             self.bpy_scene = bpy.context.scene
             self._setup_render_engine()
@@ -562,6 +570,18 @@ class _FrameStack:
         if layer not in self.arrays:
             self.arrays[layer] = np.empty((self.num_frames,) + frame.shape, frame.dtype)
         self.arrays[layer][index] = frame
+
+
+def _custom_scene(path) -> str | None:
+    """``custom_scene`` (upstream's option): None or an existing ``.blend`` file, as a str."""
+    if path is None:
+        return None
+    if not isinstance(path, (str, os.PathLike)) or Path(path).suffix.lower() != ".blend":
+        raise ValueError(f"Blender option custom_scene must be the path of a .blend file, got "
+                         f"{path!r}")
+    if not Path(path).is_file():
+        raise FileNotFoundError(f"Blender option custom_scene: {str(path)!r} does not exist")
+    return str(Path(path).resolve())
 
 
 def missing_texture_files() -> list[str]:
