@@ -47,7 +47,7 @@ from kubric.io.tiff_io import decode_tiff, encode_tiff, read_tiff, write_tiff
 # upstream's write_rgba_batch, write_depth_batch, write_segmentation_batch, ...
 globals().update(BATCH_WRITERS)
 # ... and the flow writers with upstream's name= / range_file= keywords, multi_write_image
-from kubric.io.batch import (  # noqa: E402
+from kubric.io.batch import (  # noqa: E402,F401  (in __all__ through BATCH_WRITERS' names)
     multi_write_image,
     write_backward_flow_batch,
     write_flow_batch,

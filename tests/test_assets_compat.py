@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 
 import kubric as kb
+from kubric import randomness
 from kubric.asset_tools.writer import Collision, package_object
 from kubric.assets.asset_source import AssetSource
-from kubric import randomness
 from kubric.randomness import WorkerRandomState, bind_worker_rng
 
 BASE = {"sun": (11.6608, -6.62799, 25.8232), "lamp_back": (-1.1685, 2.64602, 5.81574),

@@ -22,8 +22,8 @@ def _blender(scene, **kw):
 
 def _write_blend(path, objects):
     """Save a .blend holding mesh cubes ``{name: (half size, location)}`` (nothing else)."""
-    import bpy  # before bmesh, which bpy provides
     import bmesh
+    import bpy  # before bmesh, which bpy provides
     bpy.ops.wm.read_factory_settings(use_empty=True)
     for name, (half, location) in objects.items():
         mesh = bpy.data.meshes.new(name)
@@ -109,7 +109,7 @@ def test_custom_scene_renders_the_users_blend_around_the_model(tmp_path):
     """examples/animation.py: Blender(scene, custom_scene=PATH) starts from a user's .blend. A
     wall from the file stands 5 m behind the origin: depth shows it where the model's cube does
     not cover it, segmentation labels it background (0), the model's cube keeps its label."""
-    path = _write_blend(tmp_path / "room.blend", {"Wall": (4.0, (0, 9, 0))})  # front face y = 5
+    _write_blend(tmp_path / "room.blend", {"Wall": (4.0, (0, 9, 0))})  # front face y = 5
     scene = kb.Scene(resolution=(16, 16), frame_start=1, frame_end=1)
     camera = kb.PerspectiveCamera(position=(0, -5, 0), look_at=(0, 0, 0), focal_length=35)
     scene += camera

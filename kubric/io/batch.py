@@ -52,7 +52,7 @@ def multi_write_image(data, path_template: str, write_fn: Callable = png_io.writ
         write_fn(image, path, **kwargs)
 
     with ThreadPoolExecutor(max_workers=min(max_write_threads, len(images))) as pool:
-        for _ in pool.map(write, zip(images, paths)):  # re-raises the first exception
+        for _ in pool.map(write, zip(images, paths, strict=True)):  # re-raises the first exception
             pass
     return paths
 
