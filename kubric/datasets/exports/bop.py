@@ -38,6 +38,7 @@ import sys
 import numpy as np
 
 from kubric.datasets.exports import models as mdl
+from kubric.datasets.exports.coco import mask_bbox
 from kubric.datasets.exports.scenes import ExportError, Scene, find_scenes, load_scene
 
 #: our camera axes (x right, y up, looking down -z) → OpenCV's
@@ -136,11 +137,8 @@ class ModelStore:
 
 
 def _bbox(mask: np.ndarray) -> list[int]:
-    rows = np.flatnonzero(mask.any(axis=1))
-    if not rows.size:
-        return [-1, -1, -1, -1]
-    cols = np.flatnonzero(mask.any(axis=0))
-    return [int(cols[0]), int(rows[0]), int(cols[-1] + 1 - cols[0]), int(rows[-1] + 1 - rows[0])]
+    """BOP's ``[x, y, w, h]`` of a mask; ``[-1, -1, -1, -1]`` when it is empty."""
+    return mask_bbox(mask) if mask.any() else [-1, -1, -1, -1]
 
 
 def _png(array: np.ndarray) -> bytes:

@@ -109,6 +109,11 @@ def ply_bytes(model: Model) -> bytes:
     return header.encode("ascii") + verts.tobytes() + faces.tobytes()
 
 
+def _edge(p, q, px, py):
+    """Twice the signed area of (p, q, pixel centre): its sign says which side of p→q it is."""
+    return (q[:, 0] - p[:, 0]) * (py - p[:, 1]) - (q[:, 1] - p[:, 1]) * (px - p[:, 0])
+
+
 def rasterise(points_px: np.ndarray, faces: np.ndarray, height: int, width: int,
               budget: int = 1 << 22) -> np.ndarray:
     """(H, W) bool: pixels whose centre lies inside a projected triangle (edges included).
@@ -135,9 +140,7 @@ def rasterise(points_px: np.ndarray, faces: np.ndarray, height: int, width: int,
         py = lo[idx, 1] + offset // bw[idx]
         a, b, c = tri[idx, 0], tri[idx, 1], tri[idx, 2]
 
-        def edge(p, q):
-            return (q[:, 0] - p[:, 0]) * (py - p[:, 1]) - (q[:, 1] - p[:, 1]) * (px - p[:, 0])
-        e0, e1, e2 = edge(a, b), edge(b, c), edge(c, a)
+        e0, e1, e2 = (_edge(a, b, px, py), _edge(b, c, px, py), _edge(c, a, px, py))
         inside = ((e0 >= 0) & (e1 >= 0) & (e2 >= 0)) | ((e0 <= 0) & (e1 <= 0) & (e2 <= 0))
         area = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])
         inside &= area != 0
