@@ -36,6 +36,8 @@ def scenes(tmp_path_factory):
     root = tmp_path_factory.mktemp("exports")
     for seed in (1, 4):
         worker("movi_a", seed, root / "movi_a", TINY + ["frame_end=3", "min_num_objects=6"])
+    worker("movi_c", 2, root / "movi_c", TINY + ["frame_end=3", "collection_limit=8",
+                                                  "max_num_objects=4"])
     worker("klevr", 2, root / "klevr", TINY + ["num_views=3", "split_ratio=1,1,1",
                                                "max_num_objects=5"])
     return root
@@ -163,10 +165,15 @@ def _png(path):
 
 
 @pytest.mark.blender
-def test_bop_movi_a(scenes, tmp_path):
+@pytest.mark.parametrize("recipe", ["movi_a", "movi_c", "klevr"])
+def test_bop(scenes, tmp_path, recipe):
+    """movi_a: two scenes, KuBasic OBJ meshes; movi_c: converted pybullet_data GLB meshes;
+    klevr: a multi-view scene without a z layer (z-depth from the distance layer)."""
     import trimesh
+
+    from kubric import assets
     out = tmp_path / "bop"
-    proc = kubric("export", "bop", scenes / "movi_a", "--out", out)
+    proc = kubric("export", "bop", scenes / recipe, "--out", out)
     assert proc.returncode == 0, proc.stderr
     info = json.loads((out / "models" / "models_info.json").read_text())
     index = json.loads((out / "models" / "models_index.json").read_text())
@@ -177,15 +184,16 @@ def test_bop_movi_a(scenes, tmp_path):
         lo, hi = mesh.vertices.min(0), mesh.vertices.max(0)
         np.testing.assert_allclose([entry["min_x"], entry["min_y"], entry["min_z"]], lo, atol=1e-3)
         np.testing.assert_allclose(hi, -lo, atol=1e-3)  # origin at the box centre
-        # KuBasic shapes are unit-sized: scaled by the CLEVR size, the largest side is 1000·size
-        assert index[obj_id]["scale"][0] in (0.7, 1.4)
-        np.testing.assert_allclose((hi - lo).max(), 1000 * index[obj_id]["scale"][0], rtol=1e-5)
+        if recipe == "movi_a":  # unit-sized KuBasic shapes: the largest side is 1000 · size
+            assert index[obj_id]["scale"][0] in (0.7, 1.4)
+            np.testing.assert_allclose((hi - lo).max(), 1000 * index[obj_id]["scale"][0],
+                                       rtol=1e-5)
     hits, gaps, errors = [], [], []
-    from kubric import assets
-    kubasic = assets.ensure_kubasic()
-    bounds = {a: kubasic.db[a]["kwargs"]["bounds"] for a in kubasic.all_asset_ids}
-    for scene_dir in sorted((scenes / "movi_a").glob("scene_*")):
+    for scene_dir in sorted((scenes / recipe).glob("scene_*")):
         meta = file_io.read_json(scene_dir / "metadata.json")
+        source = assets.ensure_pybullet_collection(limit=meta["flags"]["collection_limit"]) \
+            if recipe == "movi_c" else assets.ensure_kubasic()
+        bounds = {a: source.db[a]["kwargs"]["bounds"] for a in source.all_asset_ids}
         w, h = meta["metadata"]["resolution"]
         bop = out / "train_pbr" / f"{meta['metadata']['seed']:06d}"
         cams = json.loads((bop / "scene_camera.json").read_text())
@@ -194,10 +202,10 @@ def test_bop_movi_a(scenes, tmp_path):
         for i in range(meta["metadata"]["num_frames"]):
             cam = cams[str(i)]
             k = np.reshape(cam["cam_K"], (3, 3))
-            # depth × depth_scale = our z-depth in mm (quantised to depth_scale)
-            z = file_io.read_tiff(scene_dir / f"z_{i:05d}.tiff")[..., 0] * 1000.0
             depth = _png(bop / "depth" / f"{i:06d}.png").astype(float) * cam["depth_scale"]
-            assert np.abs(depth - z).max() <= cam["depth_scale"] / 2 + 1e-3
+            if recipe != "klevr":  # depth × depth_scale = our z-depth in mm (quantised)
+                z = file_io.read_tiff(scene_dir / f"z_{i:05d}.tiff")[..., 0] * 1000.0
+                assert np.abs(depth - z).max() <= cam["depth_scale"] / 2 + 1e-3
             seg = file_io.read_palette_png(scene_dir / f"segmentation_{i:05d}.png")[..., 0]
             oc = read_frame(scene_dir, "object_coordinates", i).astype(float)
             r_w2c = np.reshape(cam["cam_R_w2c"], (3, 3))
@@ -247,8 +255,10 @@ def test_bop_movi_a(scenes, tmp_path):
     print(f"{hits.mean():.4f} of {len(hits)} vertices in a mask pixel; distance to the nearest "
           f"mask pixel: max {gaps.max():.3f} px, 99th percentile {np.percentile(gaps, 99):.3f}")
     # vertices on a silhouette (a sphere's rim: many) may fall just outside the pixels whose
-    # centres the silhouette covers: sub-pixel; the rest land inside
-    assert len(hits) > 100 and hits.mean() > 0.7 and gaps.max() < 1.0
+    # centres the silhouette covers: sub-pixel (a cone's apex, a spike narrower than a pixel,
+    # covers no pixel centre near its tip: up to 1.13 px measured); the rest land inside
+    assert len(hits) > 100 and hits.mean() > 0.7 and np.percentile(gaps, 99) < 1.0
+    assert gaps.max() < 1.5
     errors = np.concatenate(errors)
     print(f"posed surface points vs depth: median {np.median(errors):.3f} mm, max "
           f"{errors.max():.3f} mm over {len(errors)} pixels")

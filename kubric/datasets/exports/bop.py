@@ -79,6 +79,15 @@ def world_to_camera(matrix_world) -> tuple[np.ndarray, np.ndarray]:
     return r, -r @ (m[:3, 3] * 1000.0)
 
 
+def z_from_distance(depth: np.ndarray, k: np.ndarray) -> np.ndarray:
+    """z-depth from our depth layer (distance from the camera centre along the pixel-centre ray),
+    for scenes without a ``z`` layer: z = distance / |K⁻¹ (col, row, 1)| (``k`` OpenCV's)."""
+    h, w = depth.shape
+    cols, rows = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64))
+    norm = np.sqrt(((cols - k[0, 2]) / k[0, 0]) ** 2 + ((rows - k[1, 2]) / k[1, 1]) ** 2 + 1.0)
+    return depth.astype(np.float64) / norm
+
+
 def opencv_k(intrinsics_pixels) -> np.ndarray:
     k = np.array(intrinsics_pixels, dtype=np.float64)
     k[0, 2] -= 0.5
@@ -164,12 +173,13 @@ def export_scene(scene: Scene, out: pathlib.Path, store: ModelStore, depth_scale
     for i in range(scene.num_frames):
         try:
             rgba = read_frame(scene.path, "rgba", i)
-            z = read_frame(scene.path, "z", i)[..., 0].astype(np.float64)
             depth = read_frame(scene.path, "depth", i)[..., 0]
             seg = read_frame(scene.path, "segmentation", i)[..., 0]
         except FileNotFoundError as err:
-            raise ExportError(f"{scene.path.name}: {err} (the BOP export needs rgba, depth, z "
+            raise ExportError(f"{scene.path.name}: {err} (the BOP export needs rgba, depth "
                               "and segmentation)") from None
+        z = read_frame(scene.path, "z", i)[..., 0].astype(np.float64) \
+            if (scene.path / f"z_{i:05d}.tiff").is_file() else z_from_distance(depth, k)
         (work / "rgb" / f"{i:06d}.png").write_bytes(_png(rgba[..., :3]))
         hit = depth < background * 0.999
         units = np.where(hit, np.rint(z * 1000.0 / depth_scale), 0)
@@ -245,4 +255,4 @@ def export_bop(root, out, split: str = "train_pbr", depth_scale: float = 1.0,
 
 
 __all__ = ["BopSummary", "export_bop", "instance_scale", "opencv_k", "quaternion_matrix",
-           "world_to_camera"]
+           "world_to_camera", "z_from_distance"]

@@ -1,8 +1,10 @@
 """Object models for the BOP export: meshes from asset sources, scaled and centred, written as PLY
 in millimetres, their ``models_info.json`` entry, and silhouettes rasterised from them.
 
-Mesh frame: an asset's ``render_filename`` (OBJ, PLY or STL, imported by the renderer without axis
-conversion: file x, y, z = the object's local x, y, z) in metres, times the object's scale. The
+Mesh frame: an asset's ``render_filename`` in metres, times the object's scale, in the frame the
+renderer imports it into: OBJ, PLY and STL without axis conversion (file x, y, z = the object's
+local x, y, z); glTF / GLB from glTF's y-up axes as Blender's importer converts them (local
+(x, y, z) = glTF (x, −z, y)). The
 model's origin is moved to the centre of its 3D bounding box (BOP's convention); the export adds
 that shift to ``cam_t_m2c`` so the pose still places the model where the object was.
 """
@@ -18,7 +20,10 @@ from kubric.datasets.exports.scenes import ExportError
 
 #: the renderer's default importer axes for these formats (= no conversion)
 IDENTITY_AXES = {"forward_axis": "Y", "up_axis": "Z"}
-MESH_FORMATS = (".obj", ".ply", ".stl")
+MESH_FORMATS = (".obj", ".ply", ".stl", ".glb", ".gltf")
+GLTF_FORMATS = (".glb", ".gltf")
+#: glTF (y up) → our local frame (z up), as Blender's glTF importer converts
+GLTF_TO_LOCAL = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
 
 
 @dataclasses.dataclass
@@ -56,14 +61,20 @@ def load_mesh(source, asset_id: str):
     if path.suffix.lower() not in MESH_FORMATS:
         raise ExportError(f"asset {asset_id!r}: render mesh {path.name!r} is not one of "
                           f"{MESH_FORMATS} (the BOP export reads those)")
-    axes = {k: v for k, v in dict(kwargs.get("render_import_kwargs") or {}).items()}
-    if any(axes.get(k, v) != v for k, v in IDENTITY_AXES.items()) or set(axes) - set(IDENTITY_AXES):
-        raise ExportError(f"asset {asset_id!r}: render_import_kwargs {axes} convert axes; the BOP "
-                          "export reads meshes imported without conversion only")
+    axes = dict(kwargs.get("render_import_kwargs") or {})
+    gltf = path.suffix.lower() in GLTF_FORMATS
+    if (gltf and axes) or any(axes.get(k, v) != v for k, v in IDENTITY_AXES.items()) \
+            or set(axes) - set(IDENTITY_AXES):
+        raise ExportError(f"asset {asset_id!r}: render_import_kwargs {axes} change the "
+                          "importer's axes; the BOP export reads meshes imported with the "
+                          "defaults only")
     mesh = trimesh.load(path, force="mesh", process=False)
     if not len(mesh.faces):
         raise ExportError(f"asset {asset_id!r}: {path.name!r} holds no triangles")
-    return np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces, dtype=np.int64)
+    vertices = np.asarray(mesh.vertices, dtype=np.float64)
+    if gltf:
+        vertices = vertices @ GLTF_TO_LOCAL.T
+    return vertices, np.asarray(mesh.faces, dtype=np.int64)
 
 
 def make_model(vertices_m: np.ndarray, faces: np.ndarray, scale) -> Model:
