@@ -175,6 +175,9 @@ def test_bop(scenes, tmp_path, recipe):
     out = tmp_path / "bop"
     proc = kubric("export", "bop", scenes / recipe, "--out", out)
     assert proc.returncode == 0, proc.stderr
+    again = kubric("export", "bop", scenes / recipe, "--out", out, "--no-progress")
+    assert again.returncode == 2 and "already holds a BOP export" in again.stderr
+    assert again.stderr.count("\n") == 1
     info = json.loads((out / "models" / "models_info.json").read_text())
     index = json.loads((out / "models" / "models_index.json").read_text())
     meshes = {}

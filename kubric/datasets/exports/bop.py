@@ -237,6 +237,10 @@ def export_bop(root, out, split: str = "train_pbr", depth_scale: float = 1.0,
         raise ExportError(f"--out {str(out)!r} is a file; give a folder (the BOP dataset root)")
     if not split or "/" in split or split.startswith("."):
         raise ExportError(f"--split {split!r}: give a folder name such as train_pbr")
+    if (out / "models" / "models_info.json").exists():
+        raise ExportError(f"--out {str(out)!r} already holds a BOP export (models/models_info.json"
+                          "); remove it or choose another folder (object ids are numbered per "
+                          "export)")
     paths, skipped = find_scenes(root)
     first = load_scene(root, paths[0])
     store = ModelStore(out / "models", model_sources(first.metadata.get("flags", {}), sources))
