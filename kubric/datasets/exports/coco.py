@@ -25,6 +25,7 @@ import dataclasses
 import json
 import os
 import pathlib
+import shutil
 import sys
 
 import numpy as np
@@ -156,8 +157,7 @@ def export_coco(root, out, progress: bool = True, compressed: bool = True,
                     bar.update(1)
             main.write('],"annotations":[')
             anns.seek(0)
-            while chunk := anns.read(1 << 20):
-                main.write(chunk)
+            shutil.copyfileobj(anns, main, 1 << 16)
             main.write("]}\n")
         os.replace(tmp, out)
     finally:
