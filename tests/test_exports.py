@@ -321,3 +321,19 @@ def test_coco_streams_one_scene_at_a_time(tmp_path):
     # 20× the scenes (1.5 MB more JSON) may not need 20× the memory: one scene at a time
     print("peak traced memory by scene count:", peaks)
     assert peaks[400] < 1.5 * peaks[20] + 512 * 1024, peaks
+
+
+def test_coco_refuses_mixed_recipes_and_missing_frames(tmp_path):
+    root = tmp_path / "scenes"
+    synthetic_scenes(root, [3, 5], frames=2)
+    meta = file_io.read_json(root / "scene_00000005" / "metadata.json")
+    meta["flags"]["recipe"] = "other"
+    file_io.write_json(meta, root / "scene_00000005" / "metadata.json")
+    proc = kubric("export", "coco", root, "--out", tmp_path / "x.json")
+    assert proc.returncode == 2 and proc.stderr.splitlines()[-1].startswith(
+        "kubric export coco: error: scene_00000005: recipe 'other' differs")
+    assert not (tmp_path / "x.json").exists()
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]  # no side files left
+    (root / "scene_00000003" / "rgba_00001.png").unlink()
+    proc = kubric("export", "coco", root / "scene_00000003", "--out", tmp_path / "x.json")
+    assert proc.returncode == 2 and "frame 1 has no rgba_00001.png" in proc.stderr

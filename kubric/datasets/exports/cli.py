@@ -57,42 +57,39 @@ def add_parser(subparsers) -> None:
     sub = p.add_subparsers(dest="export_format", metavar="FORMAT", required=True)
     scenes_help = "a folder of scene_* directories, or one scene directory"
 
-    c = sub.add_parser("coco", help="COCO instance annotations (one image per frame / view)",
-                       description="One JSON file: images (file_name relative to SCENES), "
-                       "instance annotations with RLE masks, boxes [x, y, w, h] in pixels, areas "
-                       "and categories from the recipe's labels.")
-    c.add_argument("scenes_dir", metavar="SCENES", help=scenes_help)
-    c.add_argument("--out", required=True, help="output file (.json)")
-    c.add_argument("--uncompressed-rle", action="store_true", help="write RLE counts as lists "
-                   "of ints instead of COCO's compressed strings")
-    c.add_argument("--source", action="append", default=[], metavar="ASSET_SOURCE",
-                   help="asset source whose categories name the objects (default: the one the "
-                   "scenes' options name; repeatable)")
-    c.add_argument("--no-progress", action="store_true", help="no progress bar")
-    c.set_defaults(func=cmd_coco)
-
-    b = sub.add_parser("bop", help="BOP 6D object-pose dataset (models, poses, masks, depth)",
-                       description="BOP's layout: OUT/models (PLY in mm, models_info.json) and "
-                       "OUT/SPLIT/SCENE_ID/ with rgb, depth, mask, mask_visib, scene_camera.json, "
-                       "scene_gt.json, scene_gt_info.json.")
-    b.add_argument("scenes_dir", metavar="SCENES", help=scenes_help)
-    b.add_argument("--out", required=True, help="output folder (the BOP dataset root)")
-    b.add_argument("--split", default="train_pbr", help="split folder name (default train_pbr)")
-    b.add_argument("--depth-scale", type=float, default=1.0, help="millimetres per unit of the "
-                   "16-bit depth PNGs (default 1.0: up to 65.535 m)")
-    b.add_argument("--source", action="append", default=[], metavar="ASSET_SOURCE",
-                   help="asset source holding the objects' meshes (default: the sources the "
-                   "scenes' options name, and KuBasic; repeatable)")
-    b.add_argument("--no-progress", action="store_true", help="no progress bar")
-    b.set_defaults(func=cmd_bop)
-
-    t = sub.add_parser("tapvid", help="point tracks in TAP-Vid's pickle layout",
-                       description="Pickle {scene name: {video, points, occluded, "
-                       "target_points, query_points}} (TAP-Vid's tapvid_davis.pkl layout); same "
-                       "as `kubric tracks export --format tapvid`.")
-    t.add_argument("scenes_dir", metavar="SCENES", help=scenes_help)
-    t.add_argument("--out", required=True, help="output file (.pkl)")
-    t.set_defaults(func=cmd_tapvid)
-
+    formats = {
+        "coco": ("COCO instance annotations (one image per frame / view)",
+                 "One JSON file: images (file_name relative to SCENES), instance annotations with "
+                 "RLE masks, boxes [x, y, w, h] in pixels, areas and categories from the recipe's "
+                 "labels.", "output file (.json)", cmd_coco,
+                 "asset source whose categories name the objects (default: the one the scenes' "
+                 "options name; repeatable)"),
+        "bop": ("BOP 6D object-pose dataset (models, poses, masks, depth)",
+                "BOP's layout: OUT/models (PLY in mm, models_info.json) and OUT/SPLIT/SCENE_ID/ "
+                "with rgb, depth, mask, mask_visib, scene_camera.json, scene_gt.json, "
+                "scene_gt_info.json.", "output folder (the BOP dataset root)", cmd_bop,
+                "asset source holding the objects' meshes (default: the sources the scenes' "
+                "options name, and KuBasic; repeatable)"),
+        "tapvid": ("point tracks in TAP-Vid's pickle layout",
+                   "Pickle {scene name: {video, points, occluded, target_points, query_points}} "
+                   "(TAP-Vid's tapvid_davis.pkl layout); same as `kubric tracks export --format "
+                   "tapvid`.", "output file (.pkl)", cmd_tapvid, None),
+    }
+    parsers = {}
+    for name, (short, description, out_help, func, source_help) in formats.items():
+        f = parsers[name] = sub.add_parser(name, help=short, description=description)
+        f.add_argument("scenes_dir", metavar="SCENES", help=scenes_help)
+        f.add_argument("--out", required=True, help=out_help)
+        if source_help:
+            f.add_argument("--source", action="append", default=[], metavar="ASSET_SOURCE",
+                           help=source_help)
+            f.add_argument("--no-progress", action="store_true", help="no progress bar")
+        f.set_defaults(func=func)
+    parsers["coco"].add_argument("--uncompressed-rle", action="store_true", help="write RLE "
+                                 "counts as lists of ints instead of COCO's compressed strings")
+    parsers["bop"].add_argument("--split", default="train_pbr", help="split folder name "
+                                "(default train_pbr)")
+    parsers["bop"].add_argument("--depth-scale", type=float, default=1.0, help="millimetres per "
+                                "unit of the 16-bit depth PNGs (default 1.0: up to 65.535 m)")
 
 __all__ = ["add_parser"]
