@@ -88,7 +88,8 @@ def _check_coco(path, scenes_root, expect_kind):
             np.testing.assert_allclose(ann["bbox"], [xmin * w, ymin * h, (xmax - xmin) * w,
                                                      (ymax - ymin) * h], atol=1e-4)
             assert ann["iscrowd"] == 0 and ann["id"] == img["id"] * 10000 + k + 1
-            label = {"shape": inst.get("shape"), "semantic":
+            label = {"shape": inst.get("shape"), "asset category": inst.get("category"),
+                     "semantic":
                      meta["metadata"].get("semantic_classes", [None])[inst.get("semantic_id", 0)]
                      }[expect_kind]
             assert cats[ann["category_id"]] == label
@@ -138,6 +139,20 @@ def test_coco_multiview(scenes, tmp_path):
     assert kubric("export", "coco", scenes / "klevr", "--out", out).returncode == 0
     coco, n_ann = _check_coco(out, scenes / "klevr", "semantic")
     assert [i["split"] for i in coco.dataset["images"]] == ["train", "val", "test"]
+    assert n_ann >= 3
+
+
+@pytest.mark.blender
+def test_coco_asset_categories(scenes, tmp_path):
+    """movi_c: categories are the default objects collection's, in sorted order."""
+    pytest.importorskip("pycocotools")
+    from kubric import assets
+    out = tmp_path / "movi_c.json"
+    assert kubric("export", "coco", scenes / "movi_c", "--out", out).returncode == 0
+    coco, n_ann = _check_coco(out, scenes / "movi_c", "asset category")
+    meta = file_io.read_json(scenes / "movi_c" / "scene_00000002" / "metadata.json")
+    source = assets.ensure_pybullet_collection(limit=meta["flags"]["collection_limit"])
+    assert [c["name"] for c in coco.dataset["categories"]] == source.categories
     assert n_ann >= 3
 
 
