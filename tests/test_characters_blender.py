@@ -11,11 +11,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from character_helpers import lbs
 
-from kubric.asset_tools import humans, makehuman as mh, motions
+from kubric.asset_tools import humans, motions
+from kubric.asset_tools import makehuman as mh
 from kubric.asset_tools.character_import import import_characters
 from kubric.assets import AssetSource
-from test_characters_assets import lbs
 
 pytestmark = pytest.mark.blender
 MODELS = Path("/usr/share/assimp/models")
@@ -46,7 +47,8 @@ bpy.ops.object.mode_set(mode="EDIT")
 ebs = []
 for i, n in enumerate(names):
     eb = arm.edit_bones.new(n)
-    eb.head = (0, 0, 0); eb.tail = (0, float(np.linalg.norm(d["bone_tails"][i] - d["bone_rest"][i, :3, 3])), 0)
+    length = float(np.linalg.norm(d["bone_tails"][i] - d["bone_rest"][i, :3, 3]))
+    eb.head = (0, 0, 0); eb.tail = (0, length, 0)
     eb.matrix = Matrix(d["bone_rest"][i].tolist())
     if d["bone_parents"][i] >= 0:
         eb.parent = ebs[d["bone_parents"][i]]
@@ -107,7 +109,8 @@ def test_makehuman_rest_frames_and_skinning_match_blender(tmp_path):
     err = np.linalg.norm(ours - out["posed"], axis=1)
     moved = np.linalg.norm(ours - a["vertices"], axis=1)
     assert moved.max() > 0.3  # a real pose, not the rest
-    print(f"numpy LBS vs Blender armature modifier: max {err.max():.2e} m (pose moves up to {moved.max():.2f} m)")
+    print(f"numpy LBS vs Blender armature modifier: max {err.max():.2e} m "
+          f"(pose moves up to {moved.max():.2f} m)")
     assert err.max() < 1e-5, err.max()
 
 

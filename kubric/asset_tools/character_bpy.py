@@ -115,8 +115,10 @@ def _mesh_data(bpy, bmesh, objects, bone_index, world_of):
 
 
 def main(path, out):
+    # isort: off
     import bpy  # first: puts Blender's modules (bmesh) on the path
     import bmesh
+    # isort: on
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     try:

@@ -52,7 +52,7 @@ def _anchor_weights(name: str, value: float) -> dict[str, float]:
     if not anchors[0][0] <= value <= anchors[-1][0]:
         raise ValueError(f"macro parameter {name}={value!r} is outside "
                          f"[{anchors[0][0]}, {anchors[-1][0]}]")
-    for (a, la), (b, lb) in zip(anchors[:-1], anchors[1:]):
+    for (a, la), (b, lb) in zip(anchors[:-1], anchors[1:], strict=True):
         if a <= value <= b:
             t = (value - a) / (b - a)
             out = {la: 1.0 - t, lb: t}

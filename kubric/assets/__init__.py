@@ -19,8 +19,9 @@
 The offline **build tools** (converters, mesh physics, KuBasic, the GSO / ShapeNet / Poly Haven /
 pybullet collections, the asset writer, ``kubric assets``) live in :mod:`kubric.asset_tools`,
 which imports this package and never the reverse, with two documented exceptions, both lazy
-(inside the function): :func:`ensure_kubasic`, :func:`ensure_hdri_source` and
-:func:`ensure_pybullet_collection`, :func:`ensure_humans` build a default source into the cache on first use, and
+(inside the function): :func:`ensure_kubasic`, :func:`ensure_hdri_source`,
+:func:`ensure_pybullet_collection` and :func:`ensure_humans` build a default source into the
+cache on first use, and
 :func:`kubric.assets.articulated.export_link_meshes` writes a URDF's link meshes on demand with
 the build tools' GLB writer.
 """
