@@ -1,9 +1,11 @@
 """Extract a rigged character / animation from a glTF, FBX or BVH file with bpy's importers.
 
-Run in a fresh process (``python -m kubric.asset_tools.character_bpy INPUT OUT.npz``, as
+Run in a fresh process (``python -m kubric.asset_tools.character_bpy INPUT OUT.npz [y|z]``, as
 :mod:`kubric.asset_tools.character_import` does): a process that already imported bpy would see
 Blender's internal state. It writes ``OUT.npz`` (arrays) + ``OUT.json`` (names, facts), all in
-Blender's world frame after import (Z up, metres; glTF/FBX/BVH importers convert their axes):
+Blender's world frame after import (Z up, metres; glTF/FBX/BVH importers convert their axes; a
+BVH is read as Y up facing +Z — the usual convention — or, with ``z``, as Z up unchanged, as
+Blender's own BVH exporter writes it):
 
 - armature: ``bone_names`` (parents first), ``bone_parents``, ``bone_rest`` (J,4,4: rotation
   orthonormalised, translation = head), ``bone_tails``;
@@ -41,7 +43,7 @@ def _fbx_light_workaround(bpy):
         cls.cast_shadow = bpy.props.BoolProperty(name="Cast Shadow", default=True)
 
 
-def _import(bpy, path):
+def _import(bpy, path, bvh_up="y"):
     ext = path.lower().rsplit(".", 1)[-1]
     if ext == "fbx":
         _fbx_light_workaround(bpy)
@@ -49,7 +51,9 @@ def _import(bpy, path):
     elif ext in ("gltf", "glb"):
         bpy.ops.import_scene.gltf(filepath=path)
     elif ext == "bvh":
-        bpy.ops.import_anim.bvh(filepath=path, update_scene_fps=True, update_scene_duration=True)
+        axes = {"y": ("-Z", "Y"), "z": ("Y", "Z")}[bvh_up]  # file's Y up, facing +Z / as is
+        bpy.ops.import_anim.bvh(filepath=path, update_scene_fps=True, update_scene_duration=True,
+                                axis_forward=axes[0], axis_up=axes[1])
     else:
         _fail(path, f"unsupported extension .{ext} (glTF .gltf/.glb, .fbx, .bvh)")
 
@@ -114,7 +118,7 @@ def _mesh_data(bpy, bmesh, objects, bone_index, world_of):
     return out, unweighted
 
 
-def main(path, out):
+def main(path, out, bvh_up="y"):
     # isort: off
     import bpy  # first: puts Blender's modules (bmesh) on the path
     import bmesh
@@ -122,7 +126,7 @@ def main(path, out):
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     try:
-        _import(bpy, path)
+        _import(bpy, path, bvh_up)
     except Exception as err:  # noqa: BLE001 — the importer's own error, reported in one line
         _fail(path, f"the importer failed: {str(err).strip().splitlines()[-1]}")
     scene = bpy.context.scene
@@ -172,4 +176,4 @@ def main(path, out):
 
 
 if __name__ == "__main__":
-    main(sys.argv[1], sys.argv[2])
+    main(*sys.argv[1:4])

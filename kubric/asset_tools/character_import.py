@@ -13,6 +13,10 @@ driven bones (BVH or animation-only FBX for that rig), retargeted by world-rotat
 from its rest position, scaled by the ratio of root heights (target / source; 1 for the
 character of the same file) and ``--scale``.
 
+Animations are retargeted in Blender's world frame, so a separate animation file must use the
+same axes as the character: BVH files are read as Y up facing +Z (``--bvh-up y``, the usual
+convention, e.g. CMU) or as Z up unchanged (``--bvh-up z``, as Blender's BVH exporter writes).
+
 Files that cannot be used (no armature, a mesh not skinned to it, unweighted vertices, NaN in a
 clip, an importer failure) are skipped with one line naming the file and the problem.
 """
@@ -38,12 +42,12 @@ class CharacterImportError(ValueError):
     """A file that cannot become a character or clip (one line naming it)."""
 
 
-def extract(path: Path, timeout: float = 600) -> tuple[dict, dict]:
+def extract(path: Path, timeout: float = 600, bvh_up: str = "y") -> tuple[dict, dict]:
     """Run the bpy extraction of ``path`` in a fresh process; (arrays, info)."""
     with tempfile.TemporaryDirectory(prefix="kubric-char-") as tmp:
         out = Path(tmp) / "extract.npz"
         proc = subprocess.run([sys.executable, "-m", "kubric.asset_tools.character_bpy",
-                               str(path), str(out)], capture_output=True, text=True,
+                               str(path), str(out), bvh_up], capture_output=True, text=True,
                               timeout=timeout)
         errors = [ln[len("ERROR: "):] for ln in proc.stdout.splitlines() if ln.startswith("ERROR: ")]
         if errors:
@@ -119,7 +123,7 @@ def clip_onto(src_arrays: dict, src_info: dict, target: dict, target_names: list
 
 def import_characters(src: str | Path, out: str | Path, name: str = "UserCharacters",
                       license: str = "unknown (user-provided files)", scale: float = 1.0,
-                      progress: bool = True) -> dict:
+                      progress: bool = True, bvh_up: str = "y") -> dict:
     """Import every supported file under ``src`` (a file or folder); returns a report
     ``{name, converted, reused, skipped: [{id, source, reason}], total}``."""
     src, out = Path(src), Path(out)
@@ -127,6 +131,8 @@ def import_characters(src: str | Path, out: str | Path, name: str = "UserCharact
         raise FileNotFoundError(f"{src}: no such file or folder")
     if not scale > 0:
         raise ValueError(f"--scale must be > 0, got {scale!r}")
+    if bvh_up not in ("y", "z"):
+        raise ValueError(f"--bvh-up must be 'y' or 'z', got {bvh_up!r}")
     files = [src] if src.is_file() else sorted(p for p in src.rglob("*")
                                                 if p.suffix.lower() in EXTENSIONS)
     bad = [p for p in files if p.suffix.lower() not in EXTENSIONS]
@@ -135,7 +141,7 @@ def import_characters(src: str | Path, out: str | Path, name: str = "UserCharact
     skipped, extracted = [], []
     for i, path in enumerate(files):
         try:
-            extracted.append((path, *extract(path)))
+            extracted.append((path, *extract(path, bvh_up=bvh_up)))
             if progress:
                 print(f"  [{i + 1}/{len(files)}] read {path.name}", flush=True)
         except CharacterImportError as err:

@@ -107,7 +107,7 @@ def _characters(args) -> int:
 
     t0 = time.perf_counter()
     report = import_characters(args.src, args.out, name=args.name, license=args.license,
-                               scale=args.scale)
+                               scale=args.scale, bvh_up=args.bvh_up)
     return _print_report(report, time.perf_counter() - t0)
 
 
@@ -229,6 +229,9 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--license", default="unknown (user-provided files)",
                    help="licence recorded for every asset")
     p.add_argument("--scale", type=float, default=1.0, help="extra uniform scale to metres")
+    p.add_argument("--bvh-up", choices=["y", "z"], default="y",
+                   help="BVH axes: y = Y up, facing +Z (usual, e.g. CMU; default); z = Z up as "
+                        "is (Blender's BVH exporter)")
     p.set_defaults(func=_characters)
 
     p = sub.add_parser("list", help="list the assets of a source")
