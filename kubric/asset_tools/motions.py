@@ -86,7 +86,7 @@ def retarget_bvh(path: str | Path, names, parents, rest, tails, aliases=None) ->
     if not matched:
         raise MotionError(f"{path}: none of its joints {motion.names[:8]}... matches a bone of "
                           f"the rig ({names[:8]}...)")
-    if motion.joints[0].name not in ("Hips",) and jnames[0] not in index:
+    if jnames[0] not in index:
         raise MotionError(f"{path}: its root joint {motion.names[0]!r} is not a rig bone")
     C = BVH_TO_MODEL
     zero = motion.rest_positions() @ C.T
@@ -266,6 +266,10 @@ def build_motion_source(out: str | Path, character: dict, progress: bool = True,
         if progress:
             print(f"  [{i + 1}/{len(jobs)}] {clip_id}: {T} frames at {r['fps']:.4g} fps",
                   flush=True)
+    for fname, data in sorted(cmu_files.items()):  # the acknowledgement also sits at the top
+        (out / fname).write_bytes(data if isinstance(data, bytes) else data.encode())
+    (out / "LICENSES.txt").write_text("cmu_*: " + CMU_LICENSE + "\n\ndeepmimic_*: "
+                                      + DEEPMIMIC_LICENSE + "\n")
     return write_manifest(out / "manifest.json", "MotionClips", "1", entries,
                           description="motion clips retargeted onto MakeHuman's cmu_mb rig "
                                       "(docs/characters.md)")
