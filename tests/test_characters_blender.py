@@ -244,3 +244,33 @@ def test_separate_animation_file_is_retargeted_onto_the_character(tmp_path):
         worst = max(worst, np.degrees(np.arccos(cos)).max())
     print(f"separate BVH vs the file's own clip: bone directions within {worst:.2e} deg")
     assert worst < 0.1  # (BVH text precision; 0.03 deg measured)
+
+
+STRIP_WEIGHTS = r"""
+import sys
+import bpy
+from kubric.asset_tools import character_bpy
+bpy.ops.wm.read_factory_settings(use_empty=True)
+character_bpy._import(bpy, sys.argv[1])
+for o in bpy.context.scene.objects:
+    if o.type == "MESH" and o.vertex_groups:
+        o.vertex_groups.remove(o.vertex_groups[0])   # the first bone's weights are gone
+bpy.ops.wm.save_as_mainfile(filepath=sys.argv[2])
+"""
+
+
+@needs_models
+def test_rig_without_weights_is_refused(tmp_path):
+    """huesitos with the first bone's vertex group removed, written as .fbx by Blender's
+    exporter: the vertices only that bone moved have no weight left → one line, no asset."""
+    blend = tmp_path / "x.blend"
+    _run(STRIP_WEIGHTS, MODELS / "FBX/huesitos.fbx", blend)
+    export = ("import sys, bpy\nbpy.ops.wm.open_mainfile(filepath=sys.argv[1])\n"
+              "bpy.ops.export_scene.fbx(filepath=sys.argv[2], use_selection=False)\n")
+    _run(export, blend, tmp_path / "unweighted.fbx")
+    report = import_characters(tmp_path / "unweighted.fbx", tmp_path / "out", progress=False)
+    reasons = [s["reason"] for s in report["skipped"]]
+    assert any(r.startswith(f"{tmp_path / 'unweighted.fbx'}: ") and
+               "rendered vertices have no weight on any bone (a rig without weights?)" in r
+               for r in reasons), reasons
+    assert not (tmp_path / "out" / "characters").exists()

@@ -11,8 +11,8 @@ Blender's own BVH exporter writes it):
   orthonormalised, translation = head), ``bone_tails``;
 - skinned meshes (armature modifier on that armature), merged: ``vertices``, ``faces``
   (triangulated with bmesh, quads by the ``FIXED`` split), ``uv`` (per corner, when present),
-  per-vertex ``skin_indices``/``skin_weights`` (≤ 8 largest bone-group weights, normalised;
-  unweighted vertices listed in ``unweighted``);
+  per-vertex ``skin_indices``/``skin_weights`` (≤ 8 largest bone-group weights, normalised)
+  and ``weighted`` (False where a vertex has no weight on any bone);
 - the armature's active action sampled at every frame of its range: ``pose_world`` (T,J,4,4).
 
 A failure prints one line ``ERROR: <file>: <what>`` and exits 2.
@@ -78,7 +78,7 @@ def _bone_order(arm):
 
 
 def _mesh_data(bpy, bmesh, objects, bone_index, world_of):
-    verts, faces, uvs, idx, wts, unweighted = [], [], [], [], [], 0
+    verts, faces, uvs, idx, wts, weighted = [], [], [], [], [], []
     has_uv = all(o.data.uv_layers.active is not None for o in objects)
     base = 0
     for obj in objects:
@@ -102,8 +102,8 @@ def _mesh_data(bpy, bmesh, objects, bone_index, world_of):
             pairs.sort(key=lambda p: (-p[1], p[0]))
             pairs = pairs[:MAX_INFLUENCES]
             total = sum(w for _, w in pairs)
+            weighted.append(total > 0)
             if total <= 0:
-                unweighted += 1
                 pairs, total = [(0, 0.0)], 1.0
             row_i = [b for b, _ in pairs] + [0] * (MAX_INFLUENCES - len(pairs))
             row_w = [w / total for _, w in pairs] + [0.0] * (MAX_INFLUENCES - len(pairs))
@@ -112,10 +112,10 @@ def _mesh_data(bpy, bmesh, objects, bone_index, world_of):
         base += len(co)
     out = {"vertices": np.concatenate(verts), "faces": np.array(faces, dtype=np.int64),
            "skin_indices": np.array(idx, dtype=np.int64),
-           "skin_weights": np.array(wts, dtype=np.float64)}
+           "skin_weights": np.array(wts, dtype=np.float64), "weighted": np.array(weighted)}
     if has_uv:
         out["uv"] = np.array(uvs, dtype=np.float64)
-    return out, unweighted
+    return out
 
 
 def main(path, out, bvh_up="y"):
@@ -152,9 +152,7 @@ def main(path, out, bvh_up="y"):
     info["unskinned_meshes"] = sorted(o.name for o in scene.objects
                                       if o.type == "MESH" and o not in skinned)
     if skinned:
-        mesh, unweighted = _mesh_data(bpy, bmesh, skinned, index, lambda o: o.matrix_world)
-        arrays.update(mesh)
-        info["unweighted"] = unweighted
+        arrays.update(_mesh_data(bpy, bmesh, skinned, index, lambda o: o.matrix_world))
     action = arm.animation_data.action if arm.animation_data else None
     if action is not None:
         start, end = (int(round(x)) for x in action.frame_range)

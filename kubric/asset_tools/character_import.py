@@ -68,9 +68,12 @@ def character_from_extract(arrays: dict, info: dict, where: str, scale: float = 
         raise CharacterImportError(f"{where}: no mesh is skinned to armature {info['armature']!r} "
                                    f"(meshes without an armature modifier: "
                                    f"{info.get('unskinned_meshes', [])}); not a character")
-    if info.get("unweighted", 0):
-        raise CharacterImportError(f"{where}: {info['unweighted']} of {len(arrays['vertices'])} "
-                                   f"vertices have no weight on any bone (a rig without weights?)")
+    rendered = np.zeros(len(arrays["vertices"]), bool)
+    rendered[arrays["faces"].ravel()] = True
+    bad = int(np.sum(rendered & ~arrays["weighted"]))
+    if bad:
+        raise CharacterImportError(f"{where}: {bad} of {int(rendered.sum())} rendered vertices "
+                                   f"have no weight on any bone (a rig without weights?)")
     v = arrays["vertices"] * scale
     shift = np.array([-(v[:, 0].min() + v[:, 0].max()) / 2, -(v[:, 1].min() + v[:, 1].max()) / 2,
                       -v[:, 2].min()])
