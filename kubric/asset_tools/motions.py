@@ -71,8 +71,8 @@ def _rig(character: dict):
 
 
 def _hip_height(names, rest) -> float:
-    return float(rest[names.index("Hips"), 2, 3]
-                 - 0.5 * (rest[names.index("LeftFoot"), 2, 3] + rest[names.index("RightFoot"), 2, 3]))
+    from kubric.assets.characters import hip_height
+    return hip_height(names, rest)
 
 
 def retarget_bvh(path: str | Path, names, parents, rest, tails, aliases=None) -> dict:
@@ -259,7 +259,8 @@ def build_motion_source(out: str | Path, character: dict, progress: bool = True,
                 "driven_bones": r["mapped"], "frames": T,
                 "loop": r["loop"]}
         meta = {"category": "motion", "source": kind, "frames": T, "fps": r["fps"],
-                "duration": T / r["fps"], "rig": "cmu_mb", "original_file": path.name}
+                "duration": T / r["fps"], "rig": "cmu_mb", "original_file": path.name,
+                "hip_height": hip}
         entries[clip_id] = package_motion(clip_id, out, rotations=r["rotations"],
                                           root_offsets=r["root_offsets"], info=info, files=files,
                                           license=license_, metadata=meta)

@@ -108,3 +108,29 @@ def create_motion(entry: dict, kwargs: dict, metadata: dict, overrides: dict):
     built.update(overrides)
     built["metadata"] = metadata
     return MotionClip(**built)
+
+
+def hip_height(bone_names, bone_rest) -> float:
+    """Height of the ``Hips`` head above the mean of the ``LeftFoot``/``RightFoot`` heads (m)."""
+    missing = [n for n in ("Hips", "LeftFoot", "RightFoot") if n not in bone_names]
+    if missing:
+        raise ValueError(f"hip_height needs bones {missing} (a cmu_mb-like rig)")
+    rest = np.asarray(bone_rest)
+    i = list(bone_names).index
+    return float(rest[i("Hips"), 2, 3] - 0.5 * (rest[i("LeftFoot"), 2, 3]
+                                                 + rest[i("RightFoot"), 2, 3]))
+
+
+def fit_clip(clip, character):
+    """A copy of ``clip`` whose root offsets are scaled for ``character``'s legs: × (the
+    character's hip height / the ``hip_height`` the clip was retargeted for, from its metadata).
+    Rotations are unchanged. Use it when a clip made for one body drives another (a child)."""
+    from kubric.core.characters import MotionClip
+
+    made_for = clip.metadata.get("hip_height")
+    if not made_for:
+        raise ValueError(f"MotionClip {clip.name!r}: its metadata has no 'hip_height' "
+                         f"(only clips of 'kubric assets humans' record it)")
+    ratio = hip_height(character.bone_names, character.bone_rest) / float(made_for)
+    return MotionClip(clip.bone_names, clip.fps, clip.rotations, clip.root_offsets * ratio,
+                      name=clip.name, metadata={**clip.metadata, "root_scale": ratio})
