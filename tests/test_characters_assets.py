@@ -121,6 +121,7 @@ def test_variants_counts_heights_and_frame(built, anny):
         v, f = a["vertices"], a["faces"]
         assert v.shape == (13380 + 144 + 8, 3)  # + eye and tongue helpers
         assert f.shape == (26756, 3) and a["uv"].shape == (26756, 3, 2)
+        assert 0 < a["uv"].min() and a["uv"].max() < 1  # one UV tile
         assert f.max() < 13380  # helpers (eyes) are never rendered
         body = v[:13380]
         assert body[:, 2].min() == pytest.approx(0, abs=1e-12)  # feet on the floor

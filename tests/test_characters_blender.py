@@ -274,3 +274,22 @@ def test_rig_without_weights_is_refused(tmp_path):
                "rendered vertices have no weight on any bone (a rig without weights?)" in r
                for r in reasons), reasons
     assert not (tmp_path / "out" / "characters").exists()
+
+
+@needs_models
+def test_bvh_reader_agrees_with_blenders_bvh_importer():
+    """Our BVH forward kinematics (numpy) vs Blender's BVH importer on CMU 01_01: every joint's
+    position at every frame (both in the model frame: Y up / facing +Z → Z up / facing −Y)."""
+    from kubric.asset_tools.bvh import read_bvh
+    from kubric.asset_tools.character_import import extract
+
+    arrays, info = extract(MODELS / "BVH/01_01.bvh")
+    motion = read_bvh(MODELS / "BVH/01_01.bvh")
+    assert info["fps"] == pytest.approx(motion.fps, rel=1e-6)
+    ours = motion.world_transforms()[..., :3, 3] @ motions.BVH_TO_MODEL.T
+    order = [motion.names.index(n) for n in info["bone_names"]]
+    theirs = arrays["pose_world"][..., :3, 3]
+    assert theirs.shape == (2752, 31, 3)
+    err = np.abs(ours[:, order] - theirs).max()
+    print(f"BVH joint positions vs Blender's importer: max {err:.2e} (units of the file)")
+    assert err < 1e-4 * np.abs(ours).max()
