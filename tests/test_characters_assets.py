@@ -497,3 +497,36 @@ def test_ensure_humans_builds_once_into_the_cache():
     again, _ = ensure_humans()
     assert again.manifest_path == chars.manifest_path
     assert again.manifest_path.stat().st_mtime_ns == stamp  # reused, not rebuilt
+
+
+def test_deepmimic_kinematics_agree_with_pybullet():
+    """Our DeepMimic forward kinematics vs PyBullet posing humanoid.urdf (globalScaling 0.25)
+    with the same clip values, every joint, every 4th frame of the walk."""
+    import pybullet as p
+    urdf, clips = motions.deepmimic_files()
+    clip = motions.read_deepmimic([c for c in clips if c.name == "humanoid3d_walk.txt"][0])
+    kin = motions.deepmimic_kinematics(clip, urdf)
+    cid = p.connect(p.DIRECT)
+    try:
+        body = p.loadURDF(str(urdf), globalScaling=0.25, physicsClientId=cid)
+        index = {p.getJointInfo(body, j, physicsClientId=cid)[1].decode(): j
+                 for j in range(p.getNumJoints(body, physicsClientId=cid))}
+        worst = 0.0
+        for t in range(0, len(clip["root"]), 4):
+            w, x, y, z = clip["joints"]["root"][t]
+            p.resetBasePositionAndOrientation(body, clip["root"][t].tolist(), [x, y, z, w],
+                                              physicsClientId=cid)
+            for name, n in motions.DEEPMIMIC_JOINTS:
+                v = clip["joints"][name][t]
+                if n == 1:
+                    p.resetJointState(body, index[name], float(v), physicsClientId=cid)
+                else:
+                    p.resetJointStateMultiDof(body, index[name], [v[1], v[2], v[3], v[0]],
+                                              physicsClientId=cid)
+            for name in kin["order"][1:]:
+                got = p.getLinkState(body, index[name], computeForwardKinematics=True,
+                                     physicsClientId=cid)[4]
+                worst = max(worst, np.abs(np.array(got) - kin["positions"][name][t]).max())
+    finally:
+        p.disconnect(cid)
+    assert worst < 1e-5

@@ -175,20 +175,27 @@ def resample_uniform(durations, rotations, offsets, where):
     return q, (1 - f) * offsets[i] + f * offsets[i + 1], 1.0 / step
 
 
-def retarget_deepmimic(path, urdf, names, parents, rest) -> dict:
-    """A DeepMimic clip retargeted onto the rig through :data:`DEEPMIMIC_MAP`."""
-    clip = read_deepmimic(path)
+def deepmimic_kinematics(clip: dict, urdf) -> dict:
+    """Forward kinematics of a DeepMimic clip on humanoid.urdf, in the file's frame (Y up; the
+    URDF's offsets × :data:`DEEPMIMIC_SCALE`): ``{"order": joint names (root, the
+    :data:`DEEPMIMIC_JOINTS`, the two wrists), "zero": {joint: (3,) position at the zero pose,
+    root at 0}, "world": {joint: (T, 3, 3)}, "positions": {joint: (T, 3)}}``."""
     joints = read_humanoid_urdf(urdf)
-    C = DEEPMIMIC_TO_MODEL
     order = ["root"] + [n for n, _ in DEEPMIMIC_JOINTS] + ["left_wrist", "right_wrist"]
     parent_of = {n: joints[n][0] for n in order if n != "root"}
     zero = {"root": np.zeros(3)}
     for n in order[1:]:
         zero[n] = zero[parent_of[n]] + DEEPMIMIC_SCALE * joints[n][1]
     T = len(clip["root"])
-    world = {}
-    for n in order[:-2]:
-        q = clip["joints"][n]
+    world = {"root": retarget.quaternion_to_matrix(clip["joints"]["root"])}
+    positions = {"root": clip["root"]}
+    for n in order[1:]:
+        parent = parent_of[n]
+        positions[n] = positions[parent] + world[parent] @ (DEEPMIMIC_SCALE * joints[n][1])
+        q = clip["joints"].get(n)
+        if q is None:  # the fixed wrists
+            world[n] = world[parent]
+            continue
         if q.ndim == 1:  # revolute about z
             c, s = np.cos(q), np.sin(q)
             local = np.zeros((T, 3, 3))
@@ -196,7 +203,16 @@ def retarget_deepmimic(path, urdf, names, parents, rest) -> dict:
             local[:, 2, 2] = 1
         else:
             local = retarget.quaternion_to_matrix(q)
-        world[n] = local if n == "root" else world[parent_of[n]] @ local
+        world[n] = world[parent] @ local
+    return {"order": order, "zero": zero, "world": world, "positions": positions}
+
+
+def retarget_deepmimic(path, urdf, names, parents, rest) -> dict:
+    """A DeepMimic clip retargeted onto the rig through :data:`DEEPMIMIC_MAP`."""
+    clip = read_deepmimic(path)
+    kin = deepmimic_kinematics(clip, urdf)
+    order, zero, world = kin["order"], kin["zero"], kin["world"]
+    C = DEEPMIMIC_TO_MODEL
     index = {b: i for i, b in enumerate(names)}
     src_names = order[:-2]
     src_rot = np.stack([C @ world[n] @ C.T for n in src_names], axis=1)
