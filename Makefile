@@ -10,7 +10,7 @@ DEMO_VENV  := .venv-demo
 DEMO_BIN   := $(DEMO_VENV)/bin
 DEMO_STAMP := $(DEMO_VENV)/.installed
 
-.PHONY: install test test-fast demo bench lint docs clean slurm browser
+.PHONY: install test test-fast demo bench lint docs clean slurm browser testmodels
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -28,13 +28,19 @@ $(STAMP): pyproject.toml | $(BIN)/python
 
 install: $(STAMP)
 
-test: $(STAMP) browser
+test: $(STAMP) browser testmodels
 	$(BIN)/python -m pytest -q
 
 browser:  # Debian's chromium + chromedriver for the `kubric view` browser tests (skipped when present)
 	@if ! command -v chromium >/dev/null || ! command -v chromedriver >/dev/null; then \
 	  SUDO=$$( [ "$$(id -u)" = 0 ] || echo sudo ); \
 	  $$SUDO apt-get update && $$SUDO apt-get install -y chromium chromium-driver; \
+	fi
+
+testmodels:  # Debian's assimp-testmodels: CMU BVH clips + skinned FBX/glTF files (character tests)
+	@if [ ! -f /usr/share/assimp/models/BVH/01_01.bvh ]; then \
+	  SUDO=$$( [ "$$(id -u)" = 0 ] || echo sudo ); \
+	  $$SUDO apt-get update && $$SUDO apt-get install -y assimp-testmodels; \
 	fi
 
 # Everything but the tests marked `blender` (renders) or `slow` (servers, clusters, fault runs);
