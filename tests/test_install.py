@@ -84,7 +84,9 @@ def test_wheel_installs_and_runs_kubric_worker(tmp_path):
     site = pathlib.Path(subprocess.run([str(python), "-c", "import sysconfig; print(sysconfig."
                                         "get_paths()['purelib'])"], capture_output=True,
                                        text=True, check=True).stdout.strip())
-    deps = next(p for p in map(pathlib.Path, sys.path) if (p / "bpy").is_dir())
+    import numpy  # where this environment's dependencies are (not a path a test put first)
+    deps = pathlib.Path(numpy.__file__).resolve().parents[1]
+    assert (deps / "bpy").is_dir() and (deps / "pybullet_data").is_dir(), deps
     env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "VIRTUAL_ENV")}
     install = subprocess.run([sys.executable, "-m", "pip", "--python", str(python), "install",
                               "--no-deps", "--quiet", str(wheel)], capture_output=True, text=True,
