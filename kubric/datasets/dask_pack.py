@@ -79,7 +79,7 @@ def encode_chunk(work: str, file: str, scenes: list[str], schema, dims: dict) ->
     work_dir = _require_work(work)
     packer._init_worker(schema, dims)
     tmp = work_dir / f".{file}.tmp-{os.getpid()}"
-    writer = array_record_module.ArrayRecordWriter(str(tmp), "group_size:1")
+    writer = array_record_module.ArrayRecordWriter(str(tmp), layout.SHARD_WRITER_OPTIONS)
     record = {"file": file, "scenes": [], "corrupt": [], "num_bytes": 0}
     try:
         for location in scenes:
@@ -104,7 +104,7 @@ def recut_shard(work: str, file: str, pieces: list[tuple[str, list[int]]]) -> di
     from array_record.python import array_record_module
     work_dir = _require_work(work)
     tmp = work_dir / f".{file}.tmp-{os.getpid()}"
-    writer = array_record_module.ArrayRecordWriter(str(tmp), "group_size:1")
+    writer = array_record_module.ArrayRecordWriter(str(tmp), layout.SHARD_WRITER_OPTIONS)
     num_bytes = 0
     try:
         for chunk, indices in pieces:

@@ -18,6 +18,11 @@ FORMAT_VERSION = 1
 INFO_FILE = "kubric_dataset.json"
 FILE_FORMAT = "array_record"
 NAME_PATTERN = re.compile(r"^[a-z][a-z0-9_]*$")
+#: ArrayRecord writer options of every shard: one record per chunk (random access), chunks stored
+#: uncompressed. The payload is PNG / zlib bytes already; a zstd chunk's decoder pool schedules
+#: riegeli's background cleaner thread, which a forked child (a DataLoader worker) does not have:
+#: reading zstd shards there after the parent read hangs or segfaults. Recorded in the marker.
+SHARD_WRITER_OPTIONS = "group_size:1,uncompressed"
 
 
 class DatasetError(ValueError):

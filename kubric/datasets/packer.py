@@ -362,7 +362,7 @@ class _ShardWriter:
         self.split, self.index = split, index
         self.file = f"{name}-{split}.part-{index:05d}"
         self.path = work / self.file
-        self._writer = array_record_module.ArrayRecordWriter(str(self.path), "group_size:1")
+        self._writer = array_record_module.ArrayRecordWriter(str(self.path), layout.SHARD_WRITER_OPTIONS)
         self.scenes: list[str] = []
         self.corrupt: list[tuple[str, str]] = []
         self.num_bytes = 0

@@ -1,0 +1,54 @@
+"""Fault points for tests: make a process fail at one exact moment a plain ``kill`` cannot hit.
+
+``KUBRIC_FAULT=POINT:ACTION[,POINT:ACTION...]`` (unset in normal use: :func:`point` is then a
+dictionary lookup). Each named moment in the code calls ``point("pack.after_shard_rename")``;
+when the environment names it, the action runs there:
+
+* ``kill`` — SIGKILL this process (what ``kill -9``, the OOM killer or a lost node do);
+* ``term`` / ``int`` — send SIGTERM / SIGINT to this process (the handlers run);
+* ``enospc`` — raise ``OSError(ENOSPC)`` (a full disk);
+* ``call`` — run ``KUBRIC_FAULT_CALL`` (a ``module:function`` taking the point's name), e.g. to
+  change a file between two steps.
+
+The points are listed in docs/hardening.md.
+"""
+
+from __future__ import annotations
+
+import errno
+import importlib
+import os
+import signal
+
+ENV = "KUBRIC_FAULT"
+CALL_ENV = "KUBRIC_FAULT_CALL"
+
+
+def _actions() -> dict[str, str]:
+    raw = os.environ.get(ENV, "")
+    out = {}
+    for part in filter(None, (p.strip() for p in raw.split(","))):
+        name, _, action = part.rpartition(":")
+        out[name] = action
+    return out
+
+
+def point(name: str, path=None) -> None:
+    """The fault point ``name`` (``path``: the file being written there, for ``enospc``)."""
+    if ENV not in os.environ:
+        return
+    action = _actions().get(name)
+    if action is None:
+        return
+    if action == "kill":
+        os.kill(os.getpid(), signal.SIGKILL)
+    elif action in ("term", "int"):
+        os.kill(os.getpid(), signal.SIGTERM if action == "term" else signal.SIGINT)
+    elif action == "enospc":
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), None if path is None else str(path))
+    elif action == "call":
+        module, _, fn = os.environ[CALL_ENV].partition(":")
+        getattr(importlib.import_module(module), fn)(name)
+    else:
+        raise ValueError(f"{ENV}: unknown action {action!r} at {name!r} (kill, term, int, "
+                         "enospc, call)")
