@@ -51,7 +51,8 @@ USAGE_ERRORS = (("kubric.pipeline.options", "OptionError"),
 FAILURES = (("kubric.assets.archive", "AssetArchiveError"),
             ("kubric.assets.download", "DownloadError"),
             ("kubric.assets.remote_source", "RemoteSourceError"),
-            ("kubric.viewer.source", "SceneError"))
+            ("kubric.viewer.source", "SceneError"),
+            ("kubric.io.output_lock", "OutputBusy"))
 
 
 def _is_instance(err: BaseException, names) -> bool:

@@ -7,6 +7,7 @@ when the environment names it, the action runs there:
 * ``kill`` — SIGKILL this process (what ``kill -9``, the OOM killer or a lost node do);
 * ``term`` / ``int`` — send SIGTERM / SIGINT to this process (the handlers run);
 * ``enospc`` — raise ``OSError(ENOSPC)`` (a full disk);
+* ``sleep`` — wait ``KUBRIC_FAULT_SLEEP`` seconds (default 1): make a step slow enough to be hit;
 * ``call`` — run ``KUBRIC_FAULT_CALL`` (a ``module:function`` taking the point's name), e.g. to
   change a file between two steps.
 
@@ -46,9 +47,12 @@ def point(name: str, path=None) -> None:
         os.kill(os.getpid(), signal.SIGTERM if action == "term" else signal.SIGINT)
     elif action == "enospc":
         raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), None if path is None else str(path))
+    elif action == "sleep":
+        import time
+        time.sleep(float(os.environ.get("KUBRIC_FAULT_SLEEP", "1")))
     elif action == "call":
         module, _, fn = os.environ[CALL_ENV].partition(":")
         getattr(importlib.import_module(module), fn)(name)
     else:
         raise ValueError(f"{ENV}: unknown action {action!r} at {name!r} (kill, term, int, "
-                         "enospc, call)")
+                         "enospc, sleep, call)")

@@ -5,9 +5,15 @@ from __future__ import annotations
 import sys
 
 
-def _error(command: str, message) -> int:
+def _error(command: str, message, code: int | None = None) -> int:
+    """Print the one-line error; exit status 2 for a usage error (a bad option or output:
+    :class:`~kubric.datasets.layout.DatasetUsageError`), 1 for bad input data."""
+    from kubric.datasets.layout import DatasetError, DatasetUsageError
+    if code is None:
+        code = 1 if isinstance(message, DatasetError) and not isinstance(
+            message, DatasetUsageError) else 2
     print(f"kubric {command}: error: {message}", file=sys.stderr)
-    return 2
+    return code
 
 
 def cmd_pack(args) -> int:
@@ -30,6 +36,9 @@ def cmd_pack(args) -> int:
         common["class_names"] = read_class_names(args.class_names)
     except DatasetError as err:
         return _error("pack", err)
+    from kubric.pipeline.cleanup import handle_termination, private_tmpdir
+    handle_termination()  # SIGTERM like Ctrl-C: unwind, end the pool's workers
+    private_tmpdir()  # temporary files (Dask's scratch space too) go when this process ends
     if args.cluster is not None:
         return _pack_on_cluster(args, common)
     try:

@@ -29,6 +29,10 @@ class DatasetError(ValueError):
     """Bad input to packing / loading (one-line message)."""
 
 
+class DatasetUsageError(DatasetError):
+    """A bad option or output of ``kubric pack`` (exit status 2; bad input data is 1)."""
+
+
 def shard_name(name: str, split: str, index: int, count: int) -> str:
     """TFDS's shard file name ``NAME-SPLIT.array_record-0000k-of-0000n``."""
     return f"{name}-{split}.{FILE_FORMAT}-{index:05d}-of-{count:05d}"

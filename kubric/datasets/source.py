@@ -140,6 +140,12 @@ class DataSource:
         if self._pid != os.getpid():  # a forked child: the parent's reader is not ours to use
             # ... nor to destroy: its destructor would join the parent's reader threads, which
             # do not exist in the child (a segfault). It is kept, unused, until the child exits.
+            if self._reader is not None and "uncompressed" not in self.info.get(
+                    "shard_writer_options", ""):
+                raise DatasetError(
+                    f"{str(self.dataset_dir)!r} has zstd-compressed shards (packed by an older "
+                    "kubric), which cannot be read in a forked process once the parent has "
+                    "read them; pack it again, or use multiprocessing_context='spawn'")
             _INHERITED.append((self._reader, self._features))
             self._reader = self._features = self._parser = self._last = None
             self._pid = os.getpid()
