@@ -28,6 +28,8 @@ SCHEMA = register_schema(Schema(NAME, (
     Feature("metadata/video_name", "str", (), "scene_name", "text"),
     Feature("metadata/seed", "int64", (), "meta:seed"),
     Feature("video", "uint8", ("T", "H", "W", 3), "layer:rgba[:3]", "png"),
+    Feature("target_points", "float32", ("P", "T", 2), "npz:toy_points.npz:target_points",
+            doc="a per-scene .npz (as tracks.npz)"),
 )))
 HERE = pathlib.Path(__file__).resolve()
 ROOT = HERE.parents[1]
@@ -39,7 +41,9 @@ class Tiny(Recipe, name=NAME):
     schema = SCHEMA
 
     def generate(self, seed, out_dir):
-        rgba = np.random.RandomState(seed).randint(0, 256, size=(T, H, W, 4)).astype(np.uint8)
+        rng = np.random.RandomState(seed)
+        rgba = rng.randint(0, 256, size=(T, H, W, 4)).astype(np.uint8)
+        np.savez(out_dir / "toy_points.npz", target_points=rng.rand(3, T, 2).astype(np.float32))
         metadata = {"flags": self.flags(seed),
                     "metadata": {"resolution": [W, H], "num_frames": T, "seed": seed}}
         write_scene(self.schema, out_dir, {"rgba": rgba}, metadata)

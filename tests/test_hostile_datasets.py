@@ -199,3 +199,95 @@ def _wait_children(pid, count, timeout=60):
 def _alive(pid):
     from kubric.pipeline.cleanup import pid_alive
     return pid_alive(pid)
+
+
+# ---------------------------------------------------------------- items 12, 16, 19
+def _edit_meta(scene, edit):
+    meta = scene / "metadata.json"
+    meta.write_text(json.dumps(edit(json.loads(meta.read_text()))))
+
+
+def test_item12_item16_bad_scenes_are_skipped_by_name(scenes, tmp_path):
+    mine = tmp_path / "scenes"
+    shutil.copytree(scenes, mine)
+    _edit_meta(mine / "scene_00000000", lambda m: {**m, "metadata": {**m["metadata"],
+                                                                      "seed": [4]}})
+    _edit_meta(mine / "scene_00000001", lambda m: [])
+    _edit_meta(mine / "scene_00000002", lambda m: {**m, "metadata": "x"})
+    npz = mine / "scene_00000003" / "toy_points.npz"
+    npz.write_bytes(npz.read_bytes()[:40])
+    _edit_meta(mine / "scene_00000004", lambda m: {**m, "flags": {**m["flags"],
+                                                                   "recipe": "movi_a"}})
+    run = kubric("pack", mine, "--out", tmp_path / "ds", "--splits", "train=1",
+                 "--schema", NAME, "--no-progress")
+    assert run.returncode == 0, run.stderr
+    assert "Traceback" not in run.stderr + run.stdout
+    lines = {ln.split("scene_0000000")[1][0]: ln for ln in run.stdout.splitlines()
+             if "skipped corrupt scene" in ln}
+    assert sorted(lines) == ["0", "1", "2", "3", "4"], run.stdout
+    assert "seed [4] is not a whole number" in lines["0"]
+    assert "is not a JSON object" in lines["1"]
+    assert "'metadata' is not an object" in lines["2"]
+    assert "toy_points.npz" in lines["3"]
+    assert "is a scene of recipe 'movi_a', not of the dataset's schema 'test_hostile'" in \
+        lines["4"]
+    assert load(tmp_path / "ds", "train").scenes == ["scene_00000005"]
+
+
+def test_item12_item17_full_disk_names_the_shard(scenes, tmp_path):
+    run = kubric("pack", scenes, "--out", tmp_path / "ds", "--splits", "train=1",
+                 "--no-progress", env={"KUBRIC_FAULT": "pack.shard_write:enospc"})
+    assert run.returncode == 1, run.stderr
+    line, = run.stderr.strip().splitlines()
+    assert f"{tmp_path / '.ds.incomplete' / 'test_hostile-train.part-00000'}" in line
+    assert "No space left on device" in line and "MiB free there" in line
+    assert not (tmp_path / "ds").exists()
+
+
+def test_item19_exit_status_usage_2_data_1(scenes, tmp_path):
+    bad_option = kubric("pack", scenes, "--out", tmp_path / "ds", "--splits", "train=2")
+    assert bad_option.returncode == 2
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    bad_data = kubric("pack", empty, "--out", tmp_path / "ds")
+    assert bad_data.returncode == 1 and "holds no complete scene" in bad_data.stderr
+
+
+# ---------------------------------------------------------------- items 14, 15
+def test_item14_item15_loader_and_info_name_the_file(dataset, tmp_path):
+    ds = tmp_path / "ds"
+    shutil.copytree(dataset, ds)
+    marker = json.loads((ds / "kubric_dataset.json").read_text())
+    shard = ds / "test_hostile-train.array_record-00001-of-00003"
+    source = load(ds, "train")
+    assert int(source[3]["metadata"]["seed"]) == 3
+
+    shard.write_bytes(shard.read_bytes()[:-30])  # truncated: the footer is gone
+    info = kubric("datasets", "info", ds)
+    assert info.returncode == 1 and f"{str(shard)!r}: unreadable (truncated" in info.stderr
+    with pytest.raises(DatasetError, match=f"{shard}.*: cannot read example"):
+        load(ds, "train")[3]
+    shard.unlink()
+    info = kubric("datasets", "info", ds)
+    assert info.returncode == 1 and f"{str(shard)!r}: shard missing" in info.stderr
+    with pytest.raises(DatasetError, match=f"{shard}.*: shard missing"):
+        load(ds, "train")[0]
+
+    shutil.rmtree(ds)
+    shutil.copytree(dataset, ds)
+    (ds / "features.json").write_text("{not json")
+    with pytest.raises(DatasetError, match=f"{ds / 'features.json'}.* cannot be read"):
+        load(ds, "train")[0]
+    del marker["counts"]
+    (ds / "kubric_dataset.json").write_text(json.dumps(marker))
+    info = kubric("datasets", "info", ds)
+    assert info.returncode == 1 and "kubric_dataset.json' lacks 'counts'" in info.stderr
+    assert len(info.stderr.strip().splitlines()) == 1
+
+
+# ---------------------------------------------------------------- item 18 (loader)
+def test_item18_loader_options_refused_at_load(dataset):
+    for bad in (-2, 0, 1.5, "3"):
+        with pytest.raises(DatasetError, match=r"num_frames must be a whole number ≥ 1"):
+            load(dataset, "train", task="video", num_frames=bad)
+    assert load(dataset, "train", task="video", num_frames=1)[0]["video"].shape[0] == 1

@@ -57,7 +57,22 @@ def read_info(dataset_dir) -> dict:
     if not isinstance(version, int) or version > FORMAT_VERSION:
         raise DatasetError(f"{str(path)!r} has dataset format version {version!r}; this kubric "
                            f"reads versions ≤ {FORMAT_VERSION} (upgrade kubric)")
+    for key, kind in REQUIRED_INFO.items():
+        if not isinstance(info.get(key), kind):
+            raise DatasetError(f"{str(path / INFO_FILE)!r} lacks {key!r} (or it is not "
+                               f"{'an object' if kind is dict else 'text'}): not a complete "
+                               f"marker; pack the dataset again")
+    for split, count in info["counts"].items():
+        lengths = info["shard_lengths"].get(split)
+        if not isinstance(lengths, list) or sum(lengths) != count:
+            raise DatasetError(f"{str(path / INFO_FILE)!r}: split {split!r} has {count!r} "
+                               f"examples but shard lengths {lengths!r}")
     return info
+
+
+#: the marker's keys every reader relies on, with their JSON types
+REQUIRED_INFO = {"name": str, "dims": dict, "splits": dict, "counts": dict,
+                 "shard_lengths": dict, "scenes": dict, "schema_json": dict}
 
 
 def parse_splits(spec) -> dict[str, float]:

@@ -42,6 +42,10 @@ from kubric.datasets.layout import DatasetError
 from kubric.datasets.scene_reader import dequantise
 
 
+#: task options that count frames: whole numbers ≥ 1 (checked when the source is made)
+COUNT_OPTIONS = {"frame_stride", "num_frames"}
+
+
 @dataclasses.dataclass(frozen=True)
 class Task:
     """A registered task (see module doc). ``requires``: feature names (or name prefixes such as
@@ -65,7 +69,14 @@ class Task:
         if unknown:
             raise DatasetError(f"task {self.name!r}: unknown option(s) {unknown}; options: "
                                f"{list(self.options) or 'none'}")
+        for name in COUNT_OPTIONS & set(options):
+            value = options[name]
+            if value is not None and (isinstance(value, bool) or not isinstance(
+                    value, (int, np.integer)) or value < 1):
+                raise DatasetError(f"task {self.name!r}: {name} must be a whole number ≥ 1, "
+                                   f"got {value!r}")
         return dict(options)
+
 
     def missing(self, schema) -> list[str]:
         """The required feature names (or prefixes) ``schema`` lacks."""
