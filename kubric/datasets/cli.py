@@ -71,7 +71,8 @@ def _pack_on_cluster(args, common: dict) -> int:
         client, cluster = open_cluster(options, processes=True)
     except ClusterError as err:
         return _error("pack", err)
-    print(f"Dask dashboard: {client.dashboard_link}", flush=True)
+    from kubric.pipeline.dask_runner import dashboard_link
+    print(f"Dask dashboard: {dashboard_link(client, cluster, options)}", flush=True)
     try:
         result = pack_sharded(args.scenes_dir, args.out, executor=DaskExecutor(client), **common)
     except (DatasetError, SchemaError) as err:

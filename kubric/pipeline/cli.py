@@ -70,7 +70,8 @@ def cmd_worker(args) -> int:
 
 
 #: cluster flags → their defaults; the slurm ones apply to --cluster slurm only
-CLUSTER_FLAGS = {"threads_per_scene": 1, "connect_timeout": 20.0, "dashboard_address": ":8787"}
+CLUSTER_FLAGS = {"threads_per_scene": 1, "connect_timeout": 20.0,
+                 "dashboard_address": "127.0.0.1:8787"}
 SLURM_FLAGS = {"jobs": 1, "cores_per_job": 1, "memory": "4GB", "walltime": "01:00:00",
                "queue": None, "job_directive": [], "print_job_script": False}
 
@@ -171,7 +172,8 @@ def cmd_generate(args) -> int:
             client, cluster = open_cluster(cluster_options)
         except ClusterError as err:
             return _error("generate", err)
-        print(f"Dask dashboard: {client.dashboard_link}", flush=True)
+        from kubric.pipeline.dask_runner import dashboard_link
+        print(f"Dask dashboard: {dashboard_link(client, cluster, cluster_options)}", flush=True)
         runner = DaskRunner(recipe_spec(cls), out, seeds, client,
                             threads_per_scene=cluster_options.threads_per_scene, **common)
     try:
@@ -232,7 +234,8 @@ def add_cluster_arguments(p, what: str) -> None:
     g.add_argument("--connect-timeout", type=float, default=None,
                    help="seconds to wait for the scheduler (default 20)")
     g.add_argument("--dashboard-address", default=None,
-                   help="dashboard address of a cluster started here (default :8787)")
+                   help="dashboard address of a cluster started here (default 127.0.0.1:8787: "
+                   "this machine only; :8787 listens on every interface)")
     g.add_argument("--jobs", type=int, default=None, help="slurm: worker jobs to submit")
     g.add_argument("--cores-per-job", type=int, default=None, help="slurm: cores of each job")
     g.add_argument("--memory", default=None, help="slurm: memory of each job (default 4GB)")
