@@ -37,7 +37,12 @@ class ManifestError(ValueError):
 def cache_dir() -> Path:
     """Where generated and extracted assets live: ``$KUBRIC_CACHE_DIR`` or ``~/.cache/kubric``."""
     env = os.environ.get("KUBRIC_CACHE_DIR")
-    return Path(env).expanduser() if env else Path.home() / ".cache" / "kubric"
+    path = Path(env).expanduser() if env else Path.home() / ".cache" / "kubric"
+    if path.exists() and not path.is_dir():
+        import errno
+        raise NotADirectoryError(errno.ENOTDIR, "the asset cache (KUBRIC_CACHE_DIR) must be a "
+                                 "directory, this is a file", str(path))
+    return path
 
 
 def _require_fields(value, fields, where: str, not_object: str) -> None:

@@ -193,8 +193,11 @@ def format_recipe(cls) -> str:
     lines = [f"{cls.name}: {cls.description()}"]
     width = max((len(n) for n in cls.options), default=0)
     for name, opt in cls.options.items():
+        bounded = opt.choices is not None or any(
+            v is not None for v in (opt.low, opt.high, opt.limit))
+        bounds = f" [allowed: {opt.allowed()}]" if bounded else ""
         lines.append(f"    {name:<{width}}  {opt.type_name:<11} default {opt.default!r}: "
-                     f"{opt.help}")
+                     f"{opt.help}{bounds}")
     return "\n".join(lines)
 
 
@@ -271,7 +274,8 @@ def add_parser(subparsers) -> None:
                               "as Dask tasks.")
     p.add_argument("recipe")
     p.add_argument("--out", required=True, help="output root: a directory or an fsspec URL "
-                   "(s3://bucket/run, gs://..., memory://..., file://...)")
+                   "(s3://bucket/run, gs://..., file://...; not memory://, which is private "
+                   "to one process)")
     p.add_argument("--scenes", type=int, required=True, help="number of scenes")
     p.add_argument("--first-seed", type=int, default=0, help="seed of the first scene")
     p.add_argument("--workers", type=int, default=None, help="parallel workers (default: cores; "

@@ -14,6 +14,7 @@ copy), or a work directory whose process is gone, is removed and the scene redon
 
 from __future__ import annotations
 
+import errno
 import json
 import os
 import pathlib
@@ -22,6 +23,7 @@ import shutil
 import time
 from dataclasses import dataclass
 
+from kubric import faults
 from kubric.pipeline.cleanup import own, pid_alive, release
 
 SUCCESS = "_SUCCESS"
@@ -89,6 +91,9 @@ def run_scene(recipe, seed: int, out_root) -> SceneResult:
     final = out_root / scene_name(seed)
     if is_complete(final):
         return SceneResult(seed, final, "skipped", 0.0)
+    if final.is_symlink():
+        raise FileExistsError(errno.EEXIST, "a symbolic link stands at the scene's name; "
+                              "remove it (a scene directory is written there)", str(final))
     out_root.mkdir(parents=True, exist_ok=True)
     remove_stale(out_root, seed)
     work = out_root / f".{final.name}.incomplete-{os.getpid()}"
@@ -97,7 +102,15 @@ def run_scene(recipe, seed: int, out_root) -> SceneResult:
     work.mkdir()
     own(work)  # removed at exit even when Blender turns a signal into an immediate exit
     try:
-        recipe.generate(seed, work)
+        try:
+            recipe.generate(seed, work)
+            faults.point("worker.generated")
+        except OSError as err:
+            if err.filename is None and err.errno in (errno.ENOSPC, errno.EDQUOT):
+                free = shutil.disk_usage(out_root).free / 2**20
+                raise OSError(err.errno, f"{err.strerror} (writing the scene; {free:.0f} MiB "
+                              "free there)", str(work)) from None
+            raise
         if is_complete(final):  # another process finished the same seed meanwhile
             shutil.rmtree(work, ignore_errors=True)
             return SceneResult(seed, final, "skipped", time.time() - start)
