@@ -11,7 +11,12 @@ when the environment names it, the action runs there:
 * ``call`` — run ``KUBRIC_FAULT_CALL`` (a ``module:function`` taking the point's name), e.g. to
   change a file between two steps.
 
-The points are listed in docs/hardening.md.
+Points: ``pack.encode_scene`` (before each scene is encoded, in the encoding process),
+``pack.shard_write`` (before each record is written), ``pack.shard_renamed`` (after each final
+shard rename), ``pack.finalised`` (the dataset finished in the work folder, before ``--verify``),
+``pack.before_swap``, ``pack.old_moved`` (an old dataset moved aside, the new one not yet in
+place), ``worker.generated`` (a scene's recipe returned, before ``_SUCCESS``). The hostile tests
+(``tests/test_hostile_*.py``) and ``benchmarks/bench_pack_signals.py`` use them.
 """
 
 from __future__ import annotations
