@@ -103,7 +103,8 @@ def max_objects_on_floor(region: float, radius: float, margin: float = 0.05) -> 
     convex region of area A and perimeter P by 2A / (√3 d²) + P / (2d) + 1."""
     s = 2.0 * region
     d = 2.0 * radius + margin
-    return int(2.0 * s * s / (math.sqrt(3.0) * d * d) + 4.0 * s / (2.0 * d) + 1.0)
+    bound = 2.0 * s * s / (math.sqrt(3.0) * d * d) + 4.0 * s / (2.0 * d) + 1.0
+    return int(bound) if bound < 1e9 else 10**9  # (a huge region: no limit worth stating)
 
 
 class _SemanticScenes(MultiviewBase):
