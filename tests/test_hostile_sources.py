@@ -80,6 +80,17 @@ def test_item7_trickling_server_fails_at_the_deadline(unchecked, monkeypatch):
         source.close()
 
 
+def test_item7_builder_downloads_have_the_deadline_too(unchecked, tmp_path, monkeypatch):
+    from kubric.assets.download import DownloadError, fetch_file
+    monkeypatch.setenv("KUBRIC_FETCH_DEADLINE", "1.5")
+    with serve(unchecked) as server:
+        server.trickle["/kubasic/cube.tar.gz"] = 0.05
+        start = time.monotonic()
+        with pytest.raises(DownloadError, match=r"not complete within \$KUBRIC_FETCH_DEADLINE"):
+            fetch_file(f"{server.url}/kubasic/cube.tar.gz", tmp_path / "cube.tar.gz")
+        assert time.monotonic() - start < 10 and not (tmp_path / "cube.tar.gz").exists()
+
+
 def test_item3_builders_record_checksums(tmp_path):
     from kubric.asset_tools.writer import write_manifest
     (tmp_path / "a.tar.gz").write_bytes(b"archive bytes")
