@@ -12,6 +12,7 @@ import sys
 if __name__ == "__main__":  # the kubric command, with this module (and its recipe) imported
     sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
     import hostile_fixtures  # noqa: F401
+
     from kubric.cli import main
     sys.exit(main(sys.argv[1:]))
 

@@ -8,10 +8,10 @@ import subprocess
 import sys
 
 import pytest
+from viewer_helpers import synthetic_scene
 
 from kubric.pipeline.options import OptionError
 from kubric.pipeline.recipe import get_recipe
-from viewer_helpers import synthetic_scene
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 FAKE = f"{ROOT / 'tests' / 'fake_recipes.py'}:Fake"

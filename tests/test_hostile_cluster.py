@@ -13,11 +13,10 @@ import time
 
 import psutil
 import pytest
-
 from hostile_fixtures import kubric, make_scenes
+
 from kubric.io.output_lock import OutputLock
-from kubric.pipeline.dask_runner import ClusterError, ClusterOptions, open_cluster, \
-    probe_scheduler
+from kubric.pipeline.dask_runner import ClusterError, ClusterOptions, open_cluster, probe_scheduler
 from kubric.pipeline.runner import LOCK_FILE
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]

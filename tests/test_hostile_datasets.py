@@ -8,10 +8,9 @@ import shutil
 import subprocess
 import sys
 
-import numpy as np
 import pytest
-
 from hostile_fixtures import NAME, Tiny, kubric, make_scenes, popen, tree  # noqa: F401
+
 from kubric.datasets import DatasetError, load, pack
 
 KW = dict(splits="train=1", examples_per_shard=2, progress=False)
@@ -55,7 +54,6 @@ def test_item0_readers_survive_fork_after_parent_read(dataset):
     run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          timeout=300)
     assert run.returncode == 0, run.stderr[-2000:]
-    seen, grain_seen, first = run.stdout.strip().splitlines()[-1].rsplit(" ", 1)[0], None, None
     expected = [int(s.split("_")[1]) for s in load(dataset, "train").scenes]
     assert run.stdout.strip().splitlines()[-1] == f"{expected} {sorted(expected)} {expected[0]}"
 
@@ -185,6 +183,7 @@ def test_item5_pool_workers_end_with_the_parent(scenes, tmp_path, sig):
 
 def _wait_children(pid, count, timeout=60):
     import time
+
     import psutil
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:

@@ -11,9 +11,9 @@ import sys
 import time
 
 import pytest
+from http_helpers import serve
 
 import kubric as kb
-from http_helpers import serve
 from kubric.assets import ensure_kubasic
 from kubric.assets.archive import CorruptArchiveError, safe_extract
 from kubric.assets.remote_source import RemoteSourceError, cache_folder

@@ -9,7 +9,6 @@ import sys
 import time
 
 import pytest
-
 from viewer_helpers import get_json, request, serving, synthetic_scene
 
 

@@ -210,7 +210,6 @@ def pack_sharded(scenes_dir, out, executor=None, name: str | None = None,
     """Pack like :func:`kubric.datasets.packer.pack`, one task per shard (module doc).
     ``executor``: a :class:`DaskExecutor`, or None for ``workers`` local processes;
     ``class_names`` as for :func:`~kubric.datasets.packer.pack`."""
-    from tqdm import tqdm
     start = time.perf_counter()
     scenes_dir = storage.normalise(str(scenes_dir)) if storage.is_url(str(scenes_dir)) \
         else str(pathlib.Path(scenes_dir))

@@ -42,8 +42,8 @@ import time
 import zipfile
 from collections.abc import Mapping, Sequence
 
-from kubric.datasets import layout
 from kubric import faults
+from kubric.datasets import layout
 from kubric.datasets.layout import DatasetError, DatasetUsageError
 from kubric.datasets.scene_reader import SceneError, SceneReader, is_complete
 from kubric.io.json_io import read_json, write_json

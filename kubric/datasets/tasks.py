@@ -41,7 +41,6 @@ import numpy as np
 from kubric.datasets.layout import DatasetError
 from kubric.datasets.scene_reader import dequantise
 
-
 #: task options that count frames: whole numbers ≥ 1 (checked when the source is made)
 COUNT_OPTIONS = {"frame_stride", "num_frames"}
 

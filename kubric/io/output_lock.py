@@ -36,9 +36,10 @@ class OutputLock:
             except BlockingIOError:
                 holder = os.read(fd, 32).decode(errors="replace").strip() or "unknown"
                 os.close(fd)
-                raise OutputBusy(f"{self.what} is being written by another run (pid {holder}, "
-                                 f"lock {str(self.path)!r}); wait for it to finish or stop it")
                 # (a lock file whose process died is not locked: the kernel dropped it)
+                raise OutputBusy(f"{self.what} is being written by another run (pid {holder}, "
+                                 f"lock {str(self.path)!r}); wait for it to finish or stop "
+                                 "it") from None
             try:  # the holder before us may have removed the file after we opened it
                 same = os.stat(self.path).st_ino == os.fstat(fd).st_ino
             except FileNotFoundError:

@@ -203,7 +203,7 @@ def probe_scheduler(address: str, timeout: float) -> None:
                 if not block:
                     break
                 data += block
-        except (TimeoutError, socket.timeout):
+        except TimeoutError:
             raise ClusterError(
                 f"--cluster {address}: something listens there but sent no Dask handshake within "
                 f"--connect-timeout {timeout:g} s; is it the dashboard (port 8787)? A scheduler "
