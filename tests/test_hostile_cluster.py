@@ -135,3 +135,18 @@ def test_item11_pack_on_local_cluster_leaves_no_scratch(tmp_path):
     assert run.returncode == 0, run.stderr
     assert "Dask dashboard: http://127.0.0.1:" in run.stdout
     assert list(tmp.iterdir()) == []
+
+
+def test_item10_two_real_generates_at_once(tmp_path):
+    out = tmp_path / "out"
+    cmd = [sys.executable, "-m", "kubric", "generate", FAKE, "--out", str(out), "--scenes", "2",
+           "--workers", "1", "--no-progress", "--set", "sleep=1.5"]
+    first = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 60
+    while not (out / LOCK_FILE).exists() and time.monotonic() < deadline:
+        time.sleep(0.05)
+    second = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
+    assert first.poll() is None, "the first run ended before the second started"
+    assert second.returncode == 1 and f"(pid {first.pid}," in second.stderr
+    stdout, _ = first.communicate(timeout=120)
+    assert first.returncode == 0 and stdout.startswith("2 generated, 0 already complete")

@@ -290,3 +290,21 @@ def test_item18_loader_options_refused_at_load(dataset):
         with pytest.raises(DatasetError, match=r"num_frames must be a whole number ≥ 1"):
             load(dataset, "train", task="video", num_frames=bad)
     assert load(dataset, "train", task="video", num_frames=1)[0]["video"].shape[0] == 1
+
+
+def test_item2_two_real_packs_at_once(scenes, tmp_path, dataset):
+    import time
+    out = tmp_path / "ds"
+    first = popen("pack", scenes, "--out", out, "--splits", "train=1", "--examples-per-shard",
+                  "2", "--no-progress", stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                  env={"KUBRIC_FAULT": "pack.encode_scene:sleep", "KUBRIC_FAULT_SLEEP": "0.5"})
+    lock = tmp_path / ".ds.lock"
+    deadline = time.monotonic() + 60
+    while not lock.exists() and time.monotonic() < deadline:
+        time.sleep(0.05)
+    second = kubric("pack", scenes, "--out", out, "--splits", "train=1",
+                    "--examples-per-shard", "2", "--no-progress")
+    assert first.poll() is None, "the first pack ended before the second started"
+    assert second.returncode == 2 and f"(pid {first.pid}," in second.stderr
+    assert first.wait(timeout=120) == 0
+    assert tree(out) == tree(dataset) and not lock.exists()
