@@ -160,15 +160,20 @@ def test_item4_overwrite_touches_only_packer_files(scenes, tmp_path, dataset):
 
 
 # ---------------------------------------------------------------- item 5
-@pytest.mark.parametrize("sig", ["SIGINT", "SIGTERM", "SIGKILL"])
+@pytest.mark.parametrize("sig", ["SIGINT", "SIGTERM", "SIGKILL", "Ctrl-C"])
 def test_item5_pool_workers_end_with_the_parent(scenes, tmp_path, sig):
+    """Ctrl-C: SIGINT to the whole process group, as a terminal sends it."""
     import signal
     import time
     proc = popen("pack", scenes, "--out", tmp_path / "ds", "--workers", "2", "--splits",
                  "train=1", "--no-progress", stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                 env={"KUBRIC_FAULT": "pack.encode_scene:sleep", "KUBRIC_FAULT_SLEEP": "2"})
+                 env={"KUBRIC_FAULT": "pack.encode_scene:sleep", "KUBRIC_FAULT_SLEEP": "2"},
+                 start_new_session=True)
     children = _wait_children(proc.pid, 3)
-    os.kill(proc.pid, getattr(signal, sig))
+    if sig == "Ctrl-C":
+        os.killpg(proc.pid, signal.SIGINT)
+    else:
+        os.kill(proc.pid, getattr(signal, sig))
     try:
         proc.wait(timeout=20)
     except subprocess.TimeoutExpired:
