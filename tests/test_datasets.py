@@ -296,8 +296,8 @@ def test_datasets_info(packed):
     assert "instances/positions float32 (N, 4, 3) none m" in lines
 
 
-def _one_line_error(proc, pattern):
-    assert proc.returncode == 2, proc.stdout + proc.stderr
+def _one_line_error(proc, pattern, code=2):
+    assert proc.returncode == code, proc.stdout + proc.stderr
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1, proc.stderr
     assert pattern in lines[0], lines[0]
@@ -324,7 +324,7 @@ def test_bad_input_one_line_and_nothing_written(packed, tmp_path):
     info["format_version"] = layout.FORMAT_VERSION + 1
     (newer / layout.INFO_FILE).write_text(json.dumps(info))
     _one_line_error(kubric_cli("datasets", "info", newer), "dataset format version 2; this "
-                    "kubric reads versions ≤ 1")
+                    "kubric reads versions ≤ 1", code=1)  # bad data: 1 (README)
     with pytest.raises(layout.DatasetError, match="format version 2"):
         load(newer, "train")
 

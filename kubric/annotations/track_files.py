@@ -29,6 +29,7 @@ from __future__ import annotations
 import io
 import pathlib
 import pickle
+import zipfile
 
 import numpy as np
 
@@ -68,8 +69,12 @@ def read_tracks(path) -> dict[str, np.ndarray]:
     if not path.is_file():
         raise FileNotFoundError(f"no tracks file {str(path)!r} (generate the scene with "
                                 "--set tracks=N)")
-    with np.load(path, allow_pickle=False) as data:
-        out = {k: data[k] for k in data.files}
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            out = {k: data[k] for k in data.files}
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as err:  # truncated, not a .npz
+        raise ValueError(f"{str(path)!r} is not a readable tracks file (truncated or not a "
+                         f".npz: {' '.join(str(err).split())[:200]})") from None
     version = int(out.pop("format_version", -1))
     if version != FORMAT_VERSION:
         raise InputError(f"{str(path)!r}: tracks format_version {version}, this reader reads "

@@ -404,9 +404,10 @@ def load_queries(path) -> np.ndarray:
             q = np.asarray(json.loads(path.read_text()), dtype=np.float64)
         else:
             q = np.loadtxt(io.StringIO(path.read_text().replace(",", " ")), ndmin=2)
-    except (OSError, ValueError) as err:
-        raise InputError(f"cannot read queries from {str(path)!r}: {err}") from None
-    q = np.asarray(q, dtype=np.float64)
+        q = np.asarray(q, dtype=np.float64)
+    except (OSError, ValueError, TypeError) as err:  # TypeError: a JSON object, not rows
+        raise InputError(f"cannot read queries from {str(path)!r}: expected rows (t, y, x) "
+                         f"({' '.join(str(err).split())[:200]})") from None
     if q.ndim != 2 or q.shape[1] != 3 or not len(q):
         raise InputError(f"queries file {str(path)!r} must hold rows (t, y, x), got shape "
                          f"{q.shape}")

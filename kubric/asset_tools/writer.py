@@ -14,6 +14,7 @@ source twice gives byte-identical manifests and archives.
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 import shutil
@@ -50,6 +51,20 @@ def dumps(obj) -> str:
     return json.dumps(clean_number(obj), indent=2, sort_keys=True) + "\n"
 
 
+def with_checksum(folder: Path, asset_id: str, entry: dict) -> dict:
+    """``entry`` with the ``sha256`` of its archive (``path``, default ``ID.tar.gz``, in
+    ``folder``) when the archive is there and the entry has none: a copy of the source served at
+    a URL is then checked after download (a transfer cut short is never cached)."""
+    archive = folder / entry.get("path", f"{asset_id}.tar.gz")
+    if "sha256" in entry or "data_dir" in entry or not archive.is_file():
+        return entry
+    digest = hashlib.sha256()
+    with open(archive, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            digest.update(block)
+    return {**entry, "sha256": digest.hexdigest()}
+
+
 def write_manifest(path: str | os.PathLike, name: str, version: str, entries: dict,
                    description: str = "") -> Path:
     """Write ``manifest.json`` atomically (entries sorted by id); ``description`` (optional)
@@ -58,7 +73,8 @@ def write_manifest(path: str | os.PathLike, name: str, version: str, entries: di
     head = {"name": name, "version": version}
     if description:
         head["description"] = description
-    text = dumps({**head, "assets": {k: entries[k] for k in sorted(entries)}})
+    entries = {k: with_checksum(path.parent, k, entries[k]) for k in sorted(entries)}
+    text = dumps({**head, "assets": entries})
     tmp = path.with_name(path.name + ".tmp")
     tmp.write_text(text)
     os.replace(tmp, path)

@@ -8,7 +8,10 @@ paths, members whose path leaves the target directory (``..``), symbolic and har
 files and FIFOs, members larger than ``max_member_bytes`` and archives whose members add up to more
 than ``max_total_bytes``. A truncated or corrupt archive raises :class:`CorruptArchiveError` naming
 the asset. Extraction goes to a temporary sibling directory that is renamed into place only once
-complete, so a failed extraction never leaves a half-written asset directory behind.
+complete, so a failed extraction never leaves a half-written asset directory behind; the staging
+folder is named after its process (``.NAME.staging-PID-*``), and one whose process is gone (a
+``kill -9`` mid-extraction) is removed by the next extraction into that folder.
+:func:`check_complete` reads a whole archive (downloads are checked with it before caching).
 """
 
 from __future__ import annotations
@@ -17,9 +20,11 @@ import errno
 import gzip
 import io
 import os
+import re
 import shutil
 import tarfile
 import tempfile
+import zipfile
 import zlib
 from pathlib import Path, PurePosixPath
 
@@ -93,12 +98,47 @@ def _check_member(member: tarfile.TarInfo, asset_id: str, max_member_bytes: int)
     return rel
 
 
+def _remove_dead_staging(target: Path) -> None:
+    from kubric.pipeline.cleanup import pid_alive
+    pattern = re.compile(rf"^\.{re.escape(target.name)}\.staging-(\d+)-")
+    for entry in target.parent.iterdir():
+        m = pattern.match(entry.name)
+        if m and entry.is_dir() and not pid_alive(int(m.group(1))):
+            shutil.rmtree(entry, ignore_errors=True)
+
+
+def check_complete(path: str | os.PathLike, what: str) -> None:
+    """Read the whole archive at ``path`` (tar, optionally gzip / bz2 / xz compressed, or zip);
+    :class:`CorruptArchiveError` naming ``what`` when it is truncated, corrupt or no archive."""
+    path = Path(path)
+    try:
+        if zipfile.is_zipfile(path):
+            with zipfile.ZipFile(path) as zf:
+                bad = zf.testzip()
+            if bad is not None:
+                raise CorruptArchiveError(f"{what}: member {bad!r} of the zip archive is corrupt")
+            return
+        with tarfile.open(path, mode="r:*") as tar:
+            for member in tar:
+                if member.isfile():
+                    with tar.extractfile(member) as fh:
+                        while fh.read(1 << 20):
+                            pass
+    except CorruptArchiveError:
+        raise
+    except (tarfile.TarError, zipfile.BadZipFile, OSError, EOFError, zlib.error) as err:
+        raise CorruptArchiveError(f"{what}: not a complete archive (truncated or not a tar / "
+                                  f"zip file: {' '.join(str(err).split())[:200]})") from None
+
+
 def build_staged(target: Path, fill, complete=Path.is_dir) -> Path:
     """Run ``fill(staging)`` in a temporary sibling of ``target``, then rename it into place (if
     another process finished first — ``complete(target)`` is true — its copy is kept); nothing
     is left behind on failure."""
     target.parent.mkdir(parents=True, exist_ok=True)
-    staging = Path(tempfile.mkdtemp(prefix=f".{target.name}.", dir=target.parent))
+    _remove_dead_staging(target)
+    staging = Path(tempfile.mkdtemp(prefix=f".{target.name}.staging-{os.getpid()}-",
+                                    dir=target.parent))
     try:
         fill(staging)
         try:

@@ -6,7 +6,9 @@ to ``retries`` times, or in a later run) asks the server for the rest with an HT
 header. A server that ignores the range (status 200) restarts the file from the beginning. The
 finished file is checked against the expected size and MD5 (when given) before it is renamed to
 ``dest``; a mismatch deletes the partial data and raises :class:`DownloadError`, so a corrupt file
-never sits where a good one is expected.
+never sits where a good one is expected. The whole call, retries included, has the overall
+deadline ``$KUBRIC_FETCH_DEADLINE`` (seconds, default 3600), checked as bytes arrive: a server
+that trickles bytes fails instead of hanging (the per-read timeout restarts with every byte).
 """
 
 from __future__ import annotations
@@ -80,7 +82,7 @@ def _verify(path: Path, url: str, size: int | None, md5: str | None) -> None:
             raise DownloadError(f"{url}: MD5 {got_md5} does not match the listing's {md5}")
 
 
-def _transfer(url: str, part: Path, size: int | None) -> None:
+def _transfer(url: str, part: Path, size: int | None, deadline: float = float("inf")) -> None:
     """One attempt: append the missing bytes to ``part`` (or start over); raises on a cut."""
     have = part.stat().st_size if part.is_file() else 0
     if size is not None and have > int(size):
@@ -101,11 +103,15 @@ def _transfer(url: str, part: Path, size: int | None) -> None:
         got = 0
         with open(part, mode) as fh:
             while True:
-                block = resp.read(CHUNK)
+                block = resp.read1(CHUNK)  # one receive: the deadline is checked per arrival
                 if not block:
                     break
                 fh.write(block)
                 got += len(block)
+                if time.monotonic() > deadline:
+                    raise DownloadError(f"GET {url}: not complete within $KUBRIC_FETCH_DEADLINE "
+                                        f"({got} bytes this attempt); the partial file "
+                                        f"{str(part)!r} is kept for the next run")
         if announced is not None and got < int(announced):
             raise ConnectionError(f"connection closed after {got} of {int(announced)} bytes")
 
@@ -130,14 +136,16 @@ def fetch_file(url: str, dest: str | os.PathLike, size: int | None = None,
         except DownloadError:
             dest.unlink()
     part = dest.with_name(dest.name + ".part")
+    from kubric.assets.remote_source import deadline_s
+    deadline = time.monotonic() + deadline_s()
     for attempt in range(retries + 1):
         try:
-            _transfer(url, part, size)
+            _transfer(url, part, size, deadline)
             break
         except (http.client.IncompleteRead, ConnectionError, TimeoutError,
                 urllib.error.URLError, OSError) as err:
-            if attempt == retries:
-                raise DownloadError(f"GET {url}: cut {retries + 1} times, last: {err}; the "
+            if attempt == retries or time.monotonic() > deadline:
+                raise DownloadError(f"GET {url}: cut {attempt + 1} times, last: {err}; the "
                                     f"partial file {str(part)!r} is kept for the next run") from None
             time.sleep(min(2.0 ** attempt * 0.1, 5.0))
     try:

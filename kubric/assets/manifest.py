@@ -10,6 +10,7 @@ Manifest (compatible with upstream Kubric's)::
 
 from __future__ import annotations
 
+import errno
 import os
 from pathlib import Path
 
@@ -28,7 +29,11 @@ class ManifestError(KubricError, ValueError):
 def cache_dir() -> Path:
     """Where generated and extracted assets live: ``$KUBRIC_CACHE_DIR`` or ``~/.cache/kubric``."""
     env = os.environ.get("KUBRIC_CACHE_DIR")
-    return Path(env).expanduser() if env else Path.home() / ".cache" / "kubric"
+    path = Path(env).expanduser() if env else Path.home() / ".cache" / "kubric"
+    if path.exists() and not path.is_dir():
+        raise NotADirectoryError(errno.ENOTDIR, "the asset cache (KUBRIC_CACHE_DIR) must be a "
+                                 "directory, this is a file", str(path))
+    return path
 
 
 def _require_fields(value, fields, where: str, not_object: str) -> None:

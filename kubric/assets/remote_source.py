@@ -8,14 +8,20 @@ immutable: publish a changed source under a new URL (e.g. with its version in th
 its cache folder.
 
 * ``http(s)://`` uses the standard library (``urllib``) with a timeout per request
-  (``$KUBRIC_FETCH_TIMEOUT`` seconds, default 30); other schemes go through fsspec (connection
+  (``$KUBRIC_FETCH_TIMEOUT`` seconds, default 30) and an overall deadline per file, retries
+  included (``$KUBRIC_FETCH_DEADLINE`` seconds, default 3600): a server that trickles bytes
+  fails at the deadline instead of hanging. Other schemes go through fsspec (connection
   settings are fsspec's, e.g. ``FSSPEC_S3_ENDPOINT_URL``; timeouts are the backend's).
 * Every file is written to a temporary name and renamed when complete and checked: a transfer cut
   short (fewer bytes than announced), a checksum mismatch or a crash leaves nothing that looks like
   a cached file. Concurrent processes on one machine take an exclusive ``flock`` per file, so a
   file is downloaded once and nobody reads a partial one.
 * Checksums: a manifest entry may hold ``"sha256"`` and/or ``"md5"`` (hex digests of its archive);
-  they are verified after the download (and, for local sources too, before extraction).
+  they are verified after the download (and, for local sources too, before extraction). The
+  builders record ``sha256`` of every archive they write. Every archive is also read through
+  whole before it is cached (:func:`kubric.assets.archive.check_complete`), so a transfer cut
+  short without a ``Content-Length`` (or with an understated one), or a file that is no archive,
+  is never cached, with or without checksums.
 * ``data_dir`` in a remote manifest is relative to the manifest's URL (or an absolute URL).
   Archives are extracted from the cache with the same checks as local ones
   (:func:`kubric.assets.archive.safe_extract`), and cached under a name derived from their URL, so
@@ -43,6 +49,8 @@ from kubric.io import storage
 
 TIMEOUT_ENV = "KUBRIC_FETCH_TIMEOUT"
 DEFAULT_TIMEOUT_S = 30.0
+DEADLINE_ENV = "KUBRIC_FETCH_DEADLINE"
+DEFAULT_DEADLINE_S = 3600.0
 CHECKSUMS = ("sha256", "md5")
 CHUNK = 1 << 20
 RETRIES = 2  # extra attempts after a transfer cut short
@@ -71,18 +79,24 @@ def manifest_url(url: str) -> str:
     return url if url.rsplit("/", 1)[-1].endswith(".json") else f"{url}/manifest.json"
 
 
-def timeout_s() -> float:
-    """The per-request timeout: ``$KUBRIC_FETCH_TIMEOUT`` seconds, default 30."""
-    raw = os.environ.get(TIMEOUT_ENV, "").strip()
+def timeout_s(env: str = TIMEOUT_ENV, default: float = DEFAULT_TIMEOUT_S) -> float:
+    """The per-request timeout: ``$KUBRIC_FETCH_TIMEOUT`` seconds, default 30 (or another
+    variable's seconds: :func:`deadline_s`)."""
+    raw = os.environ.get(env, "").strip()
     if not raw:
-        return DEFAULT_TIMEOUT_S
+        return default
     try:
         value = float(raw)
     except ValueError:
         value = -1.0
     if not 0 < value < float("inf"):
-        raise RemoteSourceError(f"{TIMEOUT_ENV}={raw!r}: expected a number of seconds > 0")
+        raise RemoteSourceError(f"{env}={raw!r}: expected a number of seconds > 0")
     return value
+
+
+def deadline_s() -> float:
+    """The overall time allowed for one file: ``$KUBRIC_FETCH_DEADLINE`` seconds, default 3600."""
+    return timeout_s(DEADLINE_ENV, DEFAULT_DEADLINE_S)
 
 
 def _safe(text: str) -> str:
@@ -120,13 +134,14 @@ def verify_checksums(path, entry: dict, what: str) -> None:
 
 
 # ------------------------------------------------------------------------ transfers
-def _copy_http(url: str, fh, timeout: float) -> None:
+def _copy_http(url: str, fh, timeout: float, deadline: float) -> None:
     import http.client
     import socket
     import urllib.error
     import urllib.request
 
     request = urllib.request.Request(url, headers={"User-Agent": USER_AGENT})
+    timeout = min(timeout, max(0.01, deadline - time.monotonic()))
     try:
         resp = urllib.request.urlopen(request, timeout=timeout)  # noqa: S310 - http(s) only
     except urllib.error.HTTPError as err:
@@ -144,9 +159,14 @@ def _copy_http(url: str, fh, timeout: float) -> None:
         announced = resp.headers.get("Content-Length")
         got = 0
         try:
-            while block := resp.read(CHUNK):
+            # read1: at most one receive per call, so the deadline is checked as bytes trickle in
+            # (read(n) loops until n bytes arrive, each receive restarting the socket timeout)
+            while block := resp.read1(CHUNK):
                 fh.write(block)
                 got += len(block)
+                if time.monotonic() > deadline:
+                    raise _Deadline(f"not complete within ${DEADLINE_ENV} = "
+                                    f"{deadline_s():g} s ({got} bytes so far)")
         except http.client.IncompleteRead as err:
             got += len(err.partial)
             raise ConnectionError(f"connection closed after {got} of {announced} bytes") from None
@@ -154,6 +174,10 @@ def _copy_http(url: str, fh, timeout: float) -> None:
             raise ConnectionError(f"no data for {timeout:g} s after {got} bytes") from None
         if announced is not None and got != int(announced):
             raise ConnectionError(f"connection closed after {got} of {int(announced)} bytes")
+
+
+class _Deadline(RemoteSourceError):
+    """The file's overall deadline passed (not retried)."""
 
 
 def _copy_fsspec(url: str, fh) -> None:
@@ -213,20 +237,21 @@ def download(url: str, dest, checksums: dict | None = None, what: str | None = N
             stale.unlink(missing_ok=True)
         tmp = dest.with_name(f".{dest.name}.{os.getpid()}.part")
         timeout = timeout_s()
+        deadline = time.monotonic() + deadline_s()
         try:
             for attempt in range(RETRIES + 1):
                 try:
                     with open(tmp, "wb") as fh:
                         if url.lower().startswith(("http://", "https://")):
-                            _copy_http(url, fh, timeout)
+                            _copy_http(url, fh, timeout, deadline)
                         else:
                             _copy_fsspec(url, fh)
                     break
                 except RemoteSourceError as err:
                     raise RemoteSourceError(f"{what}: {err}") from None
                 except ConnectionError as err:
-                    if attempt == RETRIES:
-                        raise RemoteSourceError(f"{what}: transfer cut {RETRIES + 1} times "
+                    if attempt == RETRIES or time.monotonic() > deadline:
+                        raise RemoteSourceError(f"{what}: transfer cut {attempt + 1} times "
                                                 f"(last: {err})") from None
                     time.sleep(0.2 * 2 ** attempt)
             verify_checksums(tmp, checksums or {}, what)
@@ -289,9 +314,11 @@ class RemoteSource:
         url = join_url(self.data_url(manifest), rel, f"asset {asset_id!r}: path")
         digest = hashlib.sha256(url.encode()).hexdigest()[:12]
         name = f"{digest}-{_safe(url.rsplit('/', 1)[-1])}"
+        what = f"asset {asset_id!r} ({url})"
+        from kubric.assets.archive import check_complete
         return download(url, self.folder / "archives" / name,
-                        {k: entry[k] for k in CHECKSUMS if k in entry},
-                        what=f"asset {asset_id!r} ({url})")
+                        {k: entry[k] for k in CHECKSUMS if k in entry}, what=what,
+                        check=lambda path: check_complete(path, what))
 
 
 __all__ = ["RemoteSource", "RemoteSourceError", "download", "is_remote", "join_url", "local_path",

@@ -5,9 +5,15 @@ from __future__ import annotations
 import sys
 
 
-def _error(command: str, message) -> int:
+def _error(command: str, message, code: int | None = None) -> int:
+    """Print the one-line error; the exit status is the error's own (a
+    :class:`~kubric.errors.KubricError`: 2 for a usage error such as
+    :class:`~kubric.datasets.layout.DatasetUsageError`, 1 for bad input data), else 2."""
+    from kubric.errors import KubricError
+    if code is None:
+        code = message.exit_code if isinstance(message, KubricError) else 2
     print(f"kubric {command}: error: {message}", file=sys.stderr)
-    return 2
+    return code
 
 
 def cmd_pack(args) -> int:
@@ -30,6 +36,9 @@ def cmd_pack(args) -> int:
         common["class_names"] = read_class_names(args.class_names)
     except DatasetError as err:
         return _error("pack", err)
+    from kubric.pipeline.cleanup import handle_termination, private_tmpdir
+    handle_termination()  # SIGTERM like Ctrl-C: unwind, end the pool's workers
+    private_tmpdir()  # temporary files (Dask's scratch space too) go when this process ends
     if args.cluster is not None:
         return _pack_on_cluster(args, common)
     try:
@@ -62,7 +71,8 @@ def _pack_on_cluster(args, common: dict) -> int:
         client, cluster = open_cluster(options, processes=True)
     except ClusterError as err:
         return _error("pack", err)
-    print(f"Dask dashboard: {client.dashboard_link}", flush=True)
+    from kubric.pipeline.dask_runner import dashboard_link
+    print(f"Dask dashboard: {dashboard_link(client, cluster, options)}", flush=True)
     try:
         result = pack_sharded(args.scenes_dir, args.out, executor=DaskExecutor(client), **common)
     except (DatasetError, SchemaError) as err:

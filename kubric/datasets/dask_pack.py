@@ -79,7 +79,7 @@ def encode_chunk(work: str, file: str, scenes: list[str], schema, dims: dict) ->
     work_dir = _require_work(work)
     packer._init_worker(schema, dims)
     tmp = work_dir / f".{file}.tmp-{os.getpid()}"
-    writer = array_record_module.ArrayRecordWriter(str(tmp), "group_size:1")
+    writer = array_record_module.ArrayRecordWriter(str(tmp), layout.SHARD_WRITER_OPTIONS)
     record = {"file": file, "scenes": [], "corrupt": [], "num_bytes": 0}
     try:
         for location in scenes:
@@ -104,7 +104,7 @@ def recut_shard(work: str, file: str, pieces: list[tuple[str, list[int]]]) -> di
     from array_record.python import array_record_module
     work_dir = _require_work(work)
     tmp = work_dir / f".{file}.tmp-{os.getpid()}"
-    writer = array_record_module.ArrayRecordWriter(str(tmp), "group_size:1")
+    writer = array_record_module.ArrayRecordWriter(str(tmp), layout.SHARD_WRITER_OPTIONS)
     num_bytes = 0
     try:
         for chunk, indices in pieces:
@@ -210,7 +210,6 @@ def pack_sharded(scenes_dir, out, executor=None, name: str | None = None,
     """Pack like :func:`kubric.datasets.packer.pack`, one task per shard (module doc).
     ``executor``: a :class:`DaskExecutor`, or None for ``workers`` local processes;
     ``class_names`` as for :func:`~kubric.datasets.packer.pack`."""
-    from tqdm import tqdm
     start = time.perf_counter()
     scenes_dir = storage.normalise(str(scenes_dir)) if storage.is_url(str(scenes_dir)) \
         else str(pathlib.Path(scenes_dir))
@@ -251,9 +250,21 @@ def pack_sharded(scenes_dir, out, executor=None, name: str | None = None,
     plan = {"engine": "sharded", "schema": schema.name, "name": name, "splits": split_fractions,
             "dims": dims, "examples_per_shard": examples_per_shard,
             "format_version": layout.FORMAT_VERSION, "scenes": assignment,
+            "shard_writer_options": layout.SHARD_WRITER_OPTIONS,
             "class_names": {f.name: f.names for f in schema.features if f.names}}
     plan_key = hashlib.sha256(json.dumps(plan, sort_keys=True).encode()).hexdigest()
-    work = out.parent / f".{out.name}.incomplete"
+    with packer.output_lock(out):  # one pack per output, as the local packer
+        packer._check_out(out, overwrite)
+        return _pack_locked(scenes_dir, out, executor, name, workers, schema, dims, progress,
+                            verify, examples_per_shard, split_fractions, assignment, corrupt,
+                            locations, incomplete, plan_key, start)
+
+
+def _pack_locked(scenes_dir, out, executor, name, workers, schema, dims, progress, verify,
+                 examples_per_shard, split_fractions, assignment, corrupt, locations,
+                 incomplete, plan_key, start) -> packer.PackResult:
+    from tqdm import tqdm
+    work = packer.work_dir(out)
     _open_work(work, plan_key)
 
     chunk_of = {}  # (split, k) -> chunk file
@@ -295,13 +306,16 @@ def pack_sharded(scenes_dir, out, executor=None, name: str | None = None,
     write_json(state, work / packer.PROGRESS_FILE)  # _finalise removes it
     counts = packer._finalise(work, state, schema, name, dims, split_fractions, incomplete,
                               features)
-    packer._swap_into_place(work, out)
-    result = packer.PackResult(out, counts, incomplete, corrupt, time.perf_counter() - start,
-                               resumed)
-    if verify:
+    if verify:  # in the work folder: a dataset that fails never takes the output's name
         from kubric.datasets.verify import verify_dataset
-        verify_dataset(out, scenes_dir, progress=progress)
-    return result
+        try:
+            verify_dataset(work, scenes_dir, progress=progress)
+        except DatasetError as err:
+            shutil.rmtree(work, ignore_errors=True)
+            raise DatasetError(f"{err}; nothing was written to {str(out)!r}") from None
+    packer._swap_into_place(work, out)
+    return packer.PackResult(out, counts, incomplete, corrupt, time.perf_counter() - start,
+                             resumed)
 
 
 def _open_work(work: pathlib.Path, plan_key: str) -> None:

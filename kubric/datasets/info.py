@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pathlib
 
-from kubric.datasets.layout import read_info
+from kubric.datasets.layout import DatasetError, read_info, shard_name
 from kubric.io.schema import Schema, shape_text
 
 
@@ -33,7 +33,8 @@ def dataset_info(dataset_dir) -> str:
     for split, count in info["counts"].items():
         shards = info["shard_lengths"].get(split, [])
         lines.append(f"    {split:<12} {count:>7} examples in {len(shards)} shards "
-                     f"(fraction {info['splits'][split]:g})")
+                     f"(fraction {info['splits'].get(split, 0):g})")
+    problems = check_shards(path, info)
     if info.get("incomplete_skipped"):
         lines.append(f"  incomplete scenes skipped when packing: {info['incomplete_skipped']}")
     from kubric.datasets.tasks import servable_tasks
@@ -45,4 +46,32 @@ def dataset_info(dataset_dir) -> str:
         dtype = f"class label[{len(f.names)}]" if f.names else f.dtype
         lines.append(f"    {f.name:<{width}}  {dtype:<15} {shape:<20} {f.encoding:<11} "
                      f"{f.unit}")
+    if problems:
+        raise DatasetError(f"{problems[0]}" + (f" (and {len(problems) - 1} more shard problems)"
+                                               if len(problems) > 1 else ""))
     return "\n".join(lines)
+
+
+def check_shards(path: pathlib.Path, info: dict) -> list[str]:
+    """One line per shard that is missing, unreadable or holds another number of records than
+    the marker says (a truncated file loses its footer: ArrayRecord cannot open it)."""
+    from array_record.python import array_record_module
+    problems = []
+    for split, lengths in info["shard_lengths"].items():
+        for i, expected in enumerate(lengths):
+            shard = path / shard_name(info["name"], split, i, len(lengths))
+            if not shard.is_file():
+                problems.append(f"{str(shard)!r}: shard missing")
+                continue
+            try:
+                reader = array_record_module.ArrayRecordReader(str(shard),
+                                                               "readahead_buffer_size:0")
+                got = reader.num_records()
+                reader.close()
+            except (RuntimeError, ValueError, OSError) as err:
+                problems.append(f"{str(shard)!r}: unreadable (truncated or corrupt): "
+                                f"{' '.join(str(err).split())[:200]}")
+                continue
+            if got != expected:
+                problems.append(f"{str(shard)!r}: {got} records, the marker says {expected}")
+    return problems

@@ -19,10 +19,21 @@ FORMAT_VERSION = 1
 INFO_FILE = "kubric_dataset.json"
 FILE_FORMAT = "array_record"
 NAME_PATTERN = re.compile(r"^[a-z][a-z0-9_]*$")
+#: ArrayRecord writer options of every shard: one record per chunk (random access), chunks stored
+#: uncompressed. The payload is PNG / zlib bytes already; a zstd chunk's decoder pool schedules
+#: riegeli's background cleaner thread, which a forked child (a DataLoader worker) does not have:
+#: reading zstd shards there after the parent read hangs or segfaults. Recorded in the marker.
+SHARD_WRITER_OPTIONS = "group_size:1,uncompressed"
 
 
 class DatasetError(KubricError, ValueError):
     """Bad input to packing / loading (one-line message)."""
+
+
+class DatasetUsageError(DatasetError):
+    """A bad option or output of ``kubric pack`` (exit status 2; bad input data is 1)."""
+
+    exit_code = 2
 
 
 def shard_name(name: str, split: str, index: int, count: int) -> str:
@@ -49,7 +60,22 @@ def read_info(dataset_dir) -> dict:
     if not isinstance(version, int) or version > FORMAT_VERSION:
         raise DatasetError(f"{str(path)!r} has dataset format version {version!r}; this kubric "
                            f"reads versions ≤ {FORMAT_VERSION} (upgrade kubric)")
+    for key, kind in REQUIRED_INFO.items():
+        if not isinstance(info.get(key), kind):
+            raise DatasetError(f"{str(path / INFO_FILE)!r} lacks {key!r} (or it is not "
+                               f"{'an object' if kind is dict else 'text'}): not a complete "
+                               f"marker; pack the dataset again")
+    for split, count in info["counts"].items():
+        lengths = info["shard_lengths"].get(split)
+        if not isinstance(lengths, list) or sum(lengths) != count:
+            raise DatasetError(f"{str(path / INFO_FILE)!r}: split {split!r} has {count!r} "
+                               f"examples but shard lengths {lengths!r}")
     return info
+
+
+#: the marker's keys every reader relies on, with their JSON types
+REQUIRED_INFO = {"name": str, "dims": dict, "splits": dict, "counts": dict,
+                 "shard_lengths": dict, "scenes": dict, "schema_json": dict}
 
 
 def parse_splits(spec) -> dict[str, float]:

@@ -14,29 +14,42 @@
   within a split, examples are in scene-name order; serialisation is deterministic, so packing
   the same scenes again gives byte-identical shards.
 * Work happens in ``.NAME.incomplete`` next to the output; finished shards are recorded in its
-  ``progress.json``, so an interrupted pack resumes after the last finished shard. The work
-  directory is renamed to the output only when everything is written.
+  ``progress.json``, so an interrupted pack resumes after the last finished shard. A record that
+  names a file the folder lacks (a kill during the final renames) is not trusted: the pack starts
+  afresh. The dataset is finished in the work folder (final shard names, metadata, marker) and,
+  with ``verify``, checked there; only then is the work folder renamed to the output: a directory
+  at the output's name is complete and (when asked) verified, or absent.
+* One pack per output: ``.NAME.lock`` beside it is held while packing (a second pack refuses).
+* ``overwrite`` replaces a dataset only when the output holds nothing but what the packer wrote
+  (:func:`packer_files`); any other file in it is refused by name, never deleted.
+* Worker processes (``workers`` > 1) ignore SIGINT (the parent decides), die with the parent
+  (Linux parent-death signal) and are terminated when the parent is interrupted.
 """
 
 from __future__ import annotations
 
 import concurrent.futures
+import contextlib
 import dataclasses
 import hashlib
 import multiprocessing
 import os
 import pathlib
+import re
 import shutil
+import signal
 import time
+import zipfile
 from collections.abc import Mapping, Sequence
 
+from kubric import faults
 from kubric.datasets import layout
-from kubric.datasets.layout import DatasetError
+from kubric.datasets.layout import DatasetError, DatasetUsageError
 from kubric.io import scene_dir
 from kubric.io.json_io import read_json, write_json
 from kubric.io.scene_reader import SceneError, SceneReader
 from kubric.io.schema import Schema, SchemaError
-from kubric.pipeline.recipe import schema_of
+from kubric.pipeline.recipe import get_recipe, schema_of
 
 PROGRESS_FILE = "progress.json"
 DEFAULT_SPLITS = "train=0.9,validation=0.1"
@@ -68,8 +81,11 @@ class PackResult:
 _WORKER: dict = {}
 
 
-def _init_worker(schema: Schema, dims: dict) -> None:
+def _init_worker(schema: Schema, dims: dict, parent: int | None = None) -> None:
     from kubric.datasets import tfds_io
+    if parent is not None:  # a pool process: the parent handles Ctrl-C; die with the parent
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+        _die_with(parent)
     _WORKER.update(schema=schema, dims=dims, features=tfds_io.tfds_features(schema, dims))
 
 
@@ -79,15 +95,47 @@ def _encode_scene(scene_dir: str) -> tuple[str, bytes | None, str | None]:
     schema, dims = _WORKER["schema"], _WORKER["dims"]
     path = pathlib.Path(scene_dir)
     try:
+        faults.point("pack.encode_scene")
+        _check_recipe(path, schema)
         reader = SceneReader(path, schema)
         if reader.dims != dims:
             raise SceneError(f"frames / resolution {reader.dims} differ from the dataset's {dims}")
         flat = reader.example()
         data = tfds_io.serialize(_WORKER["features"], tfds_io.nested_example(schema, flat))
         return path.name, data, None
-    except (SceneError, OSError, ValueError, KeyError, TypeError, RuntimeError) as err:
-        # (TFDS re-raises a feature's encoding error as RuntimeError)
+    except (SceneError, OSError, ValueError, KeyError, TypeError, RuntimeError, EOFError,
+            AttributeError, zipfile.BadZipFile) as err:
+        # (TFDS re-raises a feature's encoding error as RuntimeError; a truncated .npz is a
+        # BadZipFile or EOFError; a metadata.json of the wrong shape a TypeError/AttributeError)
         return path.name, None, str(err).replace("\n", " ")[:500]
+
+
+def _die_with(parent: int) -> None:
+    """Ask Linux to SIGKILL this process when its parent dies; exit now if it already has."""
+    import ctypes
+    with contextlib.suppress(OSError, AttributeError):
+        ctypes.CDLL(None, use_errno=True).prctl(1, int(signal.SIGKILL))  # PR_SET_PDEATHSIG
+    if os.getppid() != parent:
+        os._exit(1)
+
+
+def _check_recipe(scene: pathlib.Path, schema: Schema) -> None:
+    """A scene whose ``flags.recipe`` has another schema is a recipe mismatch, said as such."""
+    try:
+        recipe = read_json(scene / scene_dir.METADATA_FILE)["flags"]["recipe"]
+    except (OSError, ValueError, KeyError, TypeError):
+        return  # no recipe named: the reader reports what is wrong with the file
+    if not isinstance(recipe, str) or recipe == schema.name:
+        return
+    try:
+        cls = get_recipe(recipe)
+    except (ValueError, ImportError):
+        return  # a recipe unknown here: the reader reports what does not fit
+    own = {s.name for s in (cls.schema, *cls.variants) if s is not None}
+    if own and schema.name not in own:
+        raise SceneError(f"{str(scene)!r} is a scene of recipe {recipe!r} (schemas "
+                         f"{sorted(own)}), not of the dataset's schema {schema.name!r} (pack it "
+                         "separately or pass --schema)")
 
 
 # ------------------------------------------------------------------------ planning
@@ -99,15 +147,30 @@ def find_scenes(scenes_dir: pathlib.Path) -> tuple[list[pathlib.Path], int]:
 
 
 def _seed_of(scene: pathlib.Path) -> int:
-    meta_file = scene / scene_dir.METADATA_FILE
-    meta = read_json(meta_file) if meta_file.is_file() else {}
-    seed = meta.get("metadata", {}).get("seed", meta.get("flags", {}).get("seed"))
+    """The scene's seed: ``metadata.seed``, else ``flags.seed``, else the digits of its name.
+    A metadata.json of the wrong shape is a :class:`SceneError` naming the file."""
+    path = scene / scene_dir.METADATA_FILE
+    try:
+        meta = read_json(path) if path.is_file() else {}
+    except (OSError, ValueError) as err:
+        raise SceneError(f"{str(path)!r} cannot be read: {err}") from None
+    seed = None
+    if not isinstance(meta, dict):
+        raise SceneError(f"{str(path)!r} is not a JSON object")
+    for section in ("metadata", "flags"):
+        part = meta.get(section, {})
+        if not isinstance(part, dict):
+            raise SceneError(f"{str(path)!r}: {section!r} is not an object")
+        if seed is None:
+            seed = part.get("seed")
     if seed is None:
         digits = "".join(c for c in scene.name if c.isdigit())
         if not digits:
             raise SceneError(f"{str(scene)!r}: no seed in metadata.json and none in its name")
-        seed = int(digits)
-    return int(seed)
+        return int(digits)
+    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+        raise SceneError(f"{str(path)!r}: seed {seed!r} is not a whole number ≥ 0")
+    return seed
 
 
 def _recipe_of(scene: pathlib.Path) -> str:
@@ -179,7 +242,7 @@ def read_class_names(specs: Sequence[str]) -> dict[str, list[str]]:
     for spec in specs:
         feature, sep, path = spec.partition("=")
         if not sep or not feature or not path:
-            raise DatasetError(f"--class-names {spec!r} is not FEATURE=FILE (e.g. "
+            raise DatasetUsageError(f"--class-names {spec!r} is not FEATURE=FILE (e.g. "
                                "instances/category=other/instances-category.labels.txt)")
         try:
             text = pathlib.Path(path).read_text(encoding="utf-8")
@@ -190,26 +253,51 @@ def read_class_names(specs: Sequence[str]) -> dict[str, list[str]]:
     return out
 
 
+#: what the packer writes into a dataset directory besides its shards (TFDS metadata, labels)
+PACKER_FILES = (layout.INFO_FILE, "dataset_info.json", "features.json")
+_SHARD_RE = re.compile(r"^[a-z][a-z0-9_]*-[a-z][a-z0-9_]*\.array_record-\d{5}-of-\d{5}$")
+
+
+def packer_files(directory: pathlib.Path) -> tuple[list[str], list[str]]:
+    """(names the packer wrote, other entries) of a dataset directory."""
+    ours, other = [], []
+    for entry in sorted(pathlib.Path(directory).iterdir()):
+        mine = entry.is_file() and not entry.is_symlink() and (
+            entry.name in PACKER_FILES or entry.name.endswith(".labels.txt")
+            or _SHARD_RE.match(entry.name))
+        (ours if mine else other).append(entry.name)
+    return ours, other
+
+
 def _check_out(out: pathlib.Path, overwrite: bool) -> None:
-    if out.exists() and not out.is_dir():
-        raise DatasetError(f"--out {str(out)!r} exists and is not a directory")
+    if out.is_symlink() or (out.exists() and not out.is_dir()):
+        raise DatasetUsageError(f"--out {str(out)!r} exists and is not a directory")
     if out.is_dir() and any(out.iterdir()):
         if not layout.is_dataset(out):
-            raise DatasetError(f"--out {str(out)!r} exists and is not a dataset (refusing to "
-                               "write into it)")
+            raise DatasetUsageError(f"--out {str(out)!r} exists and is not a dataset (refusing "
+                                    "to write into it)")
         if not overwrite:
-            raise DatasetError(f"--out {str(out)!r} is already a dataset; pass --overwrite to "
-                               "replace it")
+            raise DatasetUsageError(f"--out {str(out)!r} is already a dataset; pass --overwrite "
+                                    "to replace it")
+        _, other = packer_files(out)
+        if other:
+            raise DatasetUsageError(
+                f"--out {str(out)!r} holds {', '.join(other[:5])}"
+                f"{' ...' if len(other) > 5 else ''}, which kubric pack did not write; "
+                "--overwrite replaces only a dataset the packer wrote: move them away first")
 
 
 def check_options(splits, workers: int, examples_per_shard: int, out: pathlib.Path,
                   overwrite: bool) -> dict[str, float]:
     """The split fractions; raises DatasetError (one line) on a bad option or output."""
-    split_fractions = layout.parse_splits(splits)
+    try:
+        split_fractions = layout.parse_splits(splits)
+    except DatasetError as err:
+        raise DatasetUsageError(str(err)) from None
     if workers < 1:
-        raise DatasetError(f"--workers must be ≥ 1, got {workers}")
+        raise DatasetUsageError(f"--workers must be ≥ 1, got {workers}")
     if examples_per_shard < 1:
-        raise DatasetError(f"examples per shard must be ≥ 1, got {examples_per_shard}")
+        raise DatasetUsageError(f"examples per shard must be ≥ 1, got {examples_per_shard}")
     _check_out(out, overwrite)
     return split_fractions
 
@@ -247,25 +335,74 @@ def pack(scenes_dir, out, name: str | None = None, splits=DEFAULT_SPLITS, worker
 
     plan = {"schema": schema.name, "name": name, "splits": split_fractions, "dims": dims,
             "examples_per_shard": examples_per_shard, "format_version": layout.FORMAT_VERSION,
+            "shard_writer_options": layout.SHARD_WRITER_OPTIONS,
             "class_names": {f.name: f.names for f in schema.features if f.names},
             "scenes": {s: [p.name for p in v] for s, v in assignment.items()}}
     plan_key = hashlib.sha256(repr(sorted(plan.items())).encode()).hexdigest()
-    work = out.parent / f".{out.name}.incomplete"
-    state = _open_work(work, plan_key)
-    resumed = sum(len(sh["scenes"]) + len(sh.get("corrupt", []))
-                  for shards in state["shards"].values() for sh in shards)
-    corrupt += [tuple(c) for shards in state["shards"].values() for sh in shards
-                for c in sh.get("corrupt", [])]
+    with output_lock(out):
+        _check_out(out, overwrite)  # again, now that no other pack can change it
+        work = work_dir(out)
+        state = _open_work(work, plan_key)
+        resumed = sum(len(sh["scenes"]) + len(sh.get("corrupt", []))
+                      for shards in state["shards"].values() for sh in shards)
+        corrupt += [tuple(c) for shards in state["shards"].values() for sh in shards
+                    for c in sh.get("corrupt", [])]
+        todo = [(split, scene) for split, scenes in assignment.items() for scene in scenes
+                if scene.name not in _done_names(state, split)]
+        from kubric.datasets import tfds_io
+        features = tfds_io.tfds_features(schema, dims)
+        _write_shards(work, state, todo, schema, dims, name, workers, examples_per_shard,
+                      corrupt, progress)
+        if not any(sh["scenes"] for shards in state["shards"].values() for sh in shards):
+            first = f"; first: {corrupt[0][0]}: {corrupt[0][1]}" if corrupt else ""
+            shutil.rmtree(work, ignore_errors=True)
+            raise DatasetError(f"no scene could be packed: all {len(complete)} complete scenes "
+                               f"are corrupt{first}")
+        counts = _finalise(work, state, schema, name, dims, split_fractions, incomplete,
+                           features)
+        faults.point("pack.finalised")
+        if verify:
+            from kubric.datasets.verify import verify_dataset
+            try:
+                verify_dataset(work, scenes_dir, progress=progress)
+            except DatasetError as err:
+                shutil.rmtree(work, ignore_errors=True)  # finished but wrong: never the output
+                raise DatasetError(f"{err}; nothing was written to {str(out)!r}") from None
+        _swap_into_place(work, out)
+    return PackResult(out, counts, incomplete, corrupt, time.perf_counter() - start, resumed)
 
-    todo = [(split, scene) for split, scenes in assignment.items() for scene in scenes
-            if scene.name not in _done_names(state, split)]
-    from kubric.datasets import tfds_io
-    features = tfds_io.tfds_features(schema, dims)
+
+def work_dir(out: pathlib.Path) -> pathlib.Path:
+    """The work folder of a pack into ``out``: ``.NAME.incomplete`` beside it."""
+    return out.parent / f".{out.name}.incomplete"
+
+
+def output_lock(out: pathlib.Path):
+    """The lock held while packing into ``out`` (``.NAME.lock`` beside it)."""
+    from kubric.io.output_lock import OutputBusy, OutputLock
+
+    @contextlib.contextmanager
+    def held():
+        lock = OutputLock(out.parent / f".{out.name}.lock", f"--out {str(out)!r}")
+        try:
+            lock.acquire()
+        except OutputBusy as err:
+            raise DatasetUsageError(str(err)) from None
+        try:
+            yield lock
+        finally:
+            lock.release()
+    return held()
+
+
+def _write_shards(work, state, todo, schema, dims, name, workers, examples_per_shard, corrupt,
+                  progress) -> None:
+    """Encode the scenes of ``todo`` and write them into shards, recording each finished shard."""
     results = _encoded(todo, schema, dims, workers)
     from tqdm import tqdm
     bar = tqdm(total=len(todo), unit="scene", desc=f"pack {name}", disable=not progress)
+    current: dict[str, _ShardWriter] = {}
     try:
-        current: dict[str, _ShardWriter] = {}
         for (split, scene), (scene_name, data, error) in zip(todo, results, strict=True):
             bar.update(1)
             writer = current.get(split)
@@ -278,26 +415,15 @@ def pack(scenes_dir, out, name: str | None = None, splits=DEFAULT_SPLITS, worker
             else:
                 writer.add(scene_name, data)
             if len(writer.scenes) >= examples_per_shard:
-                _finish_shard(work, state, writer)
-                current.pop(split)
-        for writer in current.values():
-            _finish_shard(work, state, writer)
+                _finish_shard(work, state, current.pop(split))
+        for split in list(current):
+            _finish_shard(work, state, current.pop(split))
     finally:
         bar.close()
+        for writer in current.values():  # interrupted: the unfinished shards are dropped
+            writer.abandon()
         if hasattr(results, "close"):
             results.close()
-    if not any(sh["scenes"] for shards in state["shards"].values() for sh in shards):
-        first = f"; first: {corrupt[0][0]}: {corrupt[0][1]}" if corrupt else ""
-        shutil.rmtree(work, ignore_errors=True)
-        raise DatasetError(f"no scene could be packed: all {len(complete)} complete scenes are "
-                           f"corrupt{first}")
-    counts = _finalise(work, state, schema, name, dims, split_fractions, incomplete, features)
-    _swap_into_place(work, out)
-    result = PackResult(out, counts, incomplete, corrupt, time.perf_counter() - start, resumed)
-    if verify:
-        from kubric.datasets.verify import verify_dataset
-        verify_dataset(out, scenes_dir, progress=progress)
-    return result
 
 
 def _encoded(todo, schema: Schema, dims: dict, workers: int):
@@ -308,14 +434,34 @@ def _encoded(todo, schema: Schema, dims: dict, workers: int):
         return (_encode_scene(p) for p in paths)
     pool = concurrent.futures.ProcessPoolExecutor(
         max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
-        initializer=_init_worker, initargs=(schema, dims))
+        initializer=_init_worker, initargs=(schema, dims, os.getpid()))
 
     def iterate():
+        finished = False
         try:
             yield from pool.map(_encode_scene, paths, chunksize=1)
+            finished = True
         finally:
-            pool.shutdown(cancel_futures=True)
+            if finished:
+                pool.shutdown()
+            else:  # interrupted (a signal, an error): end the workers now, do not wait for them
+                _stop_pool(pool)
     return iterate()
+
+
+def _stop_pool(pool: concurrent.futures.ProcessPoolExecutor) -> None:
+    processes = list((getattr(pool, "_processes", None) or {}).values())
+    pool.shutdown(wait=False, cancel_futures=True)
+    for proc in processes:
+        with contextlib.suppress(OSError, ValueError):
+            proc.terminate()
+    deadline = time.monotonic() + 5.0
+    for proc in processes:
+        with contextlib.suppress(OSError, ValueError):
+            proc.join(max(0.0, deadline - time.monotonic()))
+            if proc.is_alive():
+                proc.kill()
+                proc.join(1.0)
 
 
 def _open_work(work: pathlib.Path, plan_key: str) -> dict:
@@ -324,15 +470,21 @@ def _open_work(work: pathlib.Path, plan_key: str) -> dict:
     if progress_path.is_file():
         try:
             state = read_json(progress_path)
-        except ValueError:
-            state = {}
-        if state.get("plan") == plan_key:
             keep = {sh["file"] for shards in state["shards"].values() for sh in shards}
+        except (ValueError, KeyError, TypeError, AttributeError):
+            state, keep = {}, set()
+        # trusted only when every file it names is there (not renamed or removed since)
+        if state.get("plan") == plan_key and all((work / f).is_file() for f in keep if f):
             for entry in work.iterdir():  # drop a shard that was being written
                 if entry.name != PROGRESS_FILE and entry.name not in keep:
-                    entry.unlink()
+                    if entry.is_dir() and not entry.is_symlink():
+                        shutil.rmtree(entry)
+                    else:
+                        entry.unlink()
             return state
-    if work.exists():
+    if work.is_symlink() or work.is_file():
+        work.unlink()
+    elif work.exists():
         shutil.rmtree(work)
     work.mkdir(parents=True)
     state = {"plan": plan_key, "shards": {}}
@@ -356,18 +508,41 @@ class _ShardWriter:
         self.split, self.index = split, index
         self.file = f"{name}-{split}.part-{index:05d}"
         self.path = work / self.file
-        self._writer = array_record_module.ArrayRecordWriter(str(self.path), "group_size:1")
+        with self._errors_named():
+            self._writer = array_record_module.ArrayRecordWriter(
+                str(self.path), layout.SHARD_WRITER_OPTIONS)
         self.scenes: list[str] = []
         self.corrupt: list[tuple[str, str]] = []
         self.num_bytes = 0
 
+    @contextlib.contextmanager
+    def _errors_named(self):
+        """A failed write (a full disk: array_record says only "Failed to write") names the
+        shard and the reason."""
+        try:
+            yield
+        except (OSError, RuntimeError, ValueError) as err:
+            reason = err.strerror if isinstance(err, OSError) and err.strerror else \
+                " ".join(str(err).split())[:300]
+            free = shutil.disk_usage(self.path.parent).free
+            raise DatasetError(f"{str(self.path)!r}: cannot write the shard: {reason} "
+                               f"({free / 2**20:.0f} MiB free there)") from None
+
     def add(self, scene_name: str, data: bytes) -> None:
-        self._writer.write(data)
+        with self._errors_named():
+            faults.point("pack.shard_write", self.path)
+            self._writer.write(data)
         self.scenes.append(scene_name)
         self.num_bytes += len(data)
 
     def close(self) -> None:
-        self._writer.close()
+        with self._errors_named():
+            self._writer.close()
+
+    def abandon(self) -> None:
+        with contextlib.suppress(Exception):
+            self._writer.close()
+        self.path.unlink(missing_ok=True)
 
 
 def _finish_shard(work: pathlib.Path, state: dict, writer: _ShardWriter) -> None:
@@ -386,10 +561,14 @@ def _finalise(work, state, schema, name, dims, split_fractions, incomplete, feat
 
     from kubric import __version__
     split_infos, counts, scenes, shard_lengths = [], {}, {}, {}
+    # the record goes before the renames: a kill among them leaves no record naming moved files
+    # (the next run starts afresh), never one that a rerun would trust
+    (work / PROGRESS_FILE).unlink()
     for split in split_fractions:
         shards = [sh for sh in state["shards"].get(split, []) if sh["scenes"]]
         for i, shard in enumerate(shards):
             os.replace(work / shard["file"], work / layout.shard_name(name, split, i, len(shards)))
+            faults.point("pack.shard_renamed")
         counts[split] = sum(len(sh["scenes"]) for sh in shards)
         scenes[split] = [s for sh in shards for s in sh["scenes"]]
         shard_lengths[split] = [len(sh["scenes"]) for sh in shards]
@@ -397,7 +576,6 @@ def _finalise(work, state, schema, name, dims, split_fractions, incomplete, feat
             split_infos.append(tfds.core.SplitInfo(
                 name=split, shard_lengths=[len(sh["scenes"]) for sh in shards],
                 num_bytes=sum(sh["num_bytes"] for sh in shards)))
-    (work / PROGRESS_FILE).unlink()
     tfds.folder_dataset.write_metadata(
         data_dir=str(work), features=features, split_infos=split_infos, check_data=False,
         description=f"Kubric {schema.name} scenes packed by kubric {__version__}. "
@@ -408,17 +586,30 @@ def _finalise(work, state, schema, name, dims, split_fractions, incomplete, feat
                 "dims": dims, "splits": split_fractions, "counts": counts,
                 "shard_lengths": shard_lengths, "scenes": scenes,
                 "incomplete_skipped": incomplete, "kubric_version": __version__,
+                "shard_writer_options": layout.SHARD_WRITER_OPTIONS,
                 "schema_json": schema.to_json()},
                work / layout.INFO_FILE)
     return counts
 
 
 def _swap_into_place(work: pathlib.Path, out: pathlib.Path) -> None:
-    """Rename the finished work directory to ``out`` (replacing an old dataset / empty dir)."""
-    old = None
+    """Rename the finished work directory to ``out``, replacing an old dataset (checked to hold
+    only packer files) or an empty directory. The old one is first renamed to ``.NAME.old`` (a
+    fixed name: one left by a kill here is removed by the next pack) and then deleted."""
+    faults.point("pack.before_swap")
+    old = out.parent / f".{out.name}.old"
+    if old.exists() or old.is_symlink():
+        _remove(old)
     if out.exists():
-        old = out.parent / f".{out.name}.old-{os.getpid()}"
         os.replace(out, old)
+        faults.point("pack.old_moved")
     os.replace(work, out)
-    if old is not None:
-        shutil.rmtree(old, ignore_errors=True)
+    if old.exists():
+        _remove(old)
+
+
+def _remove(path: pathlib.Path) -> None:
+    if path.is_dir() and not path.is_symlink():
+        shutil.rmtree(path)
+    else:
+        path.unlink()

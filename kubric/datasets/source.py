@@ -9,11 +9,16 @@ An example (task ``None``) is the nested dict TFDS gives (``ex["metadata"]["dept
 ``ex["instances"]["positions"]``), made regular: per-frame features are arrays (T, H, W, C),
 per-instance features are arrays with N first (ragged ``bboxes`` / ``bbox_frames``: a list of N
 arrays), text is ``str``. A source is picklable (readers reopen lazily in each process), so it
-works in ``DataLoader(num_workers=...)`` and Grain worker processes.
+works in ``DataLoader(num_workers=...)`` and Grain worker processes. It is also safe across
+``fork``: a reader opened in the parent (e.g. by looking at ``source[0]`` first) is never used in a
+forked child; the child opens its own (the process id is checked on every read).
+A shard or ``features.json`` that cannot be read is a :class:`DatasetError` naming the file.
 """
 
 from __future__ import annotations
 
+import bisect
+import os
 import pathlib
 from collections.abc import Sequence
 
@@ -46,6 +51,37 @@ def _regular(f: Feature, value, dims: dict):
     return np.asarray(value, dtype=dtype)[()] if not f.shape else np.asarray(value, dtype=dtype)
 
 
+class _ShardReader:
+    """Records of a split's shards by global index. Each shard's ArrayRecord reader is opened on
+    first use, in the calling thread: array_record's own data source opens readers in a thread
+    pool, and a reader made in a pool thread of a forked child crashes (segfault) once the parent
+    has read."""
+
+    def __init__(self, paths: list[str], lengths: list[int]):
+        self.paths = paths
+        self.ends = list(np.cumsum(lengths))
+        self.readers: dict[int, object] = {}
+
+    def shard_of(self, index: int) -> tuple[int, int]:
+        shard = bisect.bisect_right(self.ends, index)
+        return shard, index - (self.ends[shard - 1] if shard else 0)
+
+    def __getitems__(self, indices: Sequence[int]) -> list[bytes]:
+        from array_record.python import array_record_module
+        out = []
+        for index in indices:
+            shard, position = self.shard_of(int(index))
+            if shard not in self.readers:
+                self.readers[shard] = array_record_module.ArrayRecordReader(
+                    self.paths[shard], "readahead_buffer_size:0", file_reader_buffer_size=32768)
+            out.append(self.readers[shard].read([position])[0])
+        return out
+
+
+#: readers a forked child inherited from its parent (never used, never destroyed; see _open)
+_INHERITED: list = []
+
+
 class DataSource:
     """A map-style source of one split (see module doc). Build with :func:`load`."""
 
@@ -70,6 +106,7 @@ class DataSource:
         self._features = None
         self._parser = None
         self._last = None
+        self._pid = os.getpid()
 
     # ---------------------------------------------------------------- pickling
     def __getstate__(self):
@@ -84,19 +121,49 @@ class DataSource:
                 for i in range(count)]
 
     def _open(self):
+        if self._pid != os.getpid():  # a forked child: the parent's reader is not ours to use
+            # ... nor to destroy: its destructor would join the parent's reader threads, which
+            # do not exist in the child (a segfault). It is kept, unused, until the child exits.
+            if self._reader is not None and "uncompressed" not in self.info.get(
+                    "shard_writer_options", ""):
+                raise DatasetError(
+                    f"{str(self.dataset_dir)!r} has zstd-compressed shards (packed by an older "
+                    "kubric), which cannot be read in a forked process once the parent has "
+                    "read them; pack it again, or use multiprocessing_context='spawn'")
+            _INHERITED.append((self._reader, self._features))
+            self._reader = self._features = self._parser = self._last = None
+            self._pid = os.getpid()
         if self._reader is None:
             import tensorflow_datasets as tfds
-            from array_record.python.array_record_data_source import ArrayRecordDataSource
             from tensorflow_datasets.core import utils
-            self._features = tfds.features.FeatureConnector.from_config(str(self.dataset_dir))
+            try:
+                features = tfds.features.FeatureConnector.from_config(str(self.dataset_dir))
+            except Exception as err:  # JSONDecodeError, KeyError, OSError ... of TFDS's parser
+                raise DatasetError(f"{str(self.dataset_dir / 'features.json')!r} cannot be read: "
+                                   f"{_one_line(err)}") from None
+            self._features = features
             keys = self._keys or tuple(self._features.keys())
             specs = {k: self._features.get_serialized_info()[k] for k in keys}
             self._parser = (specs, utils.flatten_nest_dict(specs), keys)
-            # "path[0:n]" gives each shard's record count, so no reader is opened until a read
             lengths = self.info["shard_lengths"][self.split]
-            self._reader = ArrayRecordDataSource(
-                [f"{p}[0:{n}]" for p, n in zip(self.shard_paths(), lengths, strict=True)])
+            missing = [p for p in self.shard_paths() if not os.path.isfile(p)]
+            if missing:
+                raise DatasetError(f"{missing[0]!r}: shard missing ({len(missing)} of the "
+                                   f"{self.split} split's shards are)")
+            self._reader = _ShardReader(self.shard_paths(), lengths)
         return self._reader
+
+
+    def _records(self, scenes: list[int]) -> list[bytes]:
+        """The serialised examples of ``scenes``; a shard that cannot be read is named."""
+        reader = self._open()
+        try:
+            return list(reader.__getitems__(scenes))
+        except Exception as err:  # array_record raises RuntimeError / ValueError with no path
+            bad = sorted({reader.paths[reader.shard_of(s)[0]] for s in scenes})
+            raise DatasetError(f"{bad[0]!r}: cannot read example(s) {scenes} of the "
+                               f"{self.split} split (truncated or corrupt shard?): "
+                               f"{_one_line(err)}") from None
 
     # ---------------------------------------------------------------- access
     def __len__(self) -> int:
@@ -140,7 +207,7 @@ class DataSource:
         a scene's frames in order decodes it once."""
         if self._last is not None and self._last[0] == scene:
             return self._last[1]
-        example = self.decode(self._open()[scene] if record is None else record)
+        example = self.decode(self._records([scene])[0] if record is None else record)
         if self._frames:
             self._last = (scene, example)
         return example
@@ -152,7 +219,7 @@ class DataSource:
     def __getitems__(self, indices: Sequence[int]) -> list:
         located = [self._locate(i) for i in indices]
         scenes = sorted({s for s, _ in located})
-        records = dict(zip(scenes, self._open().__getitems__(scenes), strict=True))
+        records = dict(zip(scenes, self._records(scenes), strict=True))
         examples = {s: self._scene_example(s, records[s]) for s in scenes}
         return [self.task(examples[s], frame, self) for s, frame in located]
 
@@ -163,6 +230,10 @@ class DataSource:
     def __repr__(self) -> str:
         return (f"DataSource({str(self.dataset_dir)!r}, split={self.split!r}, "
                 f"task={self.task.name!r}, len={len(self)})")
+
+
+def _one_line(err: BaseException) -> str:
+    return " ".join(str(err).split())[:300] or type(err).__name__
 
 
 def load(dataset_dir, split: str = "train", task: str | None = None, **task_options) -> DataSource:

@@ -7,7 +7,12 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Callable
 
+import numpy as np
+
 from kubric.datasets.layout import DatasetError
+
+#: task options that count frames: whole numbers ≥ 1 (checked when the source is made)
+COUNT_OPTIONS = {"frame_stride", "num_frames"}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -33,6 +38,12 @@ class Task:
         if unknown:
             raise DatasetError(f"task {self.name!r}: unknown option(s) {unknown}; options: "
                                f"{list(self.options) or 'none'}")
+        for name in COUNT_OPTIONS & set(options):
+            value = options[name]
+            if value is not None and (isinstance(value, bool) or not isinstance(
+                    value, (int, np.integer)) or value < 1):
+                raise DatasetError(f"task {self.name!r}: {name} must be a whole number ≥ 1, "
+                                   f"got {value!r}")
         return dict(options)
 
     def missing(self, schema) -> list[str]:

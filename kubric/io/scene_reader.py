@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import functools
 import pathlib
+import zipfile
 from collections.abc import Mapping
 
 import numpy as np
@@ -224,9 +225,9 @@ class SceneReader:
             file, _, key = arg.partition(":")
             path = self.scene_dir / file
             try:
-                with np.load(path) as archive:
+                with np.load(path, allow_pickle=False) as archive:
                     value = archive[key]
-            except (OSError, KeyError, ValueError) as err:
+            except (OSError, KeyError, ValueError, EOFError, zipfile.BadZipFile) as err:
                 raise SceneError(f"{what}: cannot read {key!r} from {file}: {err}") from None
             return _cast(f, value, self.dims, what)
         if kind in ("meta", "camera"):

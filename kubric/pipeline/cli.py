@@ -70,7 +70,8 @@ def cmd_worker(args) -> int:
 
 
 #: cluster flags → their defaults; the slurm ones apply to --cluster slurm only
-CLUSTER_FLAGS = {"threads_per_scene": 1, "connect_timeout": 20.0, "dashboard_address": ":8787"}
+CLUSTER_FLAGS = {"threads_per_scene": 1, "connect_timeout": 20.0,
+                 "dashboard_address": "127.0.0.1:8787"}
 SLURM_FLAGS = {"jobs": 1, "cores_per_job": 1, "memory": "4GB", "walltime": "01:00:00",
                "queue": None, "job_directive": [], "print_job_script": False}
 
@@ -171,7 +172,8 @@ def cmd_generate(args) -> int:
             client, cluster = open_cluster(cluster_opts)
         except ClusterError as err:
             return _error("generate", err)
-        print(f"Dask dashboard: {client.dashboard_link}", flush=True)
+        from kubric.pipeline.dask_runner import dashboard_link
+        print(f"Dask dashboard: {dashboard_link(client, cluster, cluster_options)}", flush=True)
         runner = DaskRunner(recipe_spec(cls), out, seeds, client,
                             threads_per_scene=cluster_opts.threads_per_scene, **common)
     try:
@@ -191,8 +193,11 @@ def format_recipe(cls) -> str:
     lines = [f"{cls.name}: {cls.description()}"]
     width = max((len(n) for n in cls.options), default=0)
     for name, opt in cls.options.items():
+        bounded = opt.choices is not None or any(
+            v is not None for v in (opt.low, opt.high, opt.limit))
+        bounds = f" [allowed: {opt.allowed()}]" if bounded else ""
         lines.append(f"    {name:<{width}}  {opt.type_name:<11} default {opt.default!r}: "
-                     f"{opt.help}")
+                     f"{opt.help}{bounds}")
     return "\n".join(lines)
 
 
@@ -232,7 +237,8 @@ def add_cluster_arguments(p, what: str) -> None:
     g.add_argument("--connect-timeout", type=float, default=None,
                    help="seconds to wait for the scheduler (default 20)")
     g.add_argument("--dashboard-address", default=None,
-                   help="dashboard address of a cluster started here (default :8787)")
+                   help="dashboard address of a cluster started here (default 127.0.0.1:8787: "
+                   "this machine only; :8787 listens on every interface)")
     g.add_argument("--jobs", type=int, default=None, help="slurm: worker jobs to submit")
     g.add_argument("--cores-per-job", type=int, default=None, help="slurm: cores of each job")
     g.add_argument("--memory", default=None, help="slurm: memory of each job (default 4GB)")
@@ -268,7 +274,8 @@ def add_parser(subparsers) -> None:
                               "as Dask tasks.")
     p.add_argument("recipe")
     p.add_argument("--out", required=True, help="output root: a directory or an fsspec URL "
-                   "(s3://bucket/run, gs://..., memory://..., file://...)")
+                   "(s3://bucket/run, gs://..., file://...; not memory://, which is private "
+                   "to one process)")
     p.add_argument("--scenes", type=int, required=True, help="number of scenes")
     p.add_argument("--first-seed", type=int, default=0, help="seed of the first scene")
     p.add_argument("--workers", type=int, default=None, help="parallel workers (default: cores; "

@@ -2,9 +2,13 @@
 
 ``kubric generate ... --cluster local|tcp://HOST:PORT|slurm``:
 
-* ``local`` starts a ``LocalCluster`` in this process (``--workers`` slots);
+* ``local`` starts a ``LocalCluster`` in this process (``--workers`` slots); its scheduler,
+  workers and dashboard listen on 127.0.0.1 only (``--dashboard-address :8787`` asks for every
+  interface);
 * ``tcp://HOST:PORT`` (or ``tls://``) joins a running scheduler; start its workers with
-  ``dask worker tcp://HOST:PORT --nthreads 1 --resources scene=1``;
+  ``dask worker tcp://HOST:PORT --nthreads 1 --resources scene=1``. A ``tcp://`` address is first
+  probed: it must answer with Dask's handshake within ``--connect-timeout`` (the dashboard's
+  port, 8787, or any other server is refused in one line, never a hang);
 * ``slurm`` submits Dask worker jobs with dask-jobqueue (``--jobs``, ``--cores-per-job``,
   ``--memory``, ``--walltime``, ``--queue``, ``--job-directive``); every job runs
   ``cores-per-job // threads-per-scene`` worker processes.
@@ -39,6 +43,10 @@ from kubric.pipeline.runner import PARENT_ENV, Runner, RunSummary, run_logged, u
 
 #: the resource every scene task asks for (one per worker slot).
 RESOURCE = "scene"
+#: the dashboard of a cluster started here: this machine only unless asked
+LOCAL_DASHBOARD = "127.0.0.1:8787"
+#: the largest handshake a Dask scheduler sends (it is about 60 bytes)
+_HANDSHAKE_MAX = 1 << 16
 _ADDRESS_RE = re.compile(r"^(tcp|tls)://([^\s:/]+|\[[0-9a-fA-F:]+\]):(\d{1,5})$")
 
 
@@ -54,7 +62,7 @@ class ClusterOptions:
     workers: int | None = None            # local: slots (default cores // threads_per_scene)
     threads_per_scene: int = 1
     connect_timeout: float = 20.0
-    dashboard_address: str = ":8787"
+    dashboard_address: str = LOCAL_DASHBOARD
     jobs: int = 1                         # slurm
     cores_per_job: int = 1
     memory: str = "4GB"
@@ -132,9 +140,14 @@ def open_cluster(options: ClusterOptions, processes: bool = False):
     try:
         if kind == "local":
             slots = options.workers or max(1, usable_cores() // options.threads_per_scene)
+            # every listener on 127.0.0.1: the scheduler (processes: tcp; threads: inproc, no
+            # socket), the workers' own dashboards, and the dashboard unless asked otherwise
+            local = {"host": "127.0.0.1"} if processes else {}
             cluster = LocalCluster(n_workers=slots, threads_per_worker=1, processes=processes,
-                                   resources={RESOURCE: 1}, dashboard_address=
-                                   options.dashboard_address, silence_logs=40)
+                                   resources={RESOURCE: 1},
+                                   dashboard_address=options.dashboard_address,
+                                   worker_dashboard_address="127.0.0.1:0", silence_logs=40,
+                                   **local)
             client = Client(cluster)
         elif kind == "slurm":
             from dask_jobqueue import SLURMCluster
@@ -142,6 +155,7 @@ def open_cluster(options: ClusterOptions, processes: bool = False):
             cluster.scale(jobs=options.jobs)
             client = Client(cluster)
         else:
+            probe_scheduler(options.spec, options.connect_timeout)
             client = Client(options.spec, timeout=options.connect_timeout)
     except (OSError, TimeoutError) as err:
         if cluster is not None:
@@ -159,6 +173,61 @@ def open_cluster(options: ClusterOptions, processes: bool = False):
                                f"offers the {RESOURCE!r} resource; start them with `dask worker "
                                f"{options.spec} --nthreads 1 --resources {RESOURCE}=1`")
     return client, cluster
+
+
+def probe_scheduler(address: str, timeout: float) -> None:
+    """Raise :class:`ClusterError` unless ``tcp://HOST:PORT`` answers with a Dask handshake within
+    ``timeout`` seconds. A Dask scheduler sends its handshake (an 8-byte length, then frames
+    holding msgpack with ``compression`` / ``python`` / ``pickle-protocol``) as soon as a
+    connection opens; an HTTP server (the dashboard, port 8787) waits for a request, so it times
+    out here instead of hanging in the client, and a server that sends something else is refused
+    by its first bytes (the client would read them as a length: "Unable to allocate 3.07 EiB").
+    ``tls://`` addresses are not probed (the handshake is inside TLS)."""
+    match = _ADDRESS_RE.match(address)
+    if match is None or match.group(1) != "tcp":
+        return
+    host, port = match.group(2).strip("[]"), int(match.group(3))
+    deadline = time.monotonic() + timeout
+    try:
+        sock = socket.create_connection((host, port), timeout=timeout)
+    except OSError as err:
+        raise ClusterError(f"--cluster: no Dask scheduler answered at {address} within "
+                           f"{timeout:g} s ({err.strerror or type(err).__name__})") from None
+    data = b""
+    with sock:
+        try:
+            while len(data) < 8 or len(data) < 8 + min(_HANDSHAKE_MAX, int.from_bytes(
+                    data[:8], "little")):
+                if len(data) >= 8 and int.from_bytes(data[:8], "little") > _HANDSHAKE_MAX:
+                    break
+                sock.settimeout(max(0.01, deadline - time.monotonic()))
+                block = sock.recv(4096)
+                if not block:
+                    break
+                data += block
+        except TimeoutError:
+            raise ClusterError(
+                f"--cluster {address}: something listens there but sent no Dask handshake within "
+                f"--connect-timeout {timeout:g} s; is it the dashboard (port 8787)? A scheduler "
+                "listens on 8786 by default") from None
+        except OSError as err:
+            raise ClusterError(f"--cluster {address}: the connection failed before a Dask "
+                               f"handshake ({err.strerror or type(err).__name__})") from None
+    if b"pickle-protocol" not in data[8:8 + _HANDSHAKE_MAX]:
+        raise ClusterError(f"--cluster {address}: answered, but not as a Dask scheduler (its "
+                           f"first bytes: {data[:24]!r})")
+
+
+def dashboard_link(client, cluster, options: ClusterOptions) -> str:
+    """The dashboard's address as it listens: for a cluster started here, the host of
+    ``--dashboard-address`` (127.0.0.1 by default; every interface for ``:PORT``) and the port it
+    got (Dask's own link names the machine's host name, whatever the bind)."""
+    port = getattr(getattr(cluster, "scheduler", None), "http_server", None)
+    port = getattr(port, "port", None)
+    if options.kind != "local" or port is None:
+        return client.dashboard_link
+    host = options.dashboard_address.rpartition(":")[0] or "0.0.0.0"
+    return f"http://{host}:{port}/status"
 
 
 # ---------------------------------------------------------------------- on the Dask worker
@@ -269,5 +338,6 @@ class DaskRunner(Runner):
             time.sleep(0.5)
 
 
-__all__ = ["ClusterError", "ClusterOptions", "DaskRunner", "open_cluster", "scene_task",
+__all__ = ["ClusterError", "ClusterOptions", "DaskRunner", "dashboard_link", "open_cluster",
+           "probe_scheduler", "scene_task",
            "slurm_job_script", "RESOURCE"]

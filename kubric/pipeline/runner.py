@@ -9,6 +9,8 @@ logs, resume, progress bar, summary, signals); :class:`LocalRunner` is the proce
 * up to ``retries`` extra attempts per failed scene;
 * one log per scene, kept, in ``OUT/logs/scene_{seed:08d}.log`` (all attempts appended);
 * resume: complete scenes are skipped, stale work directories removed;
+* one run per output folder: ``OUT/.kubric-generate.lock`` is held while the run lasts; a second
+  run on the same folder refuses at once (:class:`~kubric.io.output_lock.OutputBusy`);
 * SIGINT / SIGTERM: no new scenes start, running workers are terminated (they delete their work
   directories), and the summary says so. Even a ``kill -9`` of the runner leaves no directory that
   looks complete: only ``_SUCCESS`` marks a scene done, and the workers die with the runner
@@ -37,6 +39,8 @@ from kubric.pipeline.worker import remove_stale
 
 #: environment variable telling a worker to die with the runner that started it.
 PARENT_ENV = "KUBRIC_RUNNER_PID"
+#: the lock file a run holds in its (local) output folder
+LOCK_FILE = ".kubric-generate.lock"
 
 
 def usable_cores() -> int:
@@ -269,10 +273,18 @@ class Runner(abc.ABC):
         """Run the scenes of ``todo`` (seeds), recording each result in ``summary``."""
 
     def run(self) -> RunSummary:
+        """Run every scene not yet complete (one run per local output folder at a time)."""
+        if self.remote:
+            return self._run()
+        from kubric.io.output_lock import OutputLock
+        pathlib.Path(self.out_root).mkdir(parents=True, exist_ok=True)
+        with OutputLock(pathlib.Path(self.out_root) / LOCK_FILE, f"--out {str(self.out_root)!r}"):
+            return self._run()
+
+    def _run(self) -> RunSummary:
         start = time.time()
         summary = RunSummary(requested=len(self.seeds))
         if not self.remote:
-            pathlib.Path(self.out_root).mkdir(parents=True, exist_ok=True)
             remove_stale(pathlib.Path(self.out_root))
         self.logs.prepare()
         complete = set(complete_scenes(self.out_root))

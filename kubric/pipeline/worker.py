@@ -14,12 +14,14 @@ copy), or a work directory whose process is gone, is removed and the scene redon
 
 from __future__ import annotations
 
+import errno
 import os
 import pathlib
 import shutil
 import time
 from dataclasses import dataclass
 
+from kubric import faults
 from kubric.io.scene_dir import (
     SUCCESS_FILE,
     is_complete,
@@ -73,6 +75,9 @@ def run_scene(recipe, seed: int, out_root) -> SceneResult:
     final = out_root / scene_name(seed)
     if is_complete(final):
         return SceneResult(seed, final, "skipped", 0.0)
+    if final.is_symlink():
+        raise FileExistsError(errno.EEXIST, "a symbolic link stands at the scene's name; "
+                              "remove it (a scene directory is written there)", str(final))
     out_root.mkdir(parents=True, exist_ok=True)
     remove_stale(out_root, seed)
     work = out_root / work_dir_name(seed, os.getpid())
@@ -82,7 +87,15 @@ def run_scene(recipe, seed: int, out_root) -> SceneResult:
     own(work)  # removed at exit even when Blender turns a signal into an immediate exit
     try:
         with randomness.explicit_rng_only(f"recipe {recipe.name!r}"):  # rng= always explicit
-            recipe.generate(seed, work)
+            try:
+                recipe.generate(seed, work)
+                faults.point("worker.generated")
+            except OSError as err:
+                if err.filename is None and err.errno in (errno.ENOSPC, errno.EDQUOT):
+                    free = shutil.disk_usage(out_root).free / 2**20
+                    raise OSError(err.errno, f"{err.strerror} (writing the scene; {free:.0f} "
+                                  "MiB free there)", str(work)) from None
+                raise
         if is_complete(final):  # another process finished the same seed meanwhile
             shutil.rmtree(work, ignore_errors=True)
             return SceneResult(seed, final, "skipped", time.time() - start)

@@ -21,7 +21,7 @@ import numpy as np
 
 import kubric as kb
 from kubric.assets import clevr
-from kubric.pipeline import Option
+from kubric.pipeline import Option, OptionError
 from kubric.recipes import multiview_schema
 from kubric.recipes.common import source_location
 from kubric.recipes.multiview_base import MultiviewBase, open_source, orbit_positions
@@ -56,6 +56,18 @@ class ComplexBrdf(MultiviewBase, name="complex_brdf"):
     light_distance = Option(8.0, "distance of the three point lights (m)", low=0.1)
     light_intensity = Option(300.0, "intensity of each point light (W)", low=0.0)
     max_bounces = Option(12, "Cycles light bounces (every kind)", low=0, high=1024)
+
+    def check(self) -> None:
+        super().check()
+        # the object's bounding sphere (radius ≤ √3/2 · its largest extent) must leave the
+        # camera orbit and the lights outside it, or no view shows it
+        radius = math.sqrt(3.0) / 2.0 * self.object_size
+        for name in ("orbit_distance", "light_distance"):
+            if radius >= getattr(self, name):
+                raise OptionError(f"{self.name}: object_size={self.object_size:g} (bounding radius "
+                                  f"up to {radius:g} m) does not fit inside {name}="
+                                  f"{getattr(self, name):g} m; choose object_size < "
+                                  f"{2.0 * getattr(self, name) / math.sqrt(3.0):.4g}")
 
     def open_sources(self) -> dict:
         sources = super().open_sources()

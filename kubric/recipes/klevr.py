@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import abc
 import json
+import math
 import pathlib
 
 import numpy as np
@@ -90,6 +91,22 @@ def point_cloud(camera, frames, layers, semantic) -> dict[str, np.ndarray]:
     return {k: np.concatenate(v) for k, v in parts.items()}
 
 
+#: the smallest footprint radius of a KuBasic shape per metre of scale: each spans 1 m along x
+#: or y (the built manifest's bounds), so half its bounding box's diagonal is ≥ 0.5
+MIN_FOOTPRINT = 0.5
+
+
+def max_objects_on_floor(region: float, radius: float, margin: float = 0.05) -> int:
+    """An upper bound on how many footprints of radius ≥ ``radius`` :func:`free_place` can put in
+    the square ±``region``: their centres lie in the square (side s = 2·region) at pairwise
+    distances ≥ d = 2·radius + margin, and Groemer's inequality bounds such a point set in a
+    convex region of area A and perimeter P by 2A / (√3 d²) + P / (2d) + 1."""
+    s = 2.0 * region
+    d = 2.0 * radius + margin
+    bound = 2.0 * s * s / (math.sqrt(3.0) * d * d) + 4.0 * s / (2.0 * d) + 1.0
+    return int(bound) if bound < 1e9 else 10**9  # (a huge region: no limit worth stating)
+
+
 class _SemanticScenes(MultiviewBase):
     """Shared by klevr and toybox."""
 
@@ -141,6 +158,12 @@ class Klevr(_SemanticScenes, name="klevr"):
         super().check()
         if not [s for s in self.shapes.split(",") if s.strip()]:
             raise OptionError(f"{self.name}: option shapes={self.shapes!r} names no shape")
+        fits = max_objects_on_floor(self.region, MIN_FOOTPRINT * self.size_range[0])
+        if self.min_num_objects > fits:
+            raise OptionError(
+                f"{self.name}: min_num_objects={self.min_num_objects} objects of scale ≥ "
+                f"{self.size_range[0]:g} cannot stand apart in region=±{self.region:g} m (at "
+                f"most {fits} fit); enlarge region, lower min_num_objects or size_range")
         if self.kubasic_source is None:  # the built KuBasic: its shapes are known up front
             self.check_shapes(set(clevr.KUBASIC_SHAPES))
 

@@ -18,15 +18,19 @@ Endpoints (all answers are computed by :class:`~kubric.viewer.service.ViewerServ
 Scenes are named, never addressed by path; a request path containing ``..``, a backslash, a NUL,
 an absolute path or an encoded separator inside a component is refused with 400 before any
 lookup (also after repeated percent-decoding). Errors are JSON ``{"error": message}`` with 400
-(bad request), 404 (unknown scene / layer / frame), 405 (methods that would write) or 422 (a
-scene that cannot be shown: incomplete, corrupt files).
+(bad request), 404 (unknown scene / layer / frame), 405 (methods that would write), 422 (a
+scene that cannot be shown: incomplete, corrupt files) or 500 (anything else: every request is
+answered with a status, never a dropped connection). The listen backlog is
+:data:`LISTEN_BACKLOG` (the standard library's default, 5, drops connections under load).
 """
 
 from __future__ import annotations
 
 import json
+import math
 import pathlib
 import sys
+import traceback
 import urllib.parse
 from http import HTTPStatus
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
@@ -35,6 +39,8 @@ from kubric.viewer.service import ViewerService
 from kubric.viewer.source import SceneError
 
 STATIC_DIR = pathlib.Path(__file__).parent / "static"
+#: pending connections the kernel queues (a page opening fires dozens of requests at once)
+LISTEN_BACKLOG = 1024
 CONTENT_TYPES = {".html": "text/html; charset=utf-8", ".js": "text/javascript; charset=utf-8",
                  ".css": "text/css; charset=utf-8", ".png": "image/png"}
 
@@ -68,10 +74,13 @@ def _number(query: dict, key: str, kind=float, required=False):
             raise BadRequest(f"query parameter {key!r} is required")
         return None
     try:
-        return kind(query[key])
+        value = kind(query[key])
     except ValueError:
-        raise BadRequest(f"query parameter {key}={query[key]!r} must be a "
-                         f"{'whole number' if kind is int else 'number'}") from None
+        value = None
+    if value is None or not math.isfinite(value):
+        raise BadRequest(f"query parameter {key}={query[key]!r} must be a finite "
+                         f"{'whole number' if kind is int else 'number'}")
+    return value
 
 
 def _index(text: str) -> int:
@@ -101,6 +110,12 @@ class Handler(BaseHTTPRequestHandler):
             status, ctype, body = self.error(HTTPStatus.NOT_FOUND, err.args[0] if err.args else err)
         except SceneError as err:
             status, ctype, body = self.error(HTTPStatus.UNPROCESSABLE_ENTITY, err)
+        except Exception as err:  # noqa: BLE001 - answered (500), and the traceback logged
+            if not self.quiet:
+                traceback.print_exc()
+            message = " ".join(str(err).split())[:300] or type(err).__name__
+            status, ctype, body = self.error(HTTPStatus.INTERNAL_SERVER_ERROR,
+                                             f"{type(err).__name__}: {message}")
         self.send_response(status)
         self.send_header("Content-Type", ctype)
         self.send_header("Content-Length", str(len(body)))
@@ -159,11 +174,15 @@ class Handler(BaseHTTPRequestHandler):
         raise KeyError(f"no such page or endpoint: {'/'.join(parts)!r}")
 
 
+class _Server(ThreadingHTTPServer):
+    request_queue_size = LISTEN_BACKLOG
+
+
 def make_server(service: ViewerService, host: str = "127.0.0.1", port: int = 8000,
                 quiet: bool = True) -> ThreadingHTTPServer:
     """A server (not yet serving) for ``service``; port 0 picks a free port."""
     handler = type("BoundHandler", (Handler,), {"service": service, "quiet": quiet})
-    server = ThreadingHTTPServer((host, port), handler)
+    server = _Server((host, port), handler)
     server.daemon_threads = True
     return server
 

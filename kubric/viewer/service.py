@@ -95,7 +95,18 @@ class ViewerService:
         return row.value
 
     def scene_list(self) -> dict:
-        return {"scenes": [self.summary(n) for n in self.source.names()]}
+        """One row per scene; a scene whose row cannot be made is a row with its error."""
+        rows = []
+        for name in self.source.names():
+            try:
+                rows.append(self.summary(name))
+            except Exception as err:  # noqa: BLE001 - one bad scene never empties the list
+                message = " ".join(str(err).split())[:300] or type(err).__name__
+                rows.append({"name": name, "recipe": None, "seed": None, "split": None,
+                             "num_instances": None, "num_frames": None, "resolution": None,
+                             "layers": [], "has_tracks": False,
+                             "error": f"{name}: cannot be listed: {message}"})
+        return {"scenes": rows}
 
     def scene(self, name: str) -> dict:
         summary = self.summary(name)

@@ -92,7 +92,7 @@ class DirectorySource(SceneSource):
     def __init__(self, path):
         root = pathlib.Path(path).expanduser().resolve()
         if not root.is_dir():
-            raise NotADirectoryError(f"kubric view: {str(path)!r} is not a directory (give a scene "
+            raise NotADirectoryError(f"{str(path)!r} is not a directory (give a scene "
                                      "directory or a folder of scenes)")
         self.root = root
         self.single = _looks_like_scene(root)
@@ -129,6 +129,13 @@ class DirectorySource(SceneSource):
             row["error"] = str(err)
             return row
         flags, info = meta.get("flags", {}), meta.get("metadata", {})
+        wrong = [k for k, v in (("flags", flags), ("metadata", info)) if not isinstance(v, dict)]
+        if not isinstance(meta.get("instances", []), list):
+            wrong.append("instances")
+        if wrong:  # an error card for this scene; the rest of the list is unaffected
+            row["error"] = (f"{name}/metadata.json: {', '.join(map(repr, wrong))} has the wrong "
+                            "shape (expected an object / a list)")
+            return row
         row.update(recipe=flags.get("recipe"), seed=flags.get("seed", info.get("seed")),
                    split=flags.get("split") or info.get("split"),
                    num_instances=len(meta.get("instances", [])),
