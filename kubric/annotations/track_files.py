@@ -73,7 +73,7 @@ def read_tracks(path) -> dict[str, np.ndarray]:
         with np.load(path, allow_pickle=False) as data:
             out = {k: data[k] for k in data.files}
     except (OSError, ValueError, EOFError, zipfile.BadZipFile) as err:  # truncated, not a .npz
-        raise ValueError(f"{str(path)!r} is not a readable tracks file (truncated or not a "
+        raise InputError(f"{str(path)!r} is not a readable tracks file (truncated or not a "
                          f".npz: {' '.join(str(err).split())[:200]})") from None
     version = int(out.pop("format_version", -1))
     if version != FORMAT_VERSION:

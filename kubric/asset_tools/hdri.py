@@ -16,7 +16,7 @@ from pathlib import Path
 from kubric.errors import InputError
 
 NAME_DEFAULT = "HDRIs"
-VERSION = "1.0"
+VERSION = "1.1"  # 1.1: each archive's sha256 in the manifest
 EXTENSIONS = (".hdr", ".exr")
 BPY_WORLD_LICENSE = ("CC0-1.0 (Greg Zaal, Poly Haven; shipped with Blender in "
                      "datafiles/studiolights/world)")

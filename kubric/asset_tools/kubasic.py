@@ -31,7 +31,8 @@ from pathlib import Path
 from kubric.assets.clevr import KUBASIC_SHAPES
 
 NAME = "KuBasic"
-VERSION = "2.1"  # 1.1: textured dome; 2.0: shapes unit-sized (were ±1 m); 2.1: manifest description
+VERSION = "2.2"  # 1.1: textured dome; 2.0: shapes unit-sized (were ±1 m); 2.1: manifest
+# description; 2.2: each archive's sha256 in the manifest
 #: factor from the shapes' design size (cube ±1) to KuBasic's unit size (cube ±0.5)
 SHAPE_SCALE = 0.5
 #: the manifest's ``description``

@@ -22,7 +22,7 @@ from kubric.errors import InputError
 
 NAME = "PybulletObjects"
 #: 2.0: visual GLBs carry the source's appearance (texture, MTL colour or URDF colour)
-VERSION = "2.0"
+VERSION = "2.1"  # 2.1: each archive's sha256 in the manifest
 ZLIB = "zlib (pybullet_data, Bullet Physics / Erwin Coumans)"
 
 #: id → (mesh, URDF giving its scale or None, licence, description)

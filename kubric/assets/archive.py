@@ -29,6 +29,7 @@ import zlib
 from pathlib import Path, PurePosixPath
 
 from kubric.errors import KubricError
+from kubric.io import paths
 
 #: default limits of :func:`safe_extract` (bytes).
 MAX_MEMBER_BYTES = 512 * 1024**2
@@ -99,11 +100,10 @@ def _check_member(member: tarfile.TarInfo, asset_id: str, max_member_bytes: int)
 
 
 def _remove_dead_staging(target: Path) -> None:
-    from kubric.pipeline.cleanup import pid_alive
     pattern = re.compile(rf"^\.{re.escape(target.name)}\.staging-(\d+)-")
     for entry in target.parent.iterdir():
         m = pattern.match(entry.name)
-        if m and entry.is_dir() and not pid_alive(int(m.group(1))):
+        if m and entry.is_dir() and not paths.pid_alive(int(m.group(1))):
             shutil.rmtree(entry, ignore_errors=True)
 
 

@@ -133,8 +133,8 @@ def _check_recipe(scene: pathlib.Path, schema: Schema) -> None:
         return  # a recipe unknown here: the reader reports what does not fit
     own = {s.name for s in (cls.schema, *cls.variants) if s is not None}
     if own and schema.name not in own:
-        raise SceneError(f"{str(scene)!r} is a scene of recipe {recipe!r} (schemas "
-                         f"{sorted(own)}), not of the dataset's schema {schema.name!r} (pack it "
+        raise SceneError(f"{str(scene)!r} is a scene of recipe {recipe!r}, not of the dataset's "
+                         f"schema {schema.name!r} (its schemas: {sorted(own)}; pack it "
                          "separately or pass --schema)")
 
 

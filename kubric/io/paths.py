@@ -75,3 +75,23 @@ def read_bytes(filename: PathLike) -> bytes:
         return path.read_bytes()
     except FileNotFoundError:
         raise FileNotFoundError(f"no such file: {str(path)!r}") from None
+
+
+def pid_alive(pid: int) -> bool:
+    """Whether process ``pid`` still runs. A zombie (exited, not yet reaped — e.g. a worker of a
+    killed runner in a container whose init does not reap orphans) counts as gone."""
+    if pid == os.getpid():
+        return True
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    if not pathlib.Path("/proc/self/stat").exists():
+        return True  # no procfs (macOS): the signal-0 answer is all we know
+    try:  # field 3 of /proc/PID/stat is the state; the name before it is in parentheses
+        stat = pathlib.Path(f"/proc/{pid}/stat").read_text()
+    except OSError:
+        return False  # gone meanwhile
+    return stat.rsplit(")", 1)[-1].split()[0] != "Z"

@@ -20,6 +20,8 @@ import signal
 import tempfile
 import threading
 
+from kubric.io.paths import pid_alive  # noqa: F401  (also public here: worker, tests)
+
 #: prefix of a process's private temporary folder: ``kubric-tmp-{pid}-`` + a random suffix (mkdtemp's)
 PRIVATE_PREFIX = "kubric-tmp-"
 _PRIVATE_RE = re.compile(rf"^{PRIVATE_PREFIX}(\d+)-")
@@ -27,26 +29,6 @@ _PRIVATE_RE = re.compile(rf"^{PRIVATE_PREFIX}(\d+)-")
 _owned: dict[pathlib.Path, int] = {}  # path -> the pid that owns it (a fork inherits the dict)
 _lock = threading.Lock()
 _registered = False
-
-
-def pid_alive(pid: int) -> bool:
-    """Whether process ``pid`` still runs. A zombie (exited, not yet reaped — e.g. a worker of a
-    killed runner in a container whose init does not reap orphans) counts as gone."""
-    if pid == os.getpid():
-        return True
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    if not pathlib.Path("/proc/self/stat").exists():
-        return True  # no procfs (macOS): the signal-0 answer is all we know
-    try:  # field 3 of /proc/PID/stat is the state; the name before it is in parentheses
-        stat = pathlib.Path(f"/proc/{pid}/stat").read_text()
-    except OSError:
-        return False  # gone meanwhile
-    return stat.rsplit(")", 1)[-1].split()[0] != "Z"
 
 
 def own(path) -> pathlib.Path:
