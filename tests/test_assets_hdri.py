@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 import kubric as kb
+from kubric.asset_tools import hdri
 from kubric.asset_tools.hdri import bpy_world_hdri_dir, build_hdri_source
 from kubric.assets import AssetSource, ensure_hdri_source
 
@@ -83,6 +84,6 @@ def test_cli_builds_and_lists_a_source(tmp_path, capsys):
     assert main(["assets", "hdri", "--out", str(tmp_path / "h")]) == 0
     assert main(["assets", "list", str(tmp_path / "h")]) == 0
     printed = capsys.readouterr().out
-    assert "HDRIs 1.0: 8 assets" in printed and "sunset" in printed
+    assert f"HDRIs {hdri.VERSION}: 8 assets" in printed and "sunset" in printed
     assert main(["assets", "cache"]) == 0
     assert capsys.readouterr().out.strip() == str(tmp_path / "cache")

@@ -306,27 +306,37 @@ def synthetic_scenes(root, seeds, frames=4, size=(32, 24), instances=5):
         (scene / "_SUCCESS").touch()
 
 
-def test_coco_streams_one_scene_at_a_time(tmp_path):
-    import tracemalloc
+_PEAK = """
+import json, sys, tracemalloc
+from kubric.datasets.exports.coco import export_coco
+export_coco(sys.argv[1], sys.argv[2] + ".warm.json", progress=False)  # imports: not counted
+tracemalloc.start()
+summary = export_coco(sys.argv[1], sys.argv[2], progress=False)
+print(json.dumps({"peak": tracemalloc.get_traced_memory()[1], "images": summary.images,
+                  "annotations": summary.annotations, "skipped": summary.skipped_incomplete,
+                  "kind": summary.category_kind}))
+"""
 
-    from kubric.datasets.exports.coco import export_coco
+
+def test_coco_streams_one_scene_at_a_time(tmp_path):
+    """Peak memory of an export (measured in a fresh process, so nothing the test session holds
+    counts) is flat in the number of scenes."""
     peaks = {}
-    warm = tmp_path / "warm"
-    synthetic_scenes(warm, range(2))
-    export_coco(warm, tmp_path / "warm.json", progress=False)  # imports: not counted below
     for n in (20, 400):
         root = tmp_path / f"n{n}"
         synthetic_scenes(root, range(n))
         (root / ".scene_00009999.incomplete-1").mkdir()  # a worker's leftover: skipped
-        tracemalloc.start()
-        summary = export_coco(root, tmp_path / f"n{n}.json", progress=False)
-        peaks[n] = tracemalloc.get_traced_memory()[1]
-        tracemalloc.stop()
-        data = json.loads((tmp_path / f"n{n}.json").read_text())
-        assert summary.images == len(data["images"]) == 4 * n
-        assert summary.annotations == len(data["annotations"]) > 4 * n
-        assert summary.skipped_incomplete == 1 and summary.category_kind == "object"
-        assert len({a["id"] for a in data["annotations"]}) == summary.annotations
+        out = tmp_path / f"n{n}.json"
+        proc = subprocess.run([sys.executable, "-c", _PEAK, str(root), str(out)],
+                              capture_output=True, text=True, timeout=600)
+        assert proc.returncode == 0, proc.stderr[-2000:]
+        summary = json.loads(proc.stdout.strip().splitlines()[-1])
+        peaks[n] = summary["peak"]
+        data = json.loads(out.read_text())
+        assert summary["images"] == len(data["images"]) == 4 * n
+        assert summary["annotations"] == len(data["annotations"]) > 4 * n
+        assert summary["skipped"] == 1 and summary["kind"] == "object"
+        assert len({a["id"] for a in data["annotations"]}) == summary["annotations"]
         for ann in data["annotations"][:50]:
             img = ann["image_id"]
             seg = file_io.read_palette_png(root / f"scene_{img // 10000:08d}" /

@@ -184,10 +184,15 @@ def _recipe_of(scene: pathlib.Path) -> str:
 def _schema_and_dims(complete: list[pathlib.Path], schema) -> tuple[Schema, dict]:
     """The schema (given, or the recipe of the first scene whose metadata.json reads) and the
     frame count / resolution of the first scene that has them."""
+    if schema is not None:
+        try:
+            schema = schema_of(schema)
+        except SchemaError as err:  # --schema names no schema: a bad option
+            raise DatasetUsageError(str(err)) from None
     errors = []
     for scene in complete:
         try:
-            found = schema_of(schema if schema is not None else _recipe_of(scene))
+            found = schema if schema is not None else schema_of(_recipe_of(scene))
             return found, SceneReader(scene, found).dims
         except (SceneError, DatasetError, OSError) as err:
             errors.append(err)

@@ -173,7 +173,7 @@ def cmd_generate(args) -> int:
         except ClusterError as err:
             return _error("generate", err)
         from kubric.pipeline.dask_runner import dashboard_link
-        print(f"Dask dashboard: {dashboard_link(client, cluster, cluster_options)}", flush=True)
+        print(f"Dask dashboard: {dashboard_link(client, cluster, cluster_opts)}", flush=True)
         runner = DaskRunner(recipe_spec(cls), out, seeds, client,
                             threads_per_scene=cluster_opts.threads_per_scene, **common)
     try:
