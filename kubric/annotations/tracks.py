@@ -13,6 +13,10 @@ How a track is made (:func:`compute_tracks`):
    point seen there (to float32 depth precision). Off a pixel centre the depth is interpolated
    bilinearly over the neighbouring pixel centres showing the same object (second-order error;
    the track still passes exactly through the query position at the query frame).
+   On a skinned character the point is instead the mesh's surface point hit by the query's
+   pixel ray at the query frame, as (triangle, barycentric), followed through every frame's
+   skinned mesh (:mod:`kubric.annotations.character_tracks`; ``points_object`` is then its
+   rest-pose position in the model frame).
 2. The point is expressed **in its object's own frame** (the unscaled local frame of the mesh,
    using the object's position, quaternion and scale at the query frame). Points on the
    background (floor / dome: assets with ``background=True``) stay in world coordinates: the
@@ -81,8 +85,10 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from kubric.annotations.character_tracks import follow_character
 from kubric.annotations.segmentation import instance_labels
 from kubric.core import camera_geometry as geo
+from kubric.core.characters import Character
 
 #: Relative depth tolerance of the self-occlusion test (see module doc).
 DEPTH_TOLERANCE = 1e-3
@@ -306,6 +312,10 @@ def compute_tracks(camera, frames: Sequence[int], depth, segmentation, assets: S
     for uid in {a.uid for a, fg in zip(qassets, is_fg, strict=False) if fg}:
         sel = np.array([a.uid == uid for a in qassets]) & is_fg
         asset = qassets[int(np.flatnonzero(sel)[0])]
+        if isinstance(asset, Character):  # a deforming surface: kubric.annotations.character_tracks
+            points_object[sel], points_world[sel] = follow_character(
+                asset, camera, frames, tq[sel], q[sel][:, [2, 1]], world_q[sel], (w, h))
+            continue
         mats, scales = _poses(asset, frames)
         for t in np.unique(tq[sel]):
             s = sel & (tq == t)

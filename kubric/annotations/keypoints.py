@@ -1,0 +1,129 @@
+"""Keypoints of characters per frame: 2D, 3D and visibility. Pure numpy.
+
+For each :class:`~kubric.core.characters.Character` with a keypoint regressor (the 17 COCO person
+keypoints for the humans source and the procedural person) and each rendered frame:
+
+* ``keypoints_3d`` (T, K, 3): world position, metres (the regressor on the skinned mesh);
+* ``keypoints_camera`` (T, K, 3): camera frame (Blender axes: x right, y up, looking down −z);
+* ``keypoints_2d`` (T, K, 2): pixel position (x, y), pixel centres at +0.5 (docs/conventions.md);
+* ``keypoints_depth`` (T, K): distance to the camera centre, metres;
+* ``keypoint_occlusion_reason`` (T, K) uint8 bits, the point tracks' rule (docs/tracks.md):
+  1 behind the camera, 2 outside the image, 4 the pixel shows another instance, 8 the rendered
+  depth there is closer than the keypoint by more than the tolerance. Most keypoints lie *inside*
+  the body (a joint centre), so the depth test compares the rendered depth with the keypoint's
+  depth minus its **skin depth** (``keypoint_skin_depth``, (K,) metres: the keypoint's distance to
+  the nearest rendered rest vertex, times the character's largest scale);
+* ``keypoints_visibility`` (T, K) uint8, COCO's flag: 0 outside the image or behind the camera,
+  1 in the image but occluded, 2 visible;
+* ``keypoint_names`` (K,) and ``keypoint_skeleton`` (COCO's 1-based pairs, when the names are
+  COCO's).
+
+:func:`annotate_keypoints` stores these in each character's ``metadata``, so
+``get_instance_info`` writes them with the instance into ``metadata.json`` (docs/scene-format.md).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from kubric.annotations.segmentation import instance_labels
+from kubric.annotations.tracks import (
+    BEHIND_CAMERA,
+    DEPTH_CLOSER,
+    DEPTH_TOLERANCE,
+    OTHER_INSTANCE,
+    OUTSIDE_IMAGE,
+    _image_stack,
+    _visible_at,
+    depth_slope,
+)
+from kubric.core import camera_geometry as geo
+from kubric.core.characters import COCO_KEYPOINTS, COCO_SKELETON, Character
+
+KEYPOINT_FIELDS = ("keypoint_names", "keypoint_skeleton", "keypoint_skin_depth", "keypoints_3d",
+                   "keypoints_camera", "keypoints_2d", "keypoints_depth",
+                   "keypoint_occlusion_reason", "keypoints_visibility")
+
+
+def skin_depth(character) -> np.ndarray:
+    """(K,) each rest keypoint's distance to the nearest rendered rest vertex (model units)."""
+    reg = character.keypoint_regressor
+    rest = np.stack([w @ character.vertices[i] for i, w in reg.values()])
+    verts = character.vertices[character.rendered_vertices]
+    return np.array([np.linalg.norm(verts - p, axis=1).min() for p in rest])
+
+
+def character_keypoints(camera, frames: Sequence[int], depth, segmentation, assets: Sequence,
+                        character, *, depth_tolerance: float = DEPTH_TOLERANCE) -> dict:
+    """Keypoint fields (module doc) of ``character`` over ``frames``; ``depth`` / ``segmentation``
+    (T, H, W[, 1]) are the rendered layers labelled for ``assets`` (usually ``scene.assets``)."""
+    if not isinstance(character, Character) or character.keypoint_regressor is None:
+        raise ValueError(f"{getattr(character, 'uid', character)!r} is not a Character with a "
+                         "keypoint_regressor")
+    depth = _image_stack(depth, "depth").astype(np.float32)
+    labels = _image_stack(segmentation, "segmentation").astype(np.int64)
+    num_frames, h, w = depth.shape
+    frames = [int(f) for f in frames]
+    if len(frames) != num_frames or labels.shape != depth.shape:
+        raise ValueError(f"frames ({len(frames)}), depth {depth.shape} and segmentation "
+                         f"{labels.shape} must agree")
+    label = int(instance_labels(assets)[list(assets).index(character)])
+    world = np.stack([character.keypoints(f) for f in frames])           # (T, K, 3)
+    k = world.shape[1]
+    xy = np.zeros((num_frames, k, 2))
+    dist = np.zeros((num_frames, k))
+    cam = np.zeros((num_frames, k, 3))
+    for t, f in enumerate(frames):
+        xy[t], dist[t] = geo.project_to_pixels(camera, world[t], frame=f, resolution=(w, h))
+        m = geo.world_to_camera(camera, f)
+        cam[t] = world[t] @ m[:3, :3].T + m[:3, 3]
+    skin = skin_depth(character) * float(np.max(character.scale))
+    reason = np.zeros((k, num_frames), np.uint8)        # (N, T) like the tracks' arrays
+    reason[cam.transpose(1, 0, 2)[..., 2] >= 0] |= BEHIND_CAMERA
+    x, y = xy[..., 0].T, xy[..., 1].T
+    with np.errstate(invalid="ignore"):
+        outside = ~((x >= 0) & (x < w) & (y >= 0) & (y < h))
+    reason[outside] |= OUTSIDE_IMAGE
+    rows = np.floor(np.clip(np.nan_to_num(y, nan=-1.0), -1.0, h + 1.0)).astype(np.int64)
+    cols = np.floor(np.clip(np.nan_to_num(x, nan=-1.0), -1.0, w + 1.0)).astype(np.int64)
+    slope = depth_slope(depth, labels)
+    inside, same, not_closer = _visible_at(rows, cols, labels, depth, slope,
+                                           np.full(k, label), dist.T - skin[:, None], 1.0,
+                                           depth_tolerance, h, w)
+    inside &= (reason & BEHIND_CAMERA) == 0
+    reason[inside & ~same] |= OTHER_INSTANCE
+    reason[inside & same & ~not_closer] |= DEPTH_CLOSER
+    reason = reason.T
+    vis = np.where((reason & (BEHIND_CAMERA | OUTSIDE_IMAGE)) != 0, 0,
+                   np.where(reason != 0, 1, 2)).astype(np.uint8)
+    names = list(character.keypoint_names)
+    return {
+        "keypoint_names": names,
+        "keypoint_skeleton": [list(p) for p in COCO_SKELETON] if tuple(names) == COCO_KEYPOINTS
+        else [],
+        "keypoint_skin_depth": skin.astype(np.float32),
+        "keypoints_3d": world.astype(np.float32),
+        "keypoints_camera": cam.astype(np.float32),
+        "keypoints_2d": xy.astype(np.float32),
+        "keypoints_depth": dist.astype(np.float32),
+        "keypoint_occlusion_reason": reason,
+        "keypoints_visibility": vis,
+    }
+
+
+def annotate_keypoints(scene, layers: dict, characters: Sequence | None = None, *,
+                       depth_tolerance: float = DEPTH_TOLERANCE) -> list:
+    """Store :func:`character_keypoints` of every character with a regressor (default: all in
+    the scene) in its ``metadata``; ``layers`` are the renderer's (labelled for
+    ``scene.assets``, i.e. before relabelling). Returns the characters annotated."""
+    if characters is None:
+        characters = [a for a in scene.assets if isinstance(a, Character)
+                      and a.keypoint_regressor is not None]
+    frames = list(range(scene.frame_start, scene.frame_end + 1))
+    for c in characters:
+        c.metadata.update(character_keypoints(scene.camera, frames, layers["depth"],
+                                              layers["segmentation"], scene.assets, c,
+                                              depth_tolerance=depth_tolerance))
+    return list(characters)
