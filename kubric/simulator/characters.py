@@ -1,0 +1,90 @@
+"""Characters in PyBullet: kinematic per-bone convex colliders that follow the animation.
+
+A :class:`~kubric.core.characters.Character` becomes one fixed (mass 0) PyBullet body per bone:
+the convex hull of the rest vertices whose largest skin weight is on that bone, expressed in the
+bone's rest frame (bones that dominate fewer than 4 vertices get no collider). Before every physics
+step, each collider is moved to its bone's pose at that step's time (the model's keyframes at the
+fractional frame: :meth:`Character.bone_transforms`), so thrown objects are pushed away by the
+moving limbs and bounce off them; contacts with any collider are reported as contacts with the
+character (``events.json``). The colliders never receive forces and the simulator never writes
+keyframes of a character: its motion comes from its own keys only.
+
+Limits: a convex hull per bone over-covers concave parts (the hull of a hand is a box-like blob);
+the skin between two bones is covered by both hulls at rest and stretches between them when a
+joint bends; the scale must be uniform.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import pybullet as pb
+
+from kubric.core.quaternion import Quaternion
+from kubric.simulator.bodies import wxyz_to_xyzw
+
+MIN_HULL_VERTICES = 4
+
+
+@dataclass
+class CharacterBodies:
+    """The engine side of one character: ``bones[i]`` is driven by ``uids[i]``."""
+
+    bones: list[int] = field(default_factory=list)
+    uids: list[int] = field(default_factory=list)
+    scale: float = 1.0
+
+
+def _uniform_scale(character) -> float:
+    s = np.asarray(character.scale, np.float64)
+    if np.ptp(s) > 1e-6 * np.abs(s).max():
+        raise ValueError(f"{character.uid}: PyBullet simulates characters with a uniform scale "
+                         f"only, got scale {s.tolist()}")
+    return float(s[0])
+
+
+def build_character_bodies(character, client: int) -> CharacterBodies:
+    """One fixed convex-hull body per bone (module doc), posed at the current model pose."""
+    scale = _uniform_scale(character)
+    main = np.argmax(character.skin_weights, axis=1)
+    owner = character.skin_indices[np.arange(len(main)), main]
+    used = np.zeros(len(character.vertices), bool)
+    used[character.rendered_vertices] = True
+    out = CharacterBodies(scale=scale)
+    inv_rest = np.linalg.inv(character.bone_rest)
+    for j in range(character.num_bones):
+        pts = character.vertices[used & (owner == j)]
+        if len(pts) < MIN_HULL_VERTICES:
+            continue
+        local = (pts @ inv_rest[j, :3, :3].T + inv_rest[j, :3, 3]) * scale
+        shape = pb.createCollisionShape(pb.GEOM_MESH, vertices=local.tolist(),
+                                        physicsClientId=client)
+        uid = pb.createMultiBody(baseMass=0.0, baseCollisionShapeIndex=shape,
+                                 physicsClientId=client)
+        pb.changeDynamics(uid, -1, lateralFriction=float(character.friction),
+                          restitution=float(character.restitution),
+                          contactProcessingThreshold=0.0, physicsClientId=client)
+        out.bones.append(j)
+        out.uids.append(uid)
+    pose_character(character, out, client, None)
+    return out
+
+
+def pose_character(character, bodies: CharacterBodies, client: int, frame) -> None:
+    """Move every collider to its bone's world pose at ``frame`` (None: the current values)."""
+    if not bodies.uids:
+        return
+    transforms = character.bone_transforms(frame)
+    for j, uid in zip(bodies.bones, bodies.uids, strict=True):
+        m = transforms[j]
+        rot = m[:3, :3] / bodies.scale
+        q = Quaternion(matrix=rot)
+        pb.resetBasePositionAndOrientation(uid, m[:3, 3].tolist(), wxyz_to_xyzw(q),
+                                           physicsClientId=client)
+
+
+def remove_character_bodies(bodies: CharacterBodies, client: int) -> None:
+    for uid in bodies.uids:
+        pb.removeBody(uid, physicsClientId=client)
+    bodies.bones, bodies.uids = [], []
