@@ -25,7 +25,7 @@ def anchor_queries(character, camera, frame, pixels_xy, world_points, resolution
     ``frame`` (module doc); ``world_points`` (n, 3) are the unprojected queries (for a miss)."""
     o, d = geo.pixel_rays(camera, pixels_xy, frame=frame, resolution=resolution)
     verts = character.deformed_vertices(frame)
-    tri, bary, _ = ray_triangles(o, d, verts[character.faces])
+    tri, bary = _cast(o, d, verts, character.faces, camera, frame, resolution, pixels_xy)
     miss = np.flatnonzero(tri < 0)
     if len(miss):
         used = character.rendered_vertices
@@ -35,6 +35,36 @@ def anchor_queries(character, camera, frame, pixels_xy, world_points, resolution
             f = int(np.flatnonzero((character.faces == v).any(axis=1))[0])
             tri[i] = f
             bary[i] = (character.faces[f] == v).astype(np.float64)
+    return tri, bary
+
+
+def _cast(o, d, verts, faces, camera, frame, resolution, pixels_xy, chunk: int = 64):
+    """:func:`ray_triangles` against only the triangles whose image-space box contains the
+    query pixel (a triangle partly behind the camera is always a candidate): the same nearest
+    hit, without testing every ray against every triangle."""
+    xy, _ = geo.project_to_pixels(camera, verts, frame=frame, resolution=resolution)
+    m = geo.world_to_camera(camera, frame)
+    behind = (verts @ m[:3, :3].T + m[:3, 3])[:, 2] >= 0
+    corners = xy[faces]                                              # (F, 3, 2)
+    lo, hi = corners.min(axis=1) - 1e-3, corners.max(axis=1) + 1e-3
+    always = behind[faces].any(axis=1) | ~np.isfinite(corners).all(axis=(1, 2))
+    tris = verts[faces]
+    n = len(o)
+    tri = np.full(n, -1, np.int64)
+    bary = np.zeros((n, 3))
+    p = np.asarray(pixels_xy, np.float64)
+    for a in range(0, n, chunk):
+        pc = p[a:a + chunk]
+        inside = ((pc[:, None, 0] >= lo[None, :, 0]) & (pc[:, None, 0] <= hi[None, :, 0])
+                  & (pc[:, None, 1] >= lo[None, :, 1]) & (pc[:, None, 1] <= hi[None, :, 1]))
+        inside |= always[None]
+        for i, row in enumerate(inside):
+            cand = np.flatnonzero(row)
+            if not len(cand):
+                continue
+            f, b, _ = ray_triangles(o[a + i:a + i + 1], d[a + i:a + i + 1], tris[cand])
+            if f[0] >= 0:
+                tri[a + i], bary[a + i] = cand[f[0]], b[0]
     return tri, bary
 
 

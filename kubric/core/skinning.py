@@ -106,3 +106,25 @@ def nlerp(q0: np.ndarray, q1: np.ndarray, t) -> np.ndarray:
     t = np.asarray(t, np.float64)[..., None] if np.ndim(t) else t
     q = (1.0 - t) * q0 + t * q1
     return q / np.linalg.norm(q, axis=-1, keepdims=True)
+
+
+def matrices_to_quaternions(m: np.ndarray) -> np.ndarray:
+    """(..., 3, 3) rotation matrices → (..., 4) WXYZ unit quaternions (w ≥ 0), vectorised
+    (Shepperd's method: the largest of w, x, y, z is found first for numerical stability)."""
+    m = np.asarray(m, np.float64)
+    tr = m[..., 0, 0] + m[..., 1, 1] + m[..., 2, 2]
+    cand = np.stack([tr, m[..., 0, 0], m[..., 1, 1], m[..., 2, 2]], -1)
+    k = np.argmax(cand, axis=-1)
+    q = np.empty(m.shape[:-2] + (4,))
+    s = np.sqrt(np.maximum(1.0 + 2.0 * cand.max(-1) - tr, 1e-300))  # 2·|largest component|·2
+    w = (m[..., 2, 1] - m[..., 1, 2], m[..., 0, 2] - m[..., 2, 0], m[..., 1, 0] - m[..., 0, 1])
+    xy, xz, yz = m[..., 0, 1] + m[..., 1, 0], m[..., 0, 2] + m[..., 2, 0], m[..., 1, 2] + m[..., 2, 1]
+    rows = {0: (s / 2, w[0] / (2 * s), w[1] / (2 * s), w[2] / (2 * s)),
+            1: (w[0] / (2 * s), s / 2, xy / (2 * s), xz / (2 * s)),
+            2: (w[1] / (2 * s), xy / (2 * s), s / 2, yz / (2 * s)),
+            3: (w[2] / (2 * s), xz / (2 * s), yz / (2 * s), s / 2)}
+    for i, row in rows.items():
+        sel = k == i
+        q[sel] = np.stack([c[sel] for c in row], -1)
+    q /= np.linalg.norm(q, axis=-1, keepdims=True)
+    return np.where(q[..., :1] < 0, -q, q)

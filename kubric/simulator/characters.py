@@ -21,8 +21,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pybullet as pb
 
-from kubric.core.quaternion import Quaternion
-from kubric.simulator.bodies import wxyz_to_xyzw
+from kubric.core.skinning import matrices_to_quaternions
 
 MIN_HULL_VERTICES = 4
 
@@ -75,12 +74,10 @@ def pose_character(character, bodies: CharacterBodies, client: int, frame) -> No
     """Move every collider to its bone's world pose at ``frame`` (None: the current values)."""
     if not bodies.uids:
         return
-    transforms = character.bone_transforms(frame)
-    for j, uid in zip(bodies.bones, bodies.uids, strict=True):
-        m = transforms[j]
-        rot = m[:3, :3] / bodies.scale
-        q = Quaternion(matrix=rot)
-        pb.resetBasePositionAndOrientation(uid, m[:3, 3].tolist(), wxyz_to_xyzw(q),
+    transforms = character.bone_transforms(frame)[bodies.bones]
+    quats = matrices_to_quaternions(transforms[:, :3, :3] / bodies.scale)[:, [1, 2, 3, 0]]
+    for uid, m, q in zip(bodies.uids, transforms, quats, strict=True):
+        pb.resetBasePositionAndOrientation(uid, m[:3, 3].tolist(), q.tolist(),
                                            physicsClientId=client)
 
 
