@@ -178,7 +178,8 @@ def _about_x(angles) -> np.ndarray:
 def walk_clip(seconds: float = 2.0, fps: float = 30.0, speed: float = 0.8,
               stride_hz: float = 1.0) -> MotionClip:
     """A procedural walk for :func:`tube_person`: legs and knees swing about their local x axis
-    (the body's left-right axis), arms swing down and back, the root moves along −y at
+    (the body's left-right axis), the arms hang lowered with the elbows bending in time, the
+    root moves along −y at
     ``speed`` m/s with a small vertical bob."""
     t = np.arange(int(round(seconds * fps)) + 1) / fps
     ph = 2 * np.pi * stride_hz * t
@@ -187,13 +188,11 @@ def walk_clip(seconds: float = 2.0, fps: float = 30.0, speed: float = 0.8,
     swing = 0.45 * np.sin(ph)
     knee_l = 0.6 * np.clip(np.sin(ph - 1.2), 0, None)
     knee_r = 0.6 * np.clip(np.sin(ph + np.pi - 1.2), 0, None)
-    # arm bones point along ±x: rotating about local z lowers them; about local x swings them
-    down = 1.1
-    arm_l = np.stack([np.cos(-down / 2) * np.ones_like(t), 0 * t, 0 * t,
-                      np.sin(-down / 2) * np.ones_like(t)], -1)
-    arm_r = arm_l * [1, 1, 1, -1]
+    # arm bones point along ±x with local x horizontal: a rotation about local x by −1.1 rad
+    # lowers either arm by 63° (towards −z)
+    arm = _about_x(np.full_like(t, -1.1))
     rot = np.stack([_about_x(swing), _about_x(-knee_l), _about_x(-swing), _about_x(-knee_r),
-                    arm_l, arm_r, _about_x(0.3 * np.sin(ph)), _about_x(-0.3 * np.sin(ph)),
+                    arm, arm, _about_x(-0.3 - 0.3 * np.sin(ph)), _about_x(-0.3 + 0.3 * np.sin(ph)),
                     _about_x(0.05 * np.sin(2 * ph))], axis=1)
     offsets = np.stack([0 * t, -speed * t, 0.02 * np.sin(2 * ph)], -1)
     return MotionClip(names, fps, rot, offsets, name="procedural_walk",

@@ -263,7 +263,7 @@ def layer_channels(arg: str, what: str = "source") -> tuple[str, slice]:
 REGISTRY: dict[str, Schema] = {}
 #: modules that declare the built-in recipes' schemas (imported on first lookup)
 BUILTIN_SCHEMA_MODULES = ("kubric.recipes.movi_schema", "kubric.recipes.multiview_schema",
-                          "kubric.recipes.vbr_schema")
+                          "kubric.recipes.vbr_schema", "kubric.recipes.pose_estimation_schema")
 
 
 def register_schema(schema: Schema) -> Schema:
