@@ -81,4 +81,4 @@ def test_the_scene_packs_with_keypoints(scene_dir, tmp_path):
     assert proc.returncode == 0, proc.stderr[-2000:]
     assert "every example equals its scene directory" in proc.stdout + proc.stderr
     features = json.loads((tmp_path / "ds" / "features.json").read_text())
-    assert "instances/keypoints_2d" in json.dumps(features)
+    assert '"keypoints_2d"' in json.dumps(features) and '"keypoints_visibility"' in json.dumps(features)
