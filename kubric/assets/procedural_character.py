@@ -103,7 +103,7 @@ def tube_person(name: str = "person", *, segments: int = 12, spacing: float = 0.
         total = sum(seg_len)
         cum = np.concatenate([[0.0], np.cumsum(seg_len)])
         pts, ring_bone, ring_s = [], [], []
-        for i, b in enumerate(chain):
+        for i in range(len(chain)):
             n = max(2, int(np.ceil(seg_len[i] / spacing)))
             last = i == len(chain) - 1
             for t in np.linspace(0, 1, n + 1)[: None if last else -1]:

@@ -39,7 +39,8 @@ def _array(where, name, value, dtype, shape) -> np.ndarray:
     except (TypeError, ValueError):
         raise ValueError(f"{where}: {name} must be a numeric array of shape "
                          f"{_shape_text(shape)}, got {type(value).__name__}") from None
-    if arr.ndim != len(shape) or any(s is not None and a != s for a, s in zip(arr.shape, shape)):
+    if arr.ndim != len(shape) or any(s is not None and a != s
+                                     for a, s in zip(arr.shape, shape, strict=True)):
         raise ValueError(f"{where}: {name} must have shape {_shape_text(shape)}, got {arr.shape}")
     if arr.dtype.kind == "f" and not np.all(np.isfinite(arr)):
         bad = np.argwhere(~np.isfinite(arr))[0].tolist()

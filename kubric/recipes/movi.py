@@ -20,6 +20,13 @@
   the base ``urdf`` / ``articulated_links``). At 0 the scene is byte for byte what it was
   without the option (no random draw, no flag). Not in A / B: their schemas label every
   instance with a CLEVR / KuBasic shape.
+* C–F, ``characters=N`` (default 0): N people (``character_source``, default the MakeHuman
+  humans source; ``procedural`` = the built-in tube person) perform clips from
+  ``motion_source``, starting at free spots within ±3 m of the centre; they are added first, so
+  the objects are placed around them and fall onto them, bouncing off their kinematic colliders
+  (collisions in ``events.json``). Each person is an instance with its keypoints in the metadata
+  (docs/characters.md); tracks follow their skinned surfaces. At 0 the scene is byte for byte
+  what it was without the option.
 
 Materials (A, B): CLEVR's metal and rubber (BSDF, friction μ, restitution e, density); mass =
 the asset's mass (volume × density 1 at scale 1) × density × size³. The CLEVR values (shapes,
@@ -49,10 +56,13 @@ from kubric.recipes.movi_base import (
     new_camera,
     place_without_overlap,
 )
+from kubric.recipes.people import add_person, character_location, free_spots, open_people_sources
 
 #: C–F: height (m) above the floor of the viewpoint from which the dome looks up the HDRI (about
 #: an HDRI's capture height): the floor shows the HDRI's ground, the backdrop its horizon and sky.
 HDRI_PROJECTION_HEIGHT = 2.0
+#: C–F, ``characters=N``: people start at spots in [−CHARACTER_REGION, CHARACTER_REGION]² (m)
+CHARACTER_REGION = 3.0
 
 
 def add_clevr_lights(scene, rng, jitter: float = 1.0) -> list:
@@ -191,15 +201,29 @@ class MoviC(MoviBase, name="movi_c"):
                                  "without this option)", low=0, high=20)
     articulated_models = Option(tuple(MODELS), "the models the articulated objects are drawn "
                                 "from (comma-separated)", type=model_list)
+    characters = Option(0, "people performing motion clips among the objects, which fall and "
+                        "bounce off them (0 = none: the scene is as without this option)",
+                        low=0, high=10)
+    character_source = Option(None, "with characters: character asset source (folder or URL), "
+                              "or 'procedural' (the built-in tube person); default: the "
+                              "MakeHuman humans source", type=character_location)
+    motion_source = Option(None, "with characters: motion-clip asset source, or 'procedural' "
+                           "(the built-in walk); default: the humans source's clips",
+                           type=character_location)
 
     #: left out of ``flags`` while ``articulated_objects`` is 0, so that a scene made without
     #: articulated objects is byte for byte the scene made before these options existed
     ARTICULATED_OPTIONS = ("articulated_objects", "articulated_models")
+    #: likewise while ``characters`` is 0
+    CHARACTER_OPTIONS = ("characters", "character_source", "motion_source")
 
     def flags(self, seed: int) -> dict:
         out = super().flags(seed)
         if not self.articulated_objects:
             for name in self.ARTICULATED_OPTIONS:
+                out.pop(name)
+        if not self.characters:
+            for name in self.CHARACTER_OPTIONS:
                 out.pop(name)
         return out
 
@@ -221,6 +245,8 @@ class MoviC(MoviBase, name="movi_c"):
             if not ids:
                 raise OptionError(f"{self.name}: the {key} source has no {self.split} assets")
             sources[key + "_ids"] = ids
+        if self.characters:
+            sources.update(open_people_sources(self.character_source, self.motion_source))
         return sources
 
     def build_background(self, scene, rng, sources):
@@ -254,9 +280,31 @@ class MoviC(MoviBase, name="movi_c"):
         return obj
 
     def add_objects(self, scene, simulator, rng, sources):
+        self.add_characters(scene, rng, sources)
         for _ in range(rng.randint(self.min_num_objects, self.max_num_objects + 1)):
             self.new_object(scene, simulator, rng, sources, DYNAMIC_SPAWN_REGION, True)
         self.add_articulated_objects(scene, simulator, rng)
+
+    def add_characters(self, scene, rng, sources) -> None:
+        """``characters`` people (no random draw when 0), added before the objects so that the
+        objects are placed around them (their colliders count as overlaps) and fall onto them:
+        spots in [−CHARACTER_REGION, CHARACTER_REGION]² at least 1 m apart
+        (:func:`kubric.recipes.people.add_person`); a person with no free spot is counted in
+        ``dropped_objects``."""
+        if not self.characters:
+            return
+        spots = free_spots(rng, self.characters, CHARACTER_REGION, 1.0)
+        scene.metadata["dropped_objects"] += self.characters - len(spots)
+        for k, spot in enumerate(spots):
+            add_person(scene, sources, rng, spot, f"person_{k}")
+
+    def write_outputs(self, scene, layers, collisions, seed, out_dir, background,
+                      render_settings) -> list:
+        if self.characters:
+            from kubric.annotations.keypoints import annotate_keypoints
+            annotate_keypoints(scene, layers)
+        return super().write_outputs(scene, layers, collisions, seed, out_dir, background,
+                                     render_settings)
 
     def add_articulated_objects(self, scene, simulator, rng) -> None:
         """``articulated_objects`` dynamic multi-link models (no random draw when 0): model,
@@ -291,6 +339,7 @@ class MoviD(MoviC, name="movi_d"):
     settle_frames = Option(100, "frames the static objects settle for", low=0, limit=10000)
 
     def add_objects(self, scene, simulator, rng, sources):
+        self.add_characters(scene, rng, sources)
         static = []
         for _ in range(rng.randint(self.min_num_objects, self.max_num_objects + 1)):
             obj = self.new_object(scene, simulator, rng, sources, STATIC_SPAWN_REGION, False)

@@ -34,69 +34,17 @@ import numpy as np
 
 import kubric as kb
 from kubric.pipeline import Option, OptionError
-from kubric.recipes.common import open_existing_source, source_location
 from kubric.recipes.movi_base import MoviBase, new_camera
+from kubric.recipes.people import (
+    add_person,
+    asset_ids,
+    character_location,
+    free_spots,
+    open_people_sources,
+)
 from kubric.recipes.pose_estimation_schema import SCHEMA
 
-PROCEDURAL = "procedural"
 WALL_HEIGHT, ROOM_HALF_RANGE, PEOPLE_REGION, MIN_PERSON_GAP = 3.0, (3.0, 4.5), 1.5, 0.8
-
-def character_location(value):
-    """Option converter: ``procedural`` or an asset source (see :func:`source_location`)."""
-    if isinstance(value, str) and value.strip().lower() == PROCEDURAL:
-        return PROCEDURAL
-    return source_location(value)
-
-
-character_location.allowed = f"{PROCEDURAL!r}, or " + source_location.allowed
-character_location.__name__ = "procedural|path|URL"
-
-
-class ProceduralSource:
-    """The built-in tube person / walk clip as a one-asset source (``asset_ids``, ``create``)."""
-
-    def __init__(self, kind: str):
-        self.kind = kind
-
-    def asset_ids(self) -> list[str]:
-        return ["tube_person"] if self.kind == "characters" else ["procedural_walk"]
-
-    def create(self, asset_id: str, **kwargs):
-        from kubric.assets.procedural_character import tube_person, walk_clip
-        if self.kind == "characters":
-            kwargs.setdefault("material", kb.PrincipledBSDFMaterial(
-                color=kb.Color(0.55, 0.38, 0.28), roughness=0.6))
-            return tube_person(**kwargs)
-        return walk_clip(seconds=4.0)
-
-
-def open_people_sources(character_source, motion_source) -> dict:
-    """``{"characters": source, "motions": source}`` for the two options (module doc)."""
-    out = {}
-    humans = None
-    for key, value in (("characters", character_source), ("motions", motion_source)):
-        if value == PROCEDURAL:
-            out[key] = ProceduralSource(key)
-        elif value is not None:
-            out[key] = open_existing_source(value, f"{key[:-1]}_source")
-        else:
-            if humans is None:
-                from kubric import assets
-                if not hasattr(assets, "ensure_humans"):
-                    raise OptionError("the default humans source needs kubric.assets."
-                                      "ensure_humans (`kubric assets humans`), which this "
-                                      "installation lacks; give character_source=procedural "
-                                      "motion_source=procedural or source folders")
-                humans = assets.ensure_humans()
-            out[key] = humans[0] if key == "characters" else humans[1]
-    return out
-
-
-def _ids(source) -> list[str]:
-    ids = source.asset_ids() if callable(getattr(source, "asset_ids", None)) else \
-        list(source.all_asset_ids)
-    return sorted(ids)
-
 
 class PoseEstimation(MoviBase, name="pose_estimation"):
     """Pose estimation: 1–3 people performing motion clips in a random room, COCO keypoints."""
@@ -119,7 +67,7 @@ class PoseEstimation(MoviBase, name="pose_estimation"):
         sources = super().open_sources()
         sources.update(open_people_sources(self.character_source, self.motion_source))
         for key in ("characters", "motions"):
-            if not _ids(sources[key]):
+            if not asset_ids(sources[key]):
                 raise OptionError(f"{self.name}: the {key} source holds no assets")
         return sources
 
@@ -167,37 +115,11 @@ class PoseEstimation(MoviBase, name="pose_estimation"):
             obj.material = kb.PrincipledBSDFMaterial(color=kb.random_hue_color(rng=rng),
                                                      roughness=0.6)
             scene += obj
-        character_ids, motion_ids = _ids(sources["characters"]), _ids(sources["motions"])
-        spots: list[np.ndarray] = []
-        for k in range(rng.randint(self.min_num_people, self.max_num_people + 1)):
-            spot = None
-            for _ in range(100):
-                cand = rng.uniform(-PEOPLE_REGION, PEOPLE_REGION, 2)
-                if all(np.linalg.norm(cand - s) >= MIN_PERSON_GAP for s in spots):
-                    spot = cand
-                    break
-            if spot is None:
-                scene.metadata["dropped_objects"] += 1
-                continue
-            spots.append(spot)
-            cid = character_ids[rng.randint(len(character_ids))]
-            mid = motion_ids[rng.randint(len(motion_ids))]
-            person = sources["characters"].create(cid, name=f"person_{k}")
-            heading = kb.Quaternion(axis=(0, 0, 1), angle=float(rng.uniform(0, 2 * np.pi)))
-            clip = sources["motions"].create(mid)
-            seconds = (scene.frame_end + 1) / scene.frame_rate
-            start = float(rng.uniform(0, max(clip.duration - seconds, 0.0)))
-            # the clip's root offset at its start is cancelled, so the person starts at the spot
-            offset = clip.sample([start])[1][0] * np.asarray(person.scale, np.float64)
-            shift = heading.rotate(offset)
-            person.position = (float(spot[0] - shift[0]), float(spot[1] - shift[1]), 0.0)
-            person.quaternion = heading
-            scene += person
-            person.play(clip, start_frame=0, end_frame=scene.frame_end + 1,
-                        frame_rate=scene.frame_rate, clip_start=start)
-            person.metadata = {**person.metadata, "character_id": cid, "motion_id": mid,
-                               "motion_start": start}
-        scene.metadata["people_spots"] = [s.tolist() for s in spots]
+        wanted = rng.randint(self.min_num_people, self.max_num_people + 1)
+        spots = free_spots(rng, wanted, PEOPLE_REGION, MIN_PERSON_GAP)
+        scene.metadata["dropped_objects"] += wanted - len(spots)
+        for k, spot in enumerate(spots):
+            add_person(scene, sources, rng, spot, f"person_{k}")
 
     def build_camera(self, scene, rng) -> None:
         """Camera at human height inside the room (module doc)."""
@@ -214,6 +136,5 @@ class PoseEstimation(MoviBase, name="pose_estimation"):
         from kubric.annotations.keypoints import annotate_keypoints
         annotate_keypoints(scene, layers)
         scene.metadata.pop("room_half_width", None)
-        scene.metadata.pop("people_spots", None)
         return super().write_outputs(scene, layers, collisions, seed, out_dir, background,
                                      render_settings)

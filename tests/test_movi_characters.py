@@ -1,0 +1,51 @@
+"""MOVi-C with people (``characters=1``, the procedural person): the person is an instance with
+keypoints and boxes; objects are placed around it; at 0 nothing about the scene changes."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from collection_fixtures import run_worker
+
+from kubric.pipeline import get_recipe
+
+OPTIONS = ("resolution=64", "frame_end=3", "samples=2", "denoise=false", "min_num_objects=2",
+           "max_num_objects=3", "collection_limit=8", "characters=1",
+           "character_source=procedural", "motion_source=procedural")
+
+
+@pytest.fixture(scope="module")
+def scene(tmp_path_factory):
+    root = tmp_path_factory.mktemp("movi_characters")
+    run_worker("movi_c", 1, root, OPTIONS)
+    return root / "scene_00000001"
+
+
+@pytest.mark.blender
+def test_the_person_is_an_instance_with_keypoints(scene):
+    from kubric.docgen import undocumented_scene_fields
+    assert undocumented_scene_fields(scene) == []
+    meta = json.loads((scene / "metadata.json").read_text())
+    people = [i for i in meta["instances"] if i.get("character_id") == "tube_person"]
+    assert len(people) == 1 and meta["flags"]["characters"] == 1
+    person = people[0]
+    assert person["is_dynamic"] and 1.6 < person["scale"] < 1.8
+    cam = meta["camera"]
+    k = np.asarray(cam["intrinsics_pixels"])
+    kp3, kp2 = np.asarray(person["keypoints_3d"]), np.asarray(person["keypoints_2d"])
+    for t, m in enumerate(np.asarray(cam["matrices_world"])):
+        c = (kp3[t] - m[:3, 3]) @ m[:3, :3]
+        p = np.stack([c[:, 0], -c[:, 1], -c[:, 2]], -1) @ k.T
+        np.testing.assert_allclose(p[:, :2] / p[:, 2:], kp2[t], atol=1e-3)
+    # the person walks: its keypoints move between frames
+    assert np.abs(kp3[-1] - kp3[0]).max() > 0.05
+
+
+def test_zero_characters_leaves_flags_unchanged():
+    movi_c = get_recipe("movi_c")
+    flags = movi_c(collection_limit=8).flags(0)
+    assert not {"characters", "character_source", "motion_source"} & set(flags)
+    flags = movi_c(characters=2, character_source="procedural").flags(0)
+    assert flags["characters"] == 2 and flags["character_source"] == "procedural"
