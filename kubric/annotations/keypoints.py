@@ -1,7 +1,8 @@
 """Keypoints of characters per frame: 2D, 3D and visibility. Pure numpy.
 
-For each :class:`~kubric.core.characters.Character` with a keypoint regressor (the 17 COCO person
-keypoints for the humans source and the procedural person) and each rendered frame:
+For each :class:`~kubric.core.characters.Character` with a keypoint regressor and each rendered
+frame, for the keypoints asked for (default: the 17 COCO person keypoints, which the humans
+source's and the procedural person's regressors provide):
 
 * ``keypoints_3d`` (T, K, 3): world position, metres (the regressor on the skinned mesh);
 * ``keypoints_camera`` (T, K, 3): camera frame (Blender axes: x right, y up, looking down −z);
@@ -56,12 +57,20 @@ def skin_depth(character) -> np.ndarray:
 
 
 def character_keypoints(camera, frames: Sequence[int], depth, segmentation, assets: Sequence,
-                        character, *, depth_tolerance: float = DEPTH_TOLERANCE) -> dict:
-    """Keypoint fields (module doc) of ``character`` over ``frames``; ``depth`` / ``segmentation``
-    (T, H, W[, 1]) are the rendered layers labelled for ``assets`` (usually ``scene.assets``)."""
+                        character, *, names: Sequence[str] = COCO_KEYPOINTS,
+                        depth_tolerance: float = DEPTH_TOLERANCE) -> dict:
+    """Keypoint fields (module doc) of ``character`` over ``frames`` for the keypoints ``names``
+    (default: the 17 COCO ones, in COCO's order; a regressor's other points, e.g. MakeHuman's
+    foot points, are left out); ``depth`` / ``segmentation`` (T, H, W[, 1]) are the rendered
+    layers labelled for ``assets`` (usually ``scene.assets``)."""
     if not isinstance(character, Character) or character.keypoint_regressor is None:
         raise ValueError(f"{getattr(character, 'uid', character)!r} is not a Character with a "
                          "keypoint_regressor")
+    missing = [n for n in names if n not in character.keypoint_names]
+    if missing:
+        raise ValueError(f"{character.uid}: its keypoint regressor lacks {missing}; it has "
+                         f"{list(character.keypoint_names)}")
+    pick = [character.keypoint_names.index(n) for n in names]
     depth = _image_stack(depth, "depth").astype(np.float32)
     labels = _image_stack(segmentation, "segmentation").astype(np.int64)
     num_frames, h, w = depth.shape
@@ -70,7 +79,7 @@ def character_keypoints(camera, frames: Sequence[int], depth, segmentation, asse
         raise ValueError(f"frames ({len(frames)}), depth {depth.shape} and segmentation "
                          f"{labels.shape} must agree")
     label = int(instance_labels(assets)[list(assets).index(character)])
-    world = np.stack([character.keypoints(f) for f in frames])           # (T, K, 3)
+    world = np.stack([character.keypoints(f)[pick] for f in frames])     # (T, K, 3)
     k = world.shape[1]
     xy = np.zeros((num_frames, k, 2))
     dist = np.zeros((num_frames, k))
@@ -79,7 +88,7 @@ def character_keypoints(camera, frames: Sequence[int], depth, segmentation, asse
         xy[t], dist[t] = geo.project_to_pixels(camera, world[t], frame=f, resolution=(w, h))
         m = geo.world_to_camera(camera, f)
         cam[t] = world[t] @ m[:3, :3].T + m[:3, 3]
-    skin = skin_depth(character) * float(np.max(character.scale))
+    skin = skin_depth(character)[pick] * float(np.max(character.scale))
     reason = np.zeros((k, num_frames), np.uint8)        # (N, T) like the tracks' arrays
     reason[cam.transpose(1, 0, 2)[..., 2] >= 0] |= BEHIND_CAMERA
     x, y = xy[..., 0].T, xy[..., 1].T
@@ -98,7 +107,7 @@ def character_keypoints(camera, frames: Sequence[int], depth, segmentation, asse
     reason = reason.T
     vis = np.where((reason & (BEHIND_CAMERA | OUTSIDE_IMAGE)) != 0, 0,
                    np.where(reason != 0, 1, 2)).astype(np.uint8)
-    names = list(character.keypoint_names)
+    names = list(names)
     return {
         "keypoint_names": names,
         "keypoint_skeleton": [list(p) for p in COCO_SKELETON] if tuple(names) == COCO_KEYPOINTS
@@ -114,6 +123,7 @@ def character_keypoints(camera, frames: Sequence[int], depth, segmentation, asse
 
 
 def annotate_keypoints(scene, layers: dict, characters: Sequence | None = None, *,
+                       names: Sequence[str] = COCO_KEYPOINTS,
                        depth_tolerance: float = DEPTH_TOLERANCE) -> list:
     """Store :func:`character_keypoints` of every character with a regressor (default: all in
     the scene) in its ``metadata``; ``layers`` are the renderer's (labelled for
@@ -125,5 +135,5 @@ def annotate_keypoints(scene, layers: dict, characters: Sequence | None = None, 
     for c in characters:
         c.metadata.update(character_keypoints(scene.camera, frames, layers["depth"],
                                               layers["segmentation"], scene.assets, c,
-                                              depth_tolerance=depth_tolerance))
+                                              names=names, depth_tolerance=depth_tolerance))
     return list(characters)

@@ -148,6 +148,8 @@ class Character(PhysicalObject):
         self.skin_indices, self.skin_weights = si.astype(np.int32), sw
         self.rendered_vertices = np.flatnonzero(rendered)
         self.keypoint_regressor = self._check_regressor(where, reg, len(v))
+        self._weights = sk.weight_matrix(self.skin_indices, sw, j)
+        self._weights.setflags(write=False)
         self._rest_local = sk.rest_locals(rst, par)
         self._inv_rest = np.linalg.inv(rst)
         for arr in (v, self.faces, rst, tl, self.skin_indices, sw, par):
@@ -258,8 +260,7 @@ class Character(PhysicalObject):
         if space not in ("world", "model"):
             raise ValueError(f"space must be 'world' or 'model', got {space!r}")
         sel = slice(None) if indices is None else np.asarray(indices)
-        pts = sk.skin(self.vertices[sel], self.skin_indices[sel], self.skin_weights[sel],
-                      self.skinning_matrices(frame))
+        pts = sk.skin(self.vertices[sel], self._weights[sel], self.skinning_matrices(frame))
         return pts if space == "model" else self._world(pts, frame)
 
     def surface_points(self, triangles, barycentrics, frame=None, space: str = "world"):
