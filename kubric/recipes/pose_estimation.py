@@ -3,7 +3,8 @@ estimation challenge), with the 17 COCO keypoints per person per frame (docs/cha
 
 Scene (every random number from the seed, in this order):
 
-1. **Room**: a floor, a ceiling and four walls (a square room of half-width U(3, 4.5) m, walls 3 m high),
+1. **Room**: a floor, a ceiling and four walls (a square room of half-width U(4, 5.5) m, walls
+   3 m high),
    each with its own random material (random hue, saturation ≤ 0.4, roughness U(0.3, 1));
    1–2 rectangular area lights under the ceiling pointing down plus ambient light 0.1. Clutter:
    ``min_num_clutter``–``max_num_clutter`` KuBasic shapes (size U(0.2, 0.6) m, random hue),
@@ -13,10 +14,10 @@ Scene (every random number from the seed, in this order):
    each performing a clip drawn from ``motion_source`` from a random start time (so that the
    scene's duration fits in the clip when it can; the clip holds its last pose after its end),
    with a random heading, starting (the clip's root offset at its start cancelled) at a spot in
-   the room's centre (x, y ∈ [−1.5, 1.5] m, at least 0.8 m apart).
-3. **Camera** at human height: U(2.5, half-width − 0.3) m from the room's centre at a random
-   azimuth, height U(1.4, 1.8) m, looking at the room's centre 1 m above the floor (the people
-   stand within 1.5 m of it); MOVi's 35 mm lens.
+   the room's centre (x, y ∈ [−1.2, 1.2] m, at least 0.8 m apart).
+3. **Camera** at human height: U(3, 4.5) m from the people's mean start position at a random
+   azimuth (moved inside the walls, 0.3 m from them, when it would be outside), height
+   U(1.4, 1.8) m, looking at that position 1 m above the floor; MOVi's 35 mm lens.
 4. The people's colliders join a physics run (nothing else moves), then the render.
 
 Outputs: the MOVi files (RGB, the exact layers, ``metadata.json``, ``events.json``; boxes per
@@ -44,7 +45,8 @@ from kubric.recipes.people import (
 )
 from kubric.recipes.pose_estimation_schema import SCHEMA
 
-WALL_HEIGHT, ROOM_HALF_RANGE, PEOPLE_REGION, MIN_PERSON_GAP = 3.0, (3.0, 4.5), 1.5, 0.8
+WALL_HEIGHT, ROOM_HALF_RANGE, PEOPLE_REGION, MIN_PERSON_GAP = 3.0, (4.0, 5.5), 1.2, 0.8
+CAMERA_DISTANCE, CAMERA_HEIGHT = (3.0, 4.5), (1.4, 1.8)
 
 class PoseEstimation(MoviBase, name="pose_estimation"):
     """Pose estimation: 1–3 people performing motion clips in a random room, COCO keypoints."""
@@ -121,14 +123,25 @@ class PoseEstimation(MoviBase, name="pose_estimation"):
         for k, spot in enumerate(spots):
             add_person(scene, sources, rng, spot, f"person_{k}")
 
+    def populate(self, scene, simulator, rng, sources):
+        """Room, then clutter and people, then the camera (which aims at the people)."""
+        background = self.build_background(scene, rng, sources)
+        self.add_objects(scene, simulator, rng, sources)
+        self.build_camera(scene, rng)
+        return background, 0.0
+
     def build_camera(self, scene, rng) -> None:
-        """Camera at human height inside the room (module doc)."""
+        """Camera at human height looking at the people (module doc)."""
         camera = new_camera()
+        half = scene.metadata["room_half_width"] - 0.3
+        people = [a for a in scene.assets if isinstance(a, kb.Character)]
+        centre = np.mean([np.asarray(p.position)[:2] for p in people], axis=0) if people \
+            else np.zeros(2)
         azimuth = float(rng.uniform(0, 2 * np.pi))
-        dist = float(rng.uniform(2.5, scene.metadata["room_half_width"] - 0.3))
-        camera.position = (dist * np.cos(azimuth), dist * np.sin(azimuth),
-                           float(rng.uniform(1.4, 1.8)))
-        camera.look_at((0.0, 0.0, 1.0))
+        dist = float(rng.uniform(*CAMERA_DISTANCE))
+        xy = np.clip(centre + dist * np.array([np.cos(azimuth), np.sin(azimuth)]), -half, half)
+        camera.position = (float(xy[0]), float(xy[1]), float(rng.uniform(*CAMERA_HEIGHT)))
+        camera.look_at((float(centre[0]), float(centre[1]), 1.0))
         scene.camera = camera
 
     def write_outputs(self, scene, layers, collisions, seed, out_dir, background,
