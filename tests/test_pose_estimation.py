@@ -17,7 +17,8 @@ PROCEDURAL = ["character_source=procedural", "motion_source=procedural"]
 def scene_dir(tmp_path_factory):
     out = tmp_path_factory.mktemp("pose")
     run_worker("pose_estimation", 3, out, ["resolution=64", "frame_end=3", "quality=draft",
-                                           "tracks=48", "max_num_people=2", *PROCEDURAL])
+                                           "tracks=48", "track_max_fraction=0.5",
+                                           "max_num_people=2", *PROCEDURAL])
     return out / "scene_00000003"
 
 
