@@ -32,13 +32,11 @@ import numpy as np
 from kubric.annotations.segmentation import instance_labels
 from kubric.annotations.tracks import (
     BEHIND_CAMERA,
-    DEPTH_CLOSER,
     DEPTH_TOLERANCE,
-    OTHER_INSTANCE,
     OUTSIDE_IMAGE,
-    _image_stack,
-    _visible_at,
     depth_slope,
+    frame_layers,
+    occlusion_reasons,
 )
 from kubric.core import camera_geometry as geo
 from kubric.core.characters import COCO_KEYPOINTS, COCO_SKELETON, Character
@@ -71,13 +69,8 @@ def character_keypoints(camera, frames: Sequence[int], depth, segmentation, asse
         raise ValueError(f"{character.uid}: its keypoint regressor lacks {missing}; it has "
                          f"{list(character.keypoint_names)}")
     pick = [character.keypoint_names.index(n) for n in names]
-    depth = _image_stack(depth, "depth").astype(np.float32)
-    labels = _image_stack(segmentation, "segmentation").astype(np.int64)
+    depth, labels, frames = frame_layers(depth, segmentation, frames)
     num_frames, h, w = depth.shape
-    frames = [int(f) for f in frames]
-    if len(frames) != num_frames or labels.shape != depth.shape:
-        raise ValueError(f"frames ({len(frames)}), depth {depth.shape} and segmentation "
-                         f"{labels.shape} must agree")
     label = int(instance_labels(assets)[list(assets).index(character)])
     world = np.stack([character.keypoints(f)[pick] for f in frames])     # (T, K, 3)
     k = world.shape[1]
@@ -89,22 +82,9 @@ def character_keypoints(camera, frames: Sequence[int], depth, segmentation, asse
         m = geo.world_to_camera(camera, f)
         cam[t] = world[t] @ m[:3, :3].T + m[:3, 3]
     skin = skin_depth(character)[pick] * float(np.max(character.scale))
-    reason = np.zeros((k, num_frames), np.uint8)        # (N, T) like the tracks' arrays
-    reason[cam.transpose(1, 0, 2)[..., 2] >= 0] |= BEHIND_CAMERA
-    x, y = xy[..., 0].T, xy[..., 1].T
-    with np.errstate(invalid="ignore"):
-        outside = ~((x >= 0) & (x < w) & (y >= 0) & (y < h))
-    reason[outside] |= OUTSIDE_IMAGE
-    rows = np.floor(np.clip(np.nan_to_num(y, nan=-1.0), -1.0, h + 1.0)).astype(np.int64)
-    cols = np.floor(np.clip(np.nan_to_num(x, nan=-1.0), -1.0, w + 1.0)).astype(np.int64)
-    slope = depth_slope(depth, labels)
-    inside, same, not_closer = _visible_at(rows, cols, labels, depth, slope,
-                                           np.full(k, label), dist.T - skin[:, None], 1.0,
-                                           depth_tolerance, h, w)
-    inside &= (reason & BEHIND_CAMERA) == 0
-    reason[inside & ~same] |= OTHER_INSTANCE
-    reason[inside & same & ~not_closer] |= DEPTH_CLOSER
-    reason = reason.T
+    reason = occlusion_reasons(xy.transpose(1, 0, 2), cam[..., 2].T, dist.T - skin[:, None],
+                               labels, depth, depth_slope(depth, labels), np.full(k, label),
+                               depth_tolerance).T
     vis = np.where((reason & (BEHIND_CAMERA | OUTSIDE_IMAGE)) != 0, 0,
                    np.where(reason != 0, 1, 2)).astype(np.uint8)
     names = list(names)
