@@ -6,7 +6,7 @@ import pytest
 import kubric as kb
 from kubric.annotations.surfaces import ray_triangles
 from kubric.core import camera_geometry as geo
-from tests.character_fixtures import RES, pixel_centres, walking_scene
+from tests.character_fixtures import KINDS, RES, pixel_centres, walking_scene
 
 pytestmark = pytest.mark.blender
 
@@ -16,18 +16,20 @@ def _blender(scene):
     return Blender(scene, samples_per_pixel=1, use_denoising=False)
 
 
-def test_blender_evaluated_mesh_equals_model_skinning():
+@pytest.mark.parametrize("kind", KINDS)
+def test_blender_evaluated_mesh_equals_model_skinning(kind):
     from kubric.renderer.blender_characters import evaluated_vertices
-    scene, person = walking_scene()
+    scene, person = walking_scene(kind=kind)
     renderer = _blender(scene)
     moved = 0.0
     for f in scene.frames:
         model = person.deformed_vertices(f)
         blender = evaluated_vertices(renderer, person, f)
         assert blender.shape == model.shape
-        assert np.abs(blender - model).max() < 1e-5, f
+        rendered = person.rendered_vertices
+        assert np.abs(blender - model)[rendered].max() < 1e-5, f
         moved = max(moved, np.abs(model - person.deformed_vertices(1)).max())
-    assert moved > 0.2  # the clip really deforms the mesh
+    assert moved > 0.05  # the clip really deforms the mesh
 
 
 def _surface_hits(scene, person, frame):
@@ -39,8 +41,9 @@ def _surface_hits(scene, person, frame):
     return tri.reshape(RES, RES), bary.reshape(RES, RES, 3)
 
 
-def test_flow_object_coordinates_and_segmentation_follow_the_skinned_surface():
-    scene, person = walking_scene()
+@pytest.mark.parametrize("kind", KINDS)
+def test_flow_object_coordinates_and_segmentation_follow_the_skinned_surface(kind):
+    scene, person = walking_scene(kind=kind)
     out = _blender(scene).render(return_layers=("forward_flow", "backward_flow", "segmentation",
                                                 "object_coordinates", "depth"))
     label = scene.assets.index(person) + 1
@@ -70,7 +73,7 @@ def test_flow_object_coordinates_and_segmentation_follow_the_skinned_surface():
     err = np.concatenate(errors)
     print(f"flow error px: median {np.median(err):.2e} p95 {np.percentile(err, 95):.2e} "
           f"max {err.max():.2e}; flow median {np.median(np.concatenate(moving)):.2f} px")
-    assert np.median(np.concatenate(moving)) > 0.5   # the surface really moves in the image
+    assert np.median(np.concatenate(moving)) > 0.3   # the surface really moves in the image
     assert np.median(err) < 1e-3, np.median(err)
     assert np.percentile(err, 95) < 1e-2, np.percentile(err, 95)
     oc = np.concatenate(oc_errors)
