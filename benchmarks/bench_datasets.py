@@ -5,7 +5,7 @@ Scenes are generated once (4 spp, no denoising: the render settings do not chang
 into ``$KUBRIC_CACHE_DIR/bench_datasets/movi_a_128`` and reused. Measured:
 
 * pack: scenes/s of ``kubric.datasets.pack`` (1 and 2 workers) vs the baseline, reading every
-  scene's features from its directory (:class:`~kubric.datasets.scene_reader.SceneReader`, what
+  scene's features from its directory (:class:`~kubric.io.scene_reader.SceneReader`, what
   the packer reads before encoding);
 * read, random order: examples/s of ``load(...)[i]`` with every feature and with the ``video``
   task, vs reading the same scenes' layers + JSON (``file_io.read_image_dict``) and only their
@@ -63,8 +63,8 @@ def main(argv=None) -> int:
     from kubric import file_io
     from kubric.datasets import load, pack
     from kubric.datasets.packer import find_scenes
-    from kubric.datasets.scene_reader import SceneReader
-    from kubric.io.schema import get_schema
+    from kubric.io.scene_reader import SceneReader
+    from kubric.pipeline.recipe import schema_of as get_schema
 
     scene_root = ensure_scenes(args.scenes)
     scenes = find_scenes(scene_root)[0][:args.scenes]

@@ -18,7 +18,7 @@ import time
 import numpy as np
 
 import kubric as kb
-from kubric.renderer.blender_passes import ANNOTATION_LAYERS
+from kubric.renderer.base import ANNOTATION_LAYERS
 
 
 def cpu_seconds() -> float:

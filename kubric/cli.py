@@ -1,8 +1,9 @@
 """The ``kubric`` command. Each sub-command lives in its own module, which defines
 ``add_parser(subparsers)`` registering a parser whose ``func(args) -> int`` runs it.
 
-Errors: :func:`main` is the one top-level handler. An expected error (a bad option, a missing or
-unreadable file, invalid input data, a full disk, ...) prints one line
+Errors: :func:`main` is the one top-level handler. An expected error (a
+:class:`~kubric.errors.KubricError`: a bad option, invalid input data, ...; or an ``OSError``: a
+missing or unreadable file, a full disk) prints one line
 ``kubric <command>: error: <message>`` on stderr and exits 2 for a usage error (a bad option or
 flag) or 1 for a failure; the traceback is printed only with the global ``--debug`` flag (or
 ``KUBRIC_DEBUG=1``). Ctrl-C exits 130 with one line. Anything else is a bug and keeps its traceback.
@@ -15,6 +16,8 @@ import importlib
 import os
 import sys
 import traceback
+
+from kubric.errors import KubricError
 
 #: sub-command modules, in the order ``kubric --help`` lists them.
 SUBCOMMAND_MODULES = (
@@ -44,24 +47,6 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-#: (module, class) of usage errors (exit 2): looked up in sys.modules, so nothing is imported here
-USAGE_ERRORS = (("kubric.pipeline.options", "OptionError"),
-                ("kubric.pipeline.dask_runner", "ClusterError"))
-#: (module, class) of expected failures (exit 1) besides OSError and ValueError (bad input data)
-FAILURES = (("kubric.assets.archive", "AssetArchiveError"),
-            ("kubric.assets.download", "DownloadError"),
-            ("kubric.assets.remote_source", "RemoteSourceError"),
-            ("kubric.viewer.source", "SceneError"))
-
-
-def _is_instance(err: BaseException, names) -> bool:
-    for module, name in names:
-        cls = getattr(sys.modules.get(module), name, None)
-        if cls is not None and isinstance(err, cls):
-            return True
-    return False
-
-
 def error_line(err: BaseException) -> str:
     """The one-line message of ``err`` (an OSError's path included)."""
     if isinstance(err, OSError) and err.strerror and err.filename is not None:
@@ -75,10 +60,11 @@ def error_line(err: BaseException) -> str:
 
 
 def exit_code(err: BaseException) -> int | None:
-    """2 for a usage error, 1 for an expected failure, None for a bug (keep the traceback)."""
-    if _is_instance(err, USAGE_ERRORS):
-        return 2
-    if isinstance(err, (OSError, ValueError)) or _is_instance(err, FAILURES):
+    """The exit status of an expected error (:class:`~kubric.errors.KubricError`'s own; 1 for an
+    OSError: a path and its reason), None for a bug (which keeps its traceback)."""
+    if isinstance(err, KubricError):
+        return err.exit_code
+    if isinstance(err, OSError):
         return 1
     return None
 

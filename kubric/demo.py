@@ -12,10 +12,10 @@ import pathlib
 import sys
 import time
 
+from kubric.io.scene_dir import is_complete, scene_name
 from kubric.pipeline.inspect import inspect_scene
 from kubric.pipeline.recipe import get_recipe, recipe_spec
 from kubric.pipeline.runner import LocalRunner
-from kubric.pipeline.worker import scene_name
 
 #: (recipe, number of scenes, option assignments)
 DEMO_DATASETS = (
@@ -42,7 +42,7 @@ def run_demo(out: pathlib.Path, workers: int | None = None, progress: bool = Tru
             return 130
         failures += len(summary.failed)
         first = runner.out_root / scene_name(0)
-        if (first / "_SUCCESS").exists():
+        if is_complete(first):
             sheet = out / f"{cls.name}_{first.name}_contact_sheet.png"
             print(inspect_scene(first, sheet), flush=True)
             sheets.append(sheet)

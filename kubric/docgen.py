@@ -117,6 +117,7 @@ def undocumented_scene_fields(scene_dir, page: pathlib.Path | None = None) -> li
     """
     import json
 
+    from kubric.io.scene_dir import DATA_RANGES_FILE, EVENTS_FILE, METADATA_FILE
     from kubric.pipeline.recipe import get_recipe
 
     scene_dir = pathlib.Path(scene_dir)
@@ -127,13 +128,13 @@ def undocumented_scene_fields(scene_dir, page: pathlib.Path | None = None) -> li
         pattern = re.sub(r"_\d{5}\.", "_{i:05d}.", path.name)
         if pattern not in names:
             missing.add(f"file {pattern}")
-    meta = json.loads((scene_dir / "metadata.json").read_text())
+    meta = json.loads((scene_dir / METADATA_FILE).read_text())
     fields = {f"metadata.{k}" for k in meta.get("metadata", {})}
     fields |= {f"camera.{k}" for k in meta.get("camera", {})}
     fields |= {f"instances.{k}" for inst in meta.get("instances", []) for k in inst}
-    events = json.loads((scene_dir / "events.json").read_text())
+    events = json.loads((scene_dir / EVENTS_FILE).read_text())
     fields |= {f"collisions.{k}" for c in events.get("collisions", []) for k in c}
-    ranges = json.loads((scene_dir / "data_ranges.json").read_text())
+    ranges = json.loads((scene_dir / DATA_RANGES_FILE).read_text())
     fields |= {f"data_ranges.{k}" for k in ranges}
     missing |= {f for f in fields if f.split(".", 1)[1] not in names}
     flags = meta.get("flags", {})
@@ -147,7 +148,8 @@ def undocumented_scene_fields(scene_dir, page: pathlib.Path | None = None) -> li
 def features_markdown() -> str:
     """``docs/features.md``: every built-in recipe schema (the features of a packed example
     and where each comes from in a scene directory)."""
-    from kubric.io.schema import builtin_schemas, dims_markdown, schema_markdown
+    from kubric.io.schema import dims_markdown, schema_markdown
+    from kubric.pipeline.recipe import builtin_schemas
 
     schemas = builtin_schemas()
     out = [GENERATED_NOTE, "", "# Packed dataset features", "",
@@ -164,7 +166,7 @@ def features_markdown() -> str:
 
 def undocumented_features() -> list[str]:
     """``schema.feature`` names of built-in schemas whose doc is empty."""
-    from kubric.io.schema import builtin_schemas
+    from kubric.pipeline.recipe import builtin_schemas
 
     return [f"{name}.{f.name}" for name, schema in sorted(builtin_schemas().items())
             for f in schema.features if not f.doc.strip()]

@@ -12,7 +12,9 @@ This is the public facade (``kb.write_png``, ``kb.write_image_dict``, ...); the 
 * deterministic numpy-aware JSON and pickle — :func:`write_json`, :func:`read_json`,
   :func:`write_pkl`, :func:`read_pkl`;
 * a whole scene's layer dict ↔ directory, with ``data_ranges.json`` — :func:`write_image_dict` /
-  :func:`read_image_dict` / :func:`read_layer` / :func:`read_segmentation`.
+  :func:`read_image_dict` / :func:`read_layer` / :func:`read_segmentation`;
+* upstream's batch writers ``write_<layer>_batch`` (the flow ones with ``name=`` and
+  ``range_file=``) and :func:`multi_write_image` (:mod:`kubric.io.batch`).
 
 Every writer accepts ``str`` or :class:`pathlib.Path`, creates missing parent directories and
 writes atomically (temporary file in the same directory, then :func:`os.replace`).
@@ -44,8 +46,15 @@ from kubric.io.tiff_io import decode_tiff, encode_tiff, read_tiff, write_tiff
 
 # upstream's write_rgba_batch, write_depth_batch, write_segmentation_batch, ...
 globals().update(BATCH_WRITERS)
+# ... and the flow writers with upstream's name= / range_file= keywords, multi_write_image
+from kubric.io.batch import (  # noqa: E402,F401  (in __all__ through BATCH_WRITERS' names)
+    multi_write_image,
+    write_backward_flow_batch,
+    write_flow_batch,
+    write_forward_flow_batch,
+)
 
-__all__ = sorted(BATCH_WRITERS) + [
+__all__ = sorted(BATCH_WRITERS) + ["multi_write_image"] + [
     "DATA_RANGES_FILE", "LAYERS", "as_path", "atomic_write_bytes", "decode_png", "decode_tiff",
     "default_palette", "dumps_json", "encode_png", "encode_tiff", "read_image_dict", "read_json",
     "read_layer", "read_palette_png", "read_pkl", "read_png", "read_scaled_png",

@@ -1,18 +1,36 @@
 """Random scene sampling. Every function takes an ``rng`` (``numpy.random.RandomState`` or
-``numpy.random.Generator``); nothing here creates a random generator, so one seed fixes a scene.
+``numpy.random.Generator``); pass one and one seed fixes a scene.
 
-Upstream scripts sometimes omit ``rng``. For them, ``rng=None`` means *the worker's rng*: the
-:class:`WorkerRandomState` that :func:`kubric.utils.setup` returned, seeded from ``--seed`` (and
-recorded in the metadata), for as long as the caller holds it — this module keeps only a weak
-reference, so the binding ends with its owner (a test that called ``kb.setup`` leaves nothing behind
-once it returns; nothing needs resetting). With no live worker rng, ``rng=None`` is a ``TypeError``
-— there is no hidden, unseeded default.
+Upstream scripts sometimes omit ``rng``. For them, ``rng=None`` means, in this order:
+
+1. *the worker's rng*: the :class:`WorkerRandomState` that :func:`kubric.utils.setup` returned,
+   seeded from ``--seed`` (and recorded in the metadata), for as long as the caller holds it —
+   this module keeps only a weak reference, so the binding ends with its owner (a test that called
+   ``kb.setup`` leaves nothing behind once it returns; nothing needs resetting);
+2. otherwise, only in the functions whose upstream signature had an unseeded default generator
+   (:data:`UPSTREAM_DEFAULTED`: ``random_hue_color``, ``random_rotation``, ``resample_while``,
+   ``move_until_no_overlap``, ``sample_color``, ``sample_sizes``,
+   ``sample_point_in_half_sphere_shell`` and ``kb.assets.utils.get_clevr_lights``), one
+   process-wide ``numpy.random.RandomState()`` seeded from OS entropy, as upstream had. Its
+   results differ on every run: **not reproducible**. The first use warns
+   (:class:`UnseededRandomnessWarning`, once per function);
+3. otherwise (functions upstream never defaulted, e.g. ``random_clevr_color``) a ``TypeError``.
+
+:func:`default_rng` is upstream's helper of that name: a fresh unseeded ``RandomState``.
+
+Recipes pass ``rng`` explicitly and never use the unseeded generator:
+:func:`kubric.pipeline.worker.run_scene` runs every recipe inside :func:`explicit_rng_only`, where
+``rng=None`` (even with a worker rng bound) and :func:`default_rng` raise ``RuntimeError`` naming
+the function.
 """
 
 from __future__ import annotations
 
+import contextlib
+import threading
+import warnings
 import weakref
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from typing import Any
 
 import numpy as np
@@ -21,6 +39,7 @@ from kubric.assets import clevr
 from kubric.core.color import Color
 from kubric.core.objects import PhysicalObject
 from kubric.core.quaternion import Quaternion
+from kubric.errors import KubricError
 
 
 class WorkerRandomState(np.random.RandomState):
@@ -48,11 +67,71 @@ def worker_rng() -> WorkerRandomState | None:
     return _worker_ref() if _worker_ref is not None else None
 
 
+#: the public functions whose upstream signature defaulted ``rng`` to an unseeded generator
+UPSTREAM_DEFAULTED = frozenset({
+    "random_hue_color", "random_rotation", "resample_while", "move_until_no_overlap",
+    "sample_color", "sample_sizes", "sample_point_in_half_sphere_shell",
+    "kb.assets.utils.get_clevr_lights",
+})
+
+
+class UnseededRandomnessWarning(UserWarning):
+    """A sampling function ran on the unseeded generator: its results are not reproducible."""
+
+
+_unseeded: np.random.RandomState | None = None
+_warned: set[str] = set()
+_forbidden = threading.local()  # .reasons: list of active explicit_rng_only() reasons
+
+
+@contextlib.contextmanager
+def explicit_rng_only(reason: str) -> Iterator[None]:
+    """Inside this block (in this thread) every sampling function needs an explicit ``rng``:
+    ``rng=None`` (whether or not a worker rng is bound) and :func:`default_rng` raise
+    ``RuntimeError`` naming the function and ``reason``. Recipe runs use it."""
+    reasons = _forbidden.__dict__.setdefault("reasons", [])
+    reasons.append(str(reason))
+    try:
+        yield
+    finally:
+        reasons.pop()
+
+
+def _check_unseeded_allowed(where: str) -> None:
+    reasons = getattr(_forbidden, "reasons", None)
+    if reasons:
+        raise RuntimeError(f"{where} was called without an explicit rng inside {reasons[-1]}; "
+                           "pass rng= (results must follow the scene's seed)")
+
+
+def default_rng() -> np.random.RandomState:
+    """A new ``numpy.random.RandomState()`` seeded from OS entropy (upstream's ``default_rng``):
+    **not reproducible**; pass a seeded rng wherever results should follow a seed."""
+    _check_unseeded_allowed("kubric.randomness.default_rng()")
+    return np.random.RandomState()
+
+
+def _unseeded_rng(where: str) -> np.random.RandomState:
+    global _unseeded
+    _check_unseeded_allowed(where)
+    if where not in _warned:
+        _warned.add(where)
+        warnings.warn(f"{where} called without rng= and no kb.setup() rng is held: using an "
+                      "unseeded generator (as upstream Kubric did); results are not "
+                      "reproducible", UnseededRandomnessWarning, stacklevel=4)
+    if _unseeded is None:
+        _unseeded = np.random.RandomState()
+    return _unseeded
+
+
 def _require_rng(rng, where: str):
     if rng is None:
+        _check_unseeded_allowed(where)
         bound = worker_rng()
         if bound is not None:
             return bound
+        if where in UPSTREAM_DEFAULTED:
+            return _unseeded_rng(where)
         raise TypeError(f"{where} needs rng=numpy.random.RandomState(seed) (or call "
                         "kb.setup(flags) first and keep the rng it returns, which is seeded "
                         "from --seed)")
@@ -107,7 +186,7 @@ def rotation_sampler(axis=None) -> Callable[[PhysicalObject, Any], None]:
     return sample
 
 
-class DoesNotFitError(ValueError):
+class DoesNotFitError(KubricError, ValueError):
     """The object's rotated bounding box is larger than the sampling region on some axis."""
 
 
@@ -181,6 +260,7 @@ def move_until_no_overlap(asset, simulator, spawn_region=((-1, -1, -1), (1, 1, 1
     ``spawn_region`` until it overlaps nothing in ``simulator`` (which must offer
     ``check_overlap(asset)``). Rotations too large for the region are rejected trials. Returns the
     trials used; ``RuntimeError`` naming the asset after ``max_trials``."""
+    rng = _require_rng(rng, "move_until_no_overlap")
     return resample_while(asset, samplers=[rotation_sampler(), position_sampler(spawn_region)],
                           condition=simulator.check_overlap, max_trials=max_trials, rng=rng)
 

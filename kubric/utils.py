@@ -25,7 +25,7 @@ from kubric.annotations.metadata import (
 )
 from kubric.core.resolution import parse_resolution
 from kubric.core.scene import Scene
-from kubric.pipeline.worker import write_success
+from kubric.io.scene_dir import write_success
 
 logger = logging.getLogger("kubric")
 

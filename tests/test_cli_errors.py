@@ -77,7 +77,7 @@ def test_debug_flag_shows_the_traceback(place):
     for r in (kubric("--debug", *args, cwd=place), kubric(*args, cwd=place,
                                                            env={"KUBRIC_DEBUG": "1"})):
         assert r.returncode == 1
-        assert "Traceback" in r.stderr and "ValueError" in r.stderr
+        assert "Traceback" in r.stderr and "InputError" in r.stderr
         assert r.stderr.strip().splitlines()[-1].startswith("kubric assets: error: sidecar")
 
 
@@ -93,12 +93,18 @@ def test_exit_codes_classify_errors():
 
 
 BAD_INPUT_RECIPE = """
+from kubric.errors import InputError
 from kubric.pipeline import Recipe
 
 
 class BadInput(Recipe, name="bad_input_test"):
     def generate(self, seed, out_dir):
-        raise ValueError(f"scene {seed}: an input file is bad")
+        raise InputError(f"scene {seed}: an input file is bad")
+
+
+class Buggy(Recipe, name="buggy_test"):
+    def generate(self, seed, out_dir):
+        raise ValueError(f"scene {seed}: operands could not be broadcast")
 """
 
 
@@ -108,8 +114,19 @@ def test_runner_logs_keep_the_traceback(tmp_path):
                "--no-progress", "--out", "out", cwd=tmp_path)
     assert r.returncode != 0
     log = (tmp_path / "out" / "logs" / "scene_00000000.log").read_text()
-    assert "Traceback" in log and "ValueError: scene 0: an input file is bad" in log
+    assert "Traceback" in log and "InputError: scene 0: an input file is bad" in log
     assert "kubric worker: error: scene 0: an input file is bad" in log
+
+
+def test_an_unexpected_error_keeps_its_traceback(tmp_path):
+    """Only kubric's own errors (KubricError) and OSErrors are one line: a ValueError from deep
+    inside (a numpy shape bug, say) is a bug, printed with its traceback."""
+    (tmp_path / "bad_input.py").write_text(BAD_INPUT_RECIPE)
+    r = kubric("worker", "bad_input.py:Buggy", "--seed", "0", "--out", "out", cwd=tmp_path)
+    assert r.returncode == 1
+    assert "Traceback" in r.stderr and r.stderr.strip().endswith(
+        "ValueError: scene 0: operands could not be broadcast")
+    assert "kubric worker: error:" not in r.stderr
 
 
 def test_failure_reason_names_a_timeout_not_the_logs_first_line(tmp_path):

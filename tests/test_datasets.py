@@ -16,8 +16,8 @@ import pytest
 
 from kubric import file_io
 from kubric.datasets import layout, load
-from kubric.datasets.scene_reader import dequantise
 from kubric.datasets.tfds_io import flatten
+from kubric.io.scene_reader import dequantise
 
 pytestmark = pytest.mark.blender
 

@@ -62,14 +62,21 @@ def test_png_round_trip_8_and_16_bit_1_to_4_channels(data, dtype, channels, dims
 
 @SETTINGS
 @given(data=st.data(), channels=st.integers(1, 4), dims=_dims())
-def test_png_float_input_stored_16_bit_within_half_step(data, channels, dims):
+def test_png_float_input_stored_16_bit_truncated_like_upstream(data, channels, dims):
+    """Floats become floor(x · 65535) (upstream's truncation): reading back loses less than one
+    step and never rounds up."""
     image = data.draw(hnp.arrays(np.float64, dims + (channels,),
                                  elements=st.floats(0.0, 1.0)))
     with tempfile.TemporaryDirectory() as tmp:
         fio.write_png(image, pathlib.Path(tmp) / "f.png")
+        raw = fio.read_png(pathlib.Path(tmp) / "f.png")
         back = fio.read_png(pathlib.Path(tmp) / "f.png", rescale_range=(0.0, 1.0))
+    assert raw.dtype == np.uint16
+    expected = [[[int(v * 65535) for v in px] for px in row] for row in image]  # int() truncates
+    np.testing.assert_array_equal(raw[..., :channels], np.array(expected).reshape(image.shape))
     assert back.dtype == np.float32
-    np.testing.assert_allclose(back[..., :channels], image, atol=0.5 * STEP16 + 1e-7, rtol=0)
+    error = image - back[..., :channels].astype(np.float64)
+    assert np.all(error > -1e-7) and np.all(error < STEP16 + 1e-7)
 
 
 @SETTINGS

@@ -199,8 +199,8 @@ def test_every_written_file_and_field_is_documented(scenes):
 def test_movi_e_scene_packs_under_its_schema(scenes):
     """The C–F schema reads a real MOVi-E scene and TFDS serialises the example."""
     from kubric.datasets import tfds_io
-    from kubric.datasets.scene_reader import SceneReader
-    from kubric.io.schema import get_schema
+    from kubric.io.scene_reader import SceneReader
+    from kubric.pipeline.recipe import schema_of as get_schema
     schema = get_schema("movi_e")
     reader = SceneReader(scenes / "e" / "scene_00000001", schema)
     example = reader.example()

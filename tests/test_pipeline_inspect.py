@@ -8,6 +8,7 @@ import pytest
 from PIL import Image
 
 from kubric import file_io
+from kubric.annotations import pictures
 from kubric.core.camera_geometry import BACKGROUND_DEPTH
 from kubric.pipeline.cli import cmd_inspect
 from kubric.pipeline.inspect import colourise, inspect_scene
@@ -48,9 +49,10 @@ def test_inspect_summary_and_contact_sheet(tmp_path, capsys, monkeypatch):
     assert f"contact sheet: {tmp_path / 'scene_00000003_contact_sheet.png'}" in text
     sheet = np.asarray(Image.open(tmp_path / "scene_00000003_contact_sheet.png"))
     assert sheet.shape == (3 * 8, 5 * 10, 3)
-    # depth column: object bright, background black; segmentation column: label coloured
+    # depth column: the object in the depth map's colours, background black; segmentation
+    # column: label coloured
     depth_col = sheet[:8, 20:30]
-    assert depth_col[3, 4].max() == 255 and depth_col[0, 0].max() == 0
+    assert depth_col[3, 4].max() > 0 and depth_col[0, 0].max() == 0
     seg_col = sheet[:8, 10:20]
     assert seg_col[3, 4].max() > 0 and seg_col[0, 0].max() == 0
     # one palette: every label has the colour its segmentation PNG stores for it
@@ -73,11 +75,12 @@ def test_inspect_summary_and_contact_sheet(tmp_path, capsys, monkeypatch):
 
 def test_flow_colours_encode_direction():
     flow = np.zeros((1, 1, 2, 2), np.float32)
-    flow[0, 0, 0] = (0.0, 1.0)   # rightwards: hue 0 = red
-    flow[0, 0, 1] = (1.0, 0.0)   # downwards: hue 0.25
+    flow[0, 0, 0] = (0.0, 1.0)   # rightwards (+x): red on the Middlebury wheel
+    flow[0, 0, 1] = (1.0, 0.0)   # downwards (+y, a quarter turn): 13.5 of its 55 hues, orange
     rgb = colourise("forward_flow", flow)
     assert tuple(rgb[0, 0, 0]) == (255, 0, 0)
-    assert rgb[0, 0, 1, 1] == 255 and rgb[0, 0, 1, 2] == 0  # yellow-green
+    assert tuple(rgb[0, 0, 1]) == (255, round(13.5 / 15 * 255), 0)
+    np.testing.assert_array_equal(rgb[0], pictures.flow_picture(flow[0]))  # one colouriser
 
 
 def test_label_palette_extends_the_png_palette_beyond_255_labels():

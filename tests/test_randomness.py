@@ -18,8 +18,9 @@ def test_no_function_has_a_default_rng_object():
 
 
 def test_omitted_rng_needs_setup_and_then_uses_the_seeded_worker_rng(tmp_path):
+    # random_clevr_color has no upstream counterpart with an unseeded default
     with pytest.raises(TypeError, match=r"needs rng=.*or call kb.setup\(flags\) first"):
-        kb.random_hue_color()
+        randomness.random_clevr_color()
     parser = kb.ArgumentParser()
     for attempt in range(2):
         flags = parser.parse_args(["--seed", "7", "--job-dir", str(tmp_path / f"out{attempt}")])
@@ -33,8 +34,9 @@ def test_omitted_rng_needs_setup_and_then_uses_the_seeded_worker_rng(tmp_path):
 
 
 def test_the_worker_rng_binding_ends_with_its_owner(tmp_path):
-    """No reset between tests: once the rng kb.setup returned is dropped, rng=None is an error
-    again and kb.done has no output directory to mark."""
+    """No reset between tests: once the rng kb.setup returned is dropped, rng=None is no longer
+    bound (an error where upstream had no unseeded default) and kb.done has no output directory
+    to mark."""
     def upstream_script(job_dir):
         scene, rng, output_dir, _ = kb.setup(kb.ArgumentParser().parse_args(
             ["--seed", "3", "--job-dir", str(job_dir)]))
@@ -46,7 +48,7 @@ def test_the_worker_rng_binding_ends_with_its_owner(tmp_path):
     upstream_script(tmp_path / "a")
     assert randomness.worker_rng() is None
     with pytest.raises(TypeError, match="keep the rng it returns"):
-        kb.random_hue_color()
+        randomness.random_clevr_color()
     assert kb.done() is None and not (tmp_path / "a" / "_SUCCESS").exists()
     with pytest.raises(TypeError, match="needs a kubric.randomness.WorkerRandomState"):
         randomness.bind_worker_rng(np.random.RandomState(0))

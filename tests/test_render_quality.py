@@ -24,8 +24,8 @@ def test_profiles_resolve_to_renderer_settings(recipe):
             "samples_per_pixel": profile.samples, "use_denoising": profile.denoise,
             "denoising_quality": profile.denoising_quality,
             "denoising_prefilter": profile.denoising_prefilter}
-        settings = r.quality_settings()
-        assert settings["quality"] == name and settings["samples_per_pixel"] == profile.samples
+        settings = r.renderer_settings(motion_blur=0.0)
+        assert settings == {**r.renderer_quality(), "motion_blur": 0.0}
     default = get_recipe(recipe).from_assignments([])
     assert default.quality == "default" and default.renderer_quality()["samples_per_pixel"] == 16
 
@@ -35,7 +35,7 @@ def test_samples_and_denoise_override_the_profile():
     kw = r.renderer_quality()
     assert kw["samples_per_pixel"] == 12 and kw["use_denoising"] is False
     assert kw["denoising_quality"] == PROFILES["draft"].denoising_quality  # the rest stays
-    assert r.quality_settings()["quality"] == "draft"
+    assert r.renderer_settings()["samples_per_pixel"] == 12
 
 
 def test_bad_quality_is_one_line_naming_the_choices():

@@ -150,7 +150,7 @@ def test_principled_material_lit_by_lights():
     ball = kb.Sphere(material=mat)
     scene += [ball, kb.PointLight(position=(0, -3, 3), intensity=300)]
     r = _blender(scene, samples_per_pixel=4)
-    bsdf = mat.linked_objects[r].node_tree.nodes["bsdf"]
+    bsdf = mat.linked_objects[r].node_tree.nodes["Principled BSDF"]
     assert bsdf.inputs["Specular IOR Level"].default_value == pytest.approx(0.3)
     assert bsdf.inputs["IOR"].default_value == pytest.approx(1.3)
     rgba = r.render(return_layers=("rgba", "segmentation"))

@@ -122,7 +122,7 @@ def test_flat_colour_keys_drive_the_shadow_catcher_too():
     floor.keyframe_insert("color", 3)
     tree = floor.linked_objects[renderer].node_tree
     paths = {fc.data_path for fc in _action_fcurves(tree.animation_data.action)}
-    assert any('"emission"' in p for p in paths) and any('"catch_scale"' in p for p in paths)
+    assert any('"Emission"' in p for p in paths) and any('"catch_scale"' in p for p in paths)
 
     def keyed_frames():
         return sorted({int(k.co[0]) for fc in _action_fcurves(tree.animation_data.action)

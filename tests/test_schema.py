@@ -7,7 +7,8 @@ import pytest
 from kubric.io import layers as layers_io
 from kubric.io.layers import LayerFormat
 from kubric.io.scene_writer import write_scene
-from kubric.io.schema import Feature, Schema, SchemaError, get_schema, schema_markdown
+from kubric.io.schema import Feature, Schema, SchemaError, schema_markdown
+from kubric.pipeline.recipe import schema_of as get_schema
 
 # Upstream's published MOVi features (name, dtype, shape with the sequence dim first), typed
 # from the MOVi dataset builders' feature declarations.
@@ -92,7 +93,7 @@ def test_bad_declarations_are_refused():
 
 def test_markdown_lists_every_feature_with_its_contract():
     schema = get_schema("movi_a")
-    text = schema_markdown("movi_a")
+    text = schema_markdown(schema)
     for f in schema.features:
         assert f"| `{f.name}` |" in text
     assert "| `instances/positions` | float32 | (N, T, 3) | none | m |" in text
@@ -111,7 +112,8 @@ def test_schema_layer_flows_through_writer_and_reader(tmp_path):
     schema = _toy_schema()
     rng = np.random.RandomState(0)
     albedo = rng.rand(2, 4, 5, 3).astype(np.float32)
-    write_scene(schema, tmp_path, {"albedo": albedo}, {"metadata": {"answer": 42}})
+    write_scene(schema, tmp_path, {"albedo": albedo},
+                {"metadata": {"answer": 42, "resolution": [5, 4], "num_frames": 2}})
     assert sorted(p.name for p in tmp_path.glob("albedo_*.png")) == ["albedo_00000.png",
                                                                      "albedo_00001.png"]
     back = layers_io.read_layer(tmp_path, "albedo", formats=schema.layers)
@@ -126,9 +128,39 @@ def test_writer_refuses_scene_off_contract_and_writes_nothing(tmp_path):
     schema = _toy_schema()
     albedo = np.zeros((1, 2, 2, 3), np.float32)
     with pytest.raises(SchemaError, match=r"feature 'metadata/answer'.*no field 'answer'"):
-        write_scene(schema, tmp_path / "a", {"albedo": albedo}, {"metadata": {}})
+        write_scene(schema, tmp_path / "a", {"albedo": albedo}, {"metadata": DIMS})
     with pytest.raises(SchemaError, match="needs layer 'albedo'"):
-        write_scene(schema, tmp_path / "b", {}, {"metadata": {"answer": 1}})
+        write_scene(schema, tmp_path / "b", {}, {"metadata": {"answer": 1, **DIMS}})
+    with pytest.raises(SchemaError, match=r"layer 'albedo' has \(T, H, W\) \(1, 2, 2\), the "
+                       r"metadata says \(1, 3, 2\)"):
+        write_scene(schema, tmp_path / "c", {"albedo": albedo},
+                    {"metadata": {"answer": 1, "resolution": [2, 3], "num_frames": 1}})
+    with pytest.raises(SchemaError, match="must give 'resolution'"):
+        write_scene(schema, tmp_path / "d", {"albedo": albedo}, {"metadata": {"answer": 1}})
+    assert not any((tmp_path / d).exists() for d in "abcd")
+
+
+DIMS = {"resolution": [2, 2], "num_frames": 1}
+
+
+def test_writer_applies_every_conversion_the_packer_will(tmp_path):
+    """A value that passes the presence check but not the packer's conversion or cast is refused
+    when the scene is written (the MOVi-B background_color bug), naming the feature."""
+    schema = Schema("toy_colour", (Feature("background_color", "float32", (3,),
+                                           "meta:background", convert="hex_to_rgb"),
+                                   Feature("metadata/count", "uint8", (), "meta:count")))
+    ok = {"metadata": {"background": "#5998b2ff", "count": 3, **DIMS}}
+    write_scene(schema, tmp_path / "ok", {}, ok)  # '#rrggbbaa' (kb.Color.hexstr) is a colour
+    from kubric.io.scene_reader import SceneReader
+    rgb = SceneReader(tmp_path / "ok", schema).example()["background_color"]
+    assert np.allclose(rgb, np.array([0x59, 0x98, 0xb2]) / 255)
+    for field, value, message in [("background", "blue", "hex_to_rgb: 'blue' is not a"),
+                                  ("count", 300, r"values \[300, 300\] do not fit uint8"),
+                                  ("count", 2.5, "non-integer values")]:
+        bad = {"metadata": {**ok["metadata"], field: value}}
+        with pytest.raises(SchemaError, match=f"schema 'toy_colour': the scene written does not "
+                                              f"pack: .*{message}"):
+            write_scene(schema, tmp_path / field, {}, bad)
     assert not (tmp_path / "a").exists() and not (tmp_path / "b").exists()
 
 

@@ -256,16 +256,17 @@ def test_run_upstream_tests_counts_passes_failures_and_unimportable_modules(tmp_
 
 
 def test_physical_object_defaults_are_upstreams_and_reach_pybullet():
-    """Upstream's PhysicalObject defaults: mass 1, friction 0, restitution 0.5, not static; the
-    simulator body gets the same friction (PyBullet's getDynamicsInfo does not report the
-    restitution it uses; the bounce tests in test_simulator.py cover restitution)."""
+    """Upstream's PhysicalObject defaults (its code, kubric/core/objects.py at HEAD): mass 1,
+    friction 0.5, restitution 0.5, not static; the simulator body gets the same friction
+    (PyBullet's getDynamicsInfo does not report the restitution it uses; the bounce tests in
+    test_simulator.py cover restitution)."""
     import pybullet as pb
 
     scene = kb.Scene()
     simulator = kb.simulator.PyBullet(scene)
     cube = kb.Cube(position=(0, 0, 1))
-    assert (cube.mass, cube.friction, cube.restitution, cube.static) == (1.0, 0.0, 0.5, False)
+    assert (cube.mass, cube.friction, cube.restitution, cube.static) == (1.0, 0.5, 0.5, False)
     scene += cube
     info = pb.getDynamicsInfo(simulator._body_of(cube).uid, -1, physicsClientId=simulator.client)
-    assert (info[0], info[1]) == (1.0, 0.0)  # mass, lateral friction
+    assert (info[0], info[1]) == (1.0, 0.5)  # mass, lateral friction
     simulator.close()

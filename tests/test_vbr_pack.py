@@ -21,6 +21,8 @@ from kubric.datasets import load
 from kubric.io import png_io, tiff_io
 from kubric.io.schema import Feature, SchemaError
 
+pytestmark = pytest.mark.blender  # every test reads scenes the module fixture renders
+
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 TINY = ("resolution=32", "num_frames=3", "samples=1", "denoise=false")
 T, H, W = 3, 32, 32
@@ -59,7 +61,7 @@ def read_frames(scene: pathlib.Path, template: str, reader) -> np.ndarray:
 
 
 def test_inspect_recognises_the_vbr_schema(packed):
-    from kubric.io.schema import get_schema
+    from kubric.pipeline.recipe import schema_of as get_schema
     count = len(get_schema("vbr").features)
     for report in packed["inspect"].values():
         assert f"schema vbr: {count} features, every source present" in report
@@ -181,8 +183,8 @@ def test_viewer_shows_vbr_scenes(packed):
 
 def test_missing_link_fields_need_the_default(packed):
     """The rigid scene has no articulated_link: only the feature's default lets it pack."""
-    from kubric.datasets.scene_reader import SceneError, SceneReader
-    from kubric.io.schema import get_schema
+    from kubric.io.scene_reader import SceneError, SceneReader
+    from kubric.pipeline.recipe import schema_of as get_schema
     schema = get_schema("vbr")
     strict = dataclasses.replace(schema["instances/articulated_link"], default=None)
     bare = schema.extend("vbr_strict", (strict,), drop=("instances/articulated_link",))
@@ -200,8 +202,8 @@ def test_an_instance_never_visible_packs_with_empty_boxes(packed, tmp_path):
     import shutil
 
     from kubric.datasets import pack
-    from kubric.datasets.scene_reader import SceneReader
-    from kubric.io.schema import get_schema
+    from kubric.io.scene_reader import SceneReader
+    from kubric.pipeline.recipe import schema_of as get_schema
     scene = tmp_path / "scenes" / packed["articulated"]
     shutil.copytree(packed["scenes"] / packed["articulated"], scene)
     meta = json.loads((scene / "metadata.json").read_text())

@@ -22,9 +22,9 @@ import pytest
 from PIL import Image
 from viewer_helpers import get_json, serving
 
+from kubric.annotations import pictures as render
 from kubric.io.json_io import dumps_json, read_json
 from kubric.io.layers import read_frame
-from kubric.viewer import render
 
 pytestmark = pytest.mark.blender  # the fixture renders a MOVi-A scene with `kubric worker`
 

@@ -13,8 +13,8 @@ import pytest
 from PIL import Image
 from viewer_helpers import CAMERA_TO_WORLD, FOCAL_PX, H, W, get_json, request, serving, synthetic_scene
 
+from kubric.annotations import pictures as render
 from kubric.io.png_io import decode_png
-from kubric.viewer import render
 from kubric.viewer.service import LRUCache
 from kubric.viewer.source import DirectorySource
 
@@ -267,3 +267,42 @@ def test_decode_png_of_rendered_frames_round_trip():
     pic = render.picture("normal", np.float32([[[0, 0, 1], [1, 0, 0]]]))
     decoded, _ = decode_png(render.to_png(pic))
     np.testing.assert_array_equal(decoded, [[[128, 128, 255], [255, 128, 128]]])
+
+
+def test_a_recipe_s_own_layers_are_shown_through_its_schema(tmp_path):
+    """Layers a recipe declares in its schema (klevr's semantic labels, texture_nerf's bands and
+    cut-off TIFFs) are listed and drawn by their kind, found through the scene's recipe."""
+    from kubric.io.layers import LayerFormat
+    from kubric.io.scene_writer import write_scene
+    from kubric.io.schema import Feature, Schema
+    from kubric.pipeline import Recipe
+
+    schema = Schema("test_viewer_own_layers", (
+        Feature("parts", "uint8", ("T", "H", "W", 1), "layer:parts", "png"),
+        Feature("heat", "float32", ("T", "H", "W", 1), "layer:heat", "zlib")),
+        {"parts": LayerFormat("parts_{:05d}.png", 1, "labels"),
+         "heat": LayerFormat("heat_{:05d}.tiff", 1, "tiff")})
+
+    class OwnLayers(Recipe, name="test_viewer_own_layers"):
+        pass
+    OwnLayers.schema = schema
+    parts = np.zeros((2, 4, 5, 1), np.uint8)
+    parts[:, 1:3, 1:4] = 2
+    heat = np.linspace(0, 1, 2 * 4 * 5, dtype=np.float32).reshape(2, 4, 5, 1)
+    scene = tmp_path / "scene_00000001"
+    write_scene(schema, scene, {"parts": parts, "heat": heat},
+                {"flags": {"recipe": "test_viewer_own_layers"},
+                 "metadata": {"resolution": [5, 4], "num_frames": 2}})
+    (scene / "_SUCCESS").write_text("{}")
+    from kubric.io.schema import register_schema
+    register_schema(schema)
+    with serving(tmp_path) as (addr, _):
+        _, body = get_json(addr, "/api/scenes")
+        assert body["scenes"][0]["layers"] == ["parts", "heat"]
+        _, _, body = request(addr, "/api/frame/scene_00000001/parts/1.png")
+        np.testing.assert_array_equal(_png(body), render.label_palette(3)[parts[1, ..., 0]])
+        _, _, body = request(addr, "/api/frame/scene_00000001/heat/0.png")
+        pic = _png(body)
+        np.testing.assert_array_equal(pic, render.depth_picture(heat[0], float(heat[0].min()),
+                                                                float(heat[0].max()), np.inf))
+        assert request(addr, "/api/frame/scene_00000001/nope/0.png")[0] == 404

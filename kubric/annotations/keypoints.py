@@ -40,6 +40,7 @@ from kubric.annotations.tracks import (
 )
 from kubric.core import camera_geometry as geo
 from kubric.core.characters import COCO_KEYPOINTS, COCO_SKELETON, Character
+from kubric.errors import InputError
 
 KEYPOINT_FIELDS = ("keypoint_names", "keypoint_skeleton", "keypoint_skin_depth", "keypoints_3d",
                    "keypoints_camera", "keypoints_2d", "keypoints_depth",
@@ -62,11 +63,11 @@ def character_keypoints(camera, frames: Sequence[int], depth, segmentation, asse
     foot points, are left out); ``depth`` / ``segmentation`` (T, H, W[, 1]) are the rendered
     layers labelled for ``assets`` (usually ``scene.assets``)."""
     if not isinstance(character, Character) or character.keypoint_regressor is None:
-        raise ValueError(f"{getattr(character, 'uid', character)!r} is not a Character with a "
+        raise InputError(f"{getattr(character, 'uid', character)!r} is not a Character with a "
                          "keypoint_regressor")
     missing = [n for n in names if n not in character.keypoint_names]
     if missing:
-        raise ValueError(f"{character.uid}: its keypoint regressor lacks {missing}; it has "
+        raise InputError(f"{character.uid}: its keypoint regressor lacks {missing}; it has "
                          f"{list(character.keypoint_names)}")
     pick = [character.keypoint_names.index(n) for n in names]
     depth, labels, frames = frame_layers(depth, segmentation, frames)

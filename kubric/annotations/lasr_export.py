@@ -51,6 +51,8 @@ import numpy as np
 
 from kubric.core import camera_geometry as geo
 from kubric.core.quaternion import Quaternion
+from kubric.errors import InputError
+from kubric.io.scene_dir import METADATA_FILE
 
 FULL = "Full-Resolution"
 SILHOUETTE_VALUE = 128
@@ -140,7 +142,7 @@ def default_root(instances: list[dict], chosen: list[int]) -> int:
         return chosen[0]
     roots = [k for k in chosen if "articulated_link" not in instances[k]]
     if len(roots) != 1:
-        raise ValueError(f"cannot tell the root object among instances {chosen} "
+        raise InputError(f"cannot tell the root object among instances {chosen} "
                          f"({len(roots)} are not articulated links): pass root=")
     return roots[0]
 
@@ -189,21 +191,21 @@ def export_lasr(scene_dir, out_dir, sequence: str | None = None,
     scene_dir, out_dir = pathlib.Path(scene_dir), pathlib.Path(out_dir)
     if out_dir.exists():
         raise FileExistsError(f"export_lasr: {str(out_dir)!r} already exists")
-    meta = json_io.read_json(scene_dir / "metadata.json")
+    meta = json_io.read_json(scene_dir / METADATA_FILE)
     infos = meta["instances"]
     chosen = list(range(len(infos))) if instances is None else [int(k) for k in instances]
     bad = [k for k in chosen if not 0 <= k < len(infos)]
     if bad or not chosen:
-        raise ValueError(f"export_lasr: instances {chosen} must be 1 or more of 0..{len(infos) - 1}")
+        raise InputError(f"export_lasr: instances {chosen} must be 1 or more of 0..{len(infos) - 1}")
     root = default_root(infos, chosen) if root is None else int(root)
     if root not in chosen:
-        raise ValueError(f"export_lasr: root {root} is not one of the instances {chosen}")
+        raise InputError(f"export_lasr: root {root} is not one of the instances {chosen}")
     flags = meta.get("flags", {})
     if sequence is None:
         sequence = f"{flags['recipe']}_{int(flags['seed']):08d}" if "recipe" in flags \
             else scene_dir.name
     if not sequence or any(c in sequence for c in "/\\\0") or sequence in (".", ".."):
-        raise ValueError(f"export_lasr: sequence name {sequence!r} is not a folder name")
+        raise InputError(f"export_lasr: sequence name {sequence!r} is not a folder name")
     data = layer_io.read_image_dict(scene_dir, ["rgba", "depth", "segmentation",
                                                 "forward_flow", "backward_flow"])
     labels = data["segmentation"][..., 0].astype(np.int64)

@@ -33,8 +33,10 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 
 from kubric.core import camera_geometry as geo
+from kubric.errors import InputError
+from kubric.io.schema import VIEW_SPLITS
 
-SPLITS = ("train", "val", "test")
+SPLITS = VIEW_SPLITS  # declared with the schema conversion that indexes them
 
 
 def split_ratio(value) -> tuple[int, int, int]:
@@ -45,9 +47,9 @@ def split_ratio(value) -> tuple[int, int, int]:
     try:
         parts = [int(str(v).strip()) for v in value]
     except (TypeError, ValueError):
-        raise ValueError("expected three integers train,val,test") from None
+        raise InputError("expected three integers train,val,test") from None
     if len(parts) != 3 or min(parts) < 0 or parts[0] < 1:
-        raise ValueError("expected three integers train,val,test ≥ 0 with train ≥ 1")
+        raise InputError("expected three integers train,val,test ≥ 0 with train ≥ 1")
     return tuple(parts)
 
 
@@ -113,10 +115,10 @@ def nerf_transforms(camera, frames: Sequence[int], resolution, splits: Sequence[
       extra: fields added at the top level of every file (e.g. ``split_ratio``).
     """
     if len(frames) != len(splits):
-        raise ValueError(f"nerf_transforms: {len(frames)} frames but {len(splits)} split names")
+        raise InputError(f"nerf_transforms: {len(frames)} frames but {len(splits)} split names")
     unknown = sorted(set(splits) - set(SPLITS))
     if unknown:
-        raise ValueError(f"nerf_transforms: unknown split(s) {unknown}; allowed: {list(SPLITS)}")
+        raise InputError(f"nerf_transforms: unknown split(s) {unknown}; allowed: {list(SPLITS)}")
     shared = intrinsics_entry(camera, resolution)
     out = {s: {**shared, **dict(extra or {}), "split": s, "frames": []} for s in SPLITS}
     matrices = geo.camera_to_world_matrices(camera, list(frames))
@@ -134,13 +136,8 @@ def pixel_rays_from_transforms(data: Mapping, entry: Mapping):
     """(origins (H, W, 3), unit directions (H, W, 3)) of every pixel-centre ray of one frame
     entry of a transforms file, built from the file's fields alone (see module doc)."""
     w, h = int(data["w"]), int(data["h"])
-    m = np.asarray(entry["transform_matrix"], np.float64)
-    cols, rows = np.meshgrid(np.arange(w) + 0.5, np.arange(h) + 0.5)
-    local = np.stack([(cols - data["cx"]) / data["fl_x"], -(rows - data["cy"]) / data["fl_y"],
-                      -np.ones_like(cols)], axis=-1)
-    local /= np.linalg.norm(local, axis=-1, keepdims=True)
-    directions = local @ m[:3, :3].T
-    return np.broadcast_to(m[:3, 3], directions.shape).copy(), directions
+    k = [[data["fl_x"], 0.0, data["cx"]], [0.0, data["fl_y"], data["cy"]], [0.0, 0.0, 1.0]]
+    return geo.pinhole_rays(k, entry["transform_matrix"], geo.pixel_centres(h, w))
 
 
 def iter_views(scene_dir, split: str = "train"):
@@ -153,7 +150,7 @@ def iter_views(scene_dir, split: str = "train"):
     from kubric.io import png_io, tiff_io
 
     if split not in SPLITS:
-        raise ValueError(f"iter_views: unknown split {split!r}; allowed: {list(SPLITS)}")
+        raise InputError(f"iter_views: unknown split {split!r}; allowed: {list(SPLITS)}")
     scene_dir = pathlib.Path(scene_dir)
     path = scene_dir / f"transforms_{split}.json"
     if not path.is_file():

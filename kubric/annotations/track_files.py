@@ -33,20 +33,30 @@ import pickle
 import numpy as np
 
 from kubric.annotations.tracks import TRACK_FIELDS
+from kubric.errors import InputError
+from kubric.io import scene_dir
 from kubric.io.paths import atomic_write_bytes
 
 FORMAT_VERSION = 1
-TRACKS_FILE = "tracks.npz"
+TRACKS_FILE = scene_dir.TRACKS_FILE
+
+
+def tracks_archive(tracks: dict) -> dict[str, np.ndarray]:
+    """The arrays of ``tracks.npz`` for the dict of
+    :func:`~kubric.annotations.tracks.compute_tracks`: ``format_version`` then every field of
+    :data:`~kubric.annotations.tracks.TRACK_FIELDS` (what the scene writer stores)."""
+    missing = [k for k in TRACK_FIELDS if k not in tracks]
+    if missing:
+        raise InputError(f"tracks: missing fields {missing}")
+    return {"format_version": np.int32(FORMAT_VERSION),
+            **{k: np.asarray(tracks[k]) for k in TRACK_FIELDS}}
 
 
 def write_tracks(tracks: dict, path) -> pathlib.Path:
-    """Write the dict of :func:`~kubric.annotations.tracks.compute_tracks` to ``path``."""
-    missing = [k for k in TRACK_FIELDS if k not in tracks]
-    if missing:
-        raise ValueError(f"write_tracks: missing fields {missing}")
+    """Write the dict of :func:`~kubric.annotations.tracks.compute_tracks` to ``path`` (outside
+    a recipe; a recipe hands :func:`tracks_archive` to the scene writer)."""
     buffer = io.BytesIO()
-    np.savez_compressed(buffer, format_version=np.int32(FORMAT_VERSION),
-                        **{k: np.asarray(tracks[k]) for k in TRACK_FIELDS})
+    np.savez_compressed(buffer, **tracks_archive(tracks))
     return atomic_write_bytes(buffer.getvalue(), path)
 
 
@@ -62,11 +72,11 @@ def read_tracks(path) -> dict[str, np.ndarray]:
         out = {k: data[k] for k in data.files}
     version = int(out.pop("format_version", -1))
     if version != FORMAT_VERSION:
-        raise ValueError(f"{str(path)!r}: tracks format_version {version}, this reader reads "
+        raise InputError(f"{str(path)!r}: tracks format_version {version}, this reader reads "
                          f"{FORMAT_VERSION}")
     missing = [k for k in TRACK_FIELDS if k not in out]
     if missing:
-        raise ValueError(f"{str(path)!r}: missing fields {missing}")
+        raise InputError(f"{str(path)!r}: missing fields {missing}")
     return out
 
 
@@ -74,11 +84,11 @@ def tapvid_example(tracks: dict, video: np.ndarray) -> dict[str, np.ndarray]:
     """One scene in TAP-Vid's layout (module doc)."""
     video = np.asarray(video)
     if video.ndim != 4 or video.shape[-1] not in (3, 4) or video.dtype != np.uint8:
-        raise ValueError(f"video must be uint8 (T, H, W, 3 or 4), got {video.dtype} {video.shape}")
+        raise InputError(f"video must be uint8 (T, H, W, 3 or 4), got {video.dtype} {video.shape}")
     w, h = (int(v) for v in tracks["resolution"])
     t = len(tracks["frames"])
     if video.shape[:3] != (t, h, w):
-        raise ValueError(f"video shape {video.shape[:3]} does not match the tracks' "
+        raise InputError(f"video shape {video.shape[:3]} does not match the tracks' "
                          f"(T, H, W) = {(t, h, w)}")
     target = np.asarray(tracks["target_points"], dtype=np.float32)
     return {
@@ -93,16 +103,10 @@ def tapvid_example(tracks: dict, video: np.ndarray) -> dict[str, np.ndarray]:
 def scene_dirs_with_tracks(root) -> list[pathlib.Path]:
     """Complete scene directories under ``root`` (or ``root`` itself), each with tracks.npz;
     ValueError (one line) when there is none or a complete scene lacks its tracks."""
-    root = pathlib.Path(root)
-    if not root.is_dir():
-        raise FileNotFoundError(f"{str(root)!r} is not a directory")
-    candidates = [root] if (root / "_SUCCESS").exists() else \
-        sorted(p for p in root.iterdir() if p.is_dir() and (p / "_SUCCESS").exists())
-    if not candidates:
-        raise ValueError(f"{str(root)!r} holds no complete scene directory (with _SUCCESS)")
+    candidates = scene_dir.scenes_under(root)
     lacking = [p.name for p in candidates if not (p / TRACKS_FILE).is_file()]
     if lacking:
-        raise ValueError(f"scene {lacking[0]!r} has no {TRACKS_FILE} ({len(lacking)} of "
+        raise InputError(f"scene {lacking[0]!r} has no {TRACKS_FILE} ({len(lacking)} of "
                          f"{len(candidates)} scenes lack it; generate with --set tracks=N)")
     return candidates
 

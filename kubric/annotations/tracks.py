@@ -89,6 +89,7 @@ from kubric.annotations.character_tracks import follow_character
 from kubric.annotations.segmentation import instance_labels
 from kubric.core import camera_geometry as geo
 from kubric.core.characters import Character
+from kubric.errors import InputError
 
 #: Relative depth tolerance of the self-occlusion test (see module doc).
 DEPTH_TOLERANCE = 1e-3
@@ -122,7 +123,7 @@ def allocate(counts: Sequence[int], num_tracks: int, max_fraction: float) -> np.
     """Tracks per group (TAP-Vid's balanced allocation plus a shortfall fill; module doc)."""
     counts = np.asarray(counts, dtype=np.int64)
     if num_tracks > counts.sum():
-        raise ValueError(f"num_tracks={num_tracks} is more than the {int(counts.sum())} "
+        raise InputError(f"num_tracks={num_tracks} is more than the {int(counts.sum())} "
                          "trackable grid points of this scene")
     take = np.zeros_like(counts)
     remaining = int(num_tracks)
@@ -186,7 +187,7 @@ def check_queries(queries, num_frames: int, width: int, height: int) -> np.ndarr
     bad |= (q[:, 1] < 0) | (q[:, 1] >= height) | (q[:, 2] < 0) | (q[:, 2] >= width)
     if bad.any():
         i = int(np.flatnonzero(bad)[0])
-        raise ValueError(f"query {i} (t, y, x)={tuple(float(v) for v in q[i])} is outside the "
+        raise InputError(f"query {i} (t, y, x)={tuple(float(v) for v in q[i])} is outside the "
                          f"clip: t must be an integer in [0, {num_frames}), y in [0, {height}), "
                          f"x in [0, {width})")
     return q
@@ -313,7 +314,7 @@ def compute_tracks(camera, frames: Sequence[int], depth, segmentation, assets: S
     missing = (qlabel == 0) | (depth[tq, rq, cq] >= geo.BACKGROUND_DEPTH * 0.999)
     if missing.any():
         i = int(np.flatnonzero(missing)[0])
-        raise ValueError(f"query {i} (t, y, x)={tuple(float(v) for v in q[i])} hits no surface "
+        raise InputError(f"query {i} (t, y, x)={tuple(float(v) for v in q[i])} hits no surface "
                          "(the pixel shows the empty background): nothing to track there")
     qassets = [by_label[int(lab)] for lab in qlabel]
     is_fg = np.array([not a.background for a in qassets], dtype=bool)
@@ -325,7 +326,7 @@ def compute_tracks(camera, frames: Sequence[int], depth, segmentation, assets: S
                            dtype=np.int32)
     if np.any(is_fg & (instance_id == 0)):
         i = int(np.flatnonzero(is_fg & (instance_id == 0))[0])
-        raise ValueError(f"query {i} lies on {qassets[i].uid}, which is not in `instances`")
+        raise InputError(f"query {i} lies on {qassets[i].uid}, which is not in `instances`")
 
     # 1.–2. query points in world, then in their object's frame
     qdepth = np.array([_query_depth(depth, labels, tq[i], q[i, 1], q[i, 2], qlabel[i])
@@ -432,10 +433,10 @@ def load_queries(path) -> np.ndarray:
         else:
             q = np.loadtxt(io.StringIO(path.read_text().replace(",", " ")), ndmin=2)
     except (OSError, ValueError) as err:
-        raise ValueError(f"cannot read queries from {str(path)!r}: {err}") from None
+        raise InputError(f"cannot read queries from {str(path)!r}: {err}") from None
     q = np.asarray(q, dtype=np.float64)
     if q.ndim != 2 or q.shape[1] != 3 or not len(q):
-        raise ValueError(f"queries file {str(path)!r} must hold rows (t, y, x), got shape "
+        raise InputError(f"queries file {str(path)!r} must hold rows (t, y, x), got shape "
                          f"{q.shape}")
     return q
 

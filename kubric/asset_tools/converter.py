@@ -48,6 +48,8 @@ from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from kubric.errors import InputError
+
 MESH_SUFFIXES = (".obj", ".glb", ".gltf", ".ply", ".stl")
 REPORT_NAME = "conversion_report.json"
 #: version of what :func:`convert_one` writes; archives from another version are converted again.
@@ -89,7 +91,7 @@ def as_rgba(value, what: str) -> tuple[float, float, float, float]:
         vals = np.zeros(0)
     if vals.size not in (3, 4) or not np.all(np.isfinite(vals)) or \
             np.any(vals < 0) or np.any(vals > 1):
-        raise ValueError(f"{what}: a colour must be 3 or 4 numbers in [0, 1], got {value!r}")
+        raise InputError(f"{what}: a colour must be 3 or 4 numbers in [0, 1], got {value!r}")
     return tuple(float(v) for v in (*vals, 1.0)[:4])
 
 
@@ -112,7 +114,7 @@ def discover_jobs(src_dir: str | os.PathLike, license: str, up: str = "z",
             continue
         asset_id = _sanitize_id(path.relative_to(src))
         if asset_id in jobs:
-            raise ValueError(f"two meshes map to the asset id {asset_id!r}: "
+            raise InputError(f"two meshes map to the asset id {asset_id!r}: "
                              f"{jobs[asset_id].mesh_path} and {path}")
         meta, lic, sc, color = {}, license, scale, None
         sidecar = path.with_suffix(".json")
@@ -120,9 +122,9 @@ def discover_jobs(src_dir: str | os.PathLike, license: str, up: str = "z",
             try:
                 info = json.loads(sidecar.read_text())
             except (UnicodeDecodeError, json.JSONDecodeError) as err:
-                raise ValueError(f"sidecar {str(sidecar)!r} is not valid JSON: {err}") from None
+                raise InputError(f"sidecar {str(sidecar)!r} is not valid JSON: {err}") from None
             if not isinstance(info, dict):
-                raise ValueError(f"sidecar {str(sidecar)!r} must hold a JSON object, got "
+                raise InputError(f"sidecar {str(sidecar)!r} must hold a JSON object, got "
                                  f"{type(info).__name__}")
             meta = {k: info[k] for k in ("category", "description") if k in info}
             lic = info.get("license", license)
@@ -155,15 +157,15 @@ def load_visual(path: str, up: str = "z", scale=1.0, color=None,
     if suffix in (".glb", ".gltf") or up == "y":
         mesh.apply_transform(trimesh.transformations.rotation_matrix(np.pi / 2, (1, 0, 0)))
     elif up != "z":
-        raise ValueError(f"up must be 'z' or 'y', got {up!r}")
+        raise InputError(f"up must be 'z' or 'y', got {up!r}")
     factors = np.broadcast_to(np.asarray(scale, dtype=np.float64), (3,))
     if not np.all(factors > 0):
-        raise ValueError(f"scale must be positive, got {scale!r}")
+        raise InputError(f"scale must be positive, got {scale!r}")
     mesh.apply_transform(np.diag([*factors, 1.0]))
     if len(mesh.faces) == 0 or not np.all(np.isfinite(mesh.vertices)):
-        raise ValueError("empty mesh or non-finite vertex coordinates")
+        raise InputError("empty mesh or non-finite vertex coordinates")
     if np.min(mesh.extents) <= 0:
-        raise ValueError(f"degenerate (flat) mesh with extents {mesh.extents.tolist()}")
+        raise InputError(f"degenerate (flat) mesh with extents {mesh.extents.tolist()}")
     return mesh, look
 
 
@@ -181,7 +183,7 @@ def _check_obj_vertices(path: str) -> None:
             if "nan" in low or "inf" in low:
                 coords = line.split()[1:4]
                 if not all(math.isfinite(float(c)) for c in coords):
-                    raise ValueError(f"non-finite vertex coordinates in vertex {count}: "
+                    raise InputError(f"non-finite vertex coordinates in vertex {count}: "
                                      f"{' '.join(coords)}")
 
 
@@ -196,13 +198,13 @@ def _split_parts(loaded) -> list:
 
     if isinstance(loaded, trimesh.Scene):
         if not loaded.geometry:
-            raise ValueError("the file holds no geometry")
+            raise InputError("the file holds no geometry")
         parts = list(loaded.dump(concatenate=False))
     else:
         parts = [loaded]
     for part in parts:
         if not isinstance(part, trimesh.Trimesh):
-            raise ValueError(f"not a triangle mesh (got {type(part).__name__}, "
+            raise InputError(f"not a triangle mesh (got {type(part).__name__}, "
                              "e.g. a point cloud)")
     return parts
 
@@ -246,9 +248,8 @@ def srgb_bytes(linear):
     """Linear values in [0, 1] → 8-bit sRGB-encoded values (the inverse of an image import)."""
     import numpy as np
 
-    c = np.clip(np.asarray(linear, dtype=np.float64), 0.0, 1.0)
-    s = np.where(c <= 0.0031308, 12.92 * c, 1.055 * c ** (1 / 2.4) - 0.055)
-    return np.round(s * 255.0).astype(np.uint8)
+    from kubric.core.color import linear_to_srgb
+    return np.round(linear_to_srgb(linear) * 255.0).astype(np.uint8)
 
 
 def _pack_atlas(parts, looks, fallback):
@@ -289,7 +290,7 @@ def _pack_atlas(parts, looks, fallback):
     mesh = trimesh.util.concatenate(parts)
     mat = mesh.visual.material
     if not isinstance(mat, PBRMaterial) or mat.baseColorTexture is None:
-        raise ValueError(f"packing {len(parts)} materials into one texture failed "
+        raise InputError(f"packing {len(parts)} materials into one texture failed "
                          f"(got {type(mat).__name__})")
     mat.baseColorFactor = None
     mat.metallicFactor = 0.0
@@ -298,10 +299,8 @@ def _pack_atlas(parts, looks, fallback):
 
 def srgb_to_linear(srgb):
     """sRGB-encoded values in [0, 1] → linear values (the decoding an image import applies)."""
-    import numpy as np
-
-    c = np.clip(np.asarray(srgb, dtype=np.float64), 0.0, 1.0)
-    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+    from kubric.core.color import srgb_to_linear as decode
+    return decode(srgb)
 
 
 def _with_appearance(parts, fallback, color_from: str):
@@ -475,7 +474,7 @@ def convert_collection(src_dir: str | os.PathLike, out_dir: str | os.PathLike, n
     from kubric.asset_tools.physics import DECOMPOSITION_METHODS
 
     if decomposition not in DECOMPOSITION_METHODS:
-        raise ValueError(f"decomposition must be one of {list(DECOMPOSITION_METHODS)}, "
+        raise InputError(f"decomposition must be one of {list(DECOMPOSITION_METHODS)}, "
                          f"got {decomposition!r}")
     if decomposition == "coacd":
         import importlib.util
@@ -485,5 +484,5 @@ def convert_collection(src_dir: str | os.PathLike, out_dir: str | os.PathLike, n
     jobs = discover_jobs(src_dir, license=license, up=up, scale=scale,
                          decomposition=decomposition)
     if not jobs:
-        raise ValueError(f"no {list(MESH_SUFFIXES)} files under {str(src_dir)!r}")
+        raise InputError(f"no {list(MESH_SUFFIXES)} files under {str(src_dir)!r}")
     return convert_jobs(jobs, out_dir, name, workers=workers, progress=progress)

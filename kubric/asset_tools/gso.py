@@ -31,6 +31,8 @@ import shutil
 import urllib.parse
 from pathlib import Path
 
+from kubric.errors import InputError
+
 NAME = "GSO"
 VERSION = "1.0"
 LICENSE = "CC-BY-4.0 (Google Scanned Objects, Google LLC; https://creativecommons.org/licenses/by/4.0/)"
@@ -118,11 +120,11 @@ def load_catalogue(path: str | os.PathLike) -> dict[str, dict]:
     try:
         data = json.loads(path.read_text())
     except (OSError, json.JSONDecodeError) as err:
-        raise ValueError(f"GSO catalogue {str(path)!r} is not readable JSON: {err}") from None
+        raise InputError(f"GSO catalogue {str(path)!r} is not readable JSON: {err}") from None
     if isinstance(data, list) and data and all(isinstance(p, list) for p in data):
         data = [m for page in data for m in page]
     if not isinstance(data, list) or not all(isinstance(m, dict) and "name" in m for m in data):
-        raise ValueError(f"GSO catalogue {str(path)!r}: expected a JSON list of models, each with "
+        raise InputError(f"GSO catalogue {str(path)!r}: expected a JSON list of models, each with "
                          "'name' (the Fuel models API listing)")
     out = {}
     for model in data:
@@ -189,7 +191,7 @@ def check_texture(obj_path: Path, copy_missing: bool = True) -> None:
             continue
         mtl = folder / tok[1].strip()
         if not mtl.is_file():
-            raise ValueError(f"material file {tok[1].strip()!r} named by {obj_path.name} is missing")
+            raise InputError(f"material file {tok[1].strip()!r} named by {obj_path.name} is missing")
         for mline in mtl.read_text(errors="replace").splitlines():
             mt = mline.split()
             if not mt or mt[0] != "map_Kd":
@@ -199,13 +201,13 @@ def check_texture(obj_path: Path, copy_missing: bool = True) -> None:
             if not tex.is_file():
                 alt = folder.parent / "materials" / "textures" / Path(rel).name
                 if not (copy_missing and alt.is_file()):
-                    raise ValueError(f"texture {rel!r} named by {mtl.name} is missing")
+                    raise InputError(f"texture {rel!r} named by {mtl.name} is missing")
                 shutil.copyfile(alt, tex)
             try:
                 with Image.open(tex) as im:
                     im.verify()
             except (UnidentifiedImageError, OSError, SyntaxError) as err:
-                raise ValueError(f"texture {rel!r} is not a readable image ({err})") from None
+                raise InputError(f"texture {rel!r} is not a readable image ({err})") from None
 
 
 def prepare_model(asset_id: str, path: Path, scratch: Path) -> tuple[Path, dict]:
@@ -222,10 +224,10 @@ def prepare_model(asset_id: str, path: Path, scratch: Path) -> tuple[Path, dict]
         shutil.copytree(path, model_dir, symlinks=True)
         links = [p for p in model_dir.rglob("*") if p.is_symlink()]
         if links:
-            raise ValueError(f"model folder holds symbolic link {str(links[0])!r}; links are refused")
+            raise InputError(f"model folder holds symbolic link {str(links[0])!r}; links are refused")
     obj = model_dir / "meshes" / "model.obj"
     if not obj.is_file():
-        raise ValueError("no meshes/model.obj in the model")
+        raise InputError("no meshes/model.obj in the model")
     check_texture(obj)
     return obj, read_model_metadata(model_dir)
 
@@ -254,7 +256,7 @@ def build_gso(src_dir: str | os.PathLike, out_dir: str | os.PathLike,
     if limit is not None:
         ids = ids[:limit]
     if not ids and not errors:
-        raise ValueError(f"no GSO models (zips or folders with meshes/model.obj) under {str(src)!r}")
+        raise InputError(f"no GSO models (zips or folders with meshes/model.obj) under {str(src)!r}")
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     scratch = out / _SCRATCH

@@ -13,6 +13,8 @@ import importlib.util
 import os
 from pathlib import Path
 
+from kubric.errors import InputError
+
 NAME_DEFAULT = "HDRIs"
 VERSION = "1.0"
 EXTENSIONS = (".hdr", ".exr")
@@ -30,17 +32,17 @@ def image_size(path: Path) -> list[int]:
     if path.suffix.lower() == ".exr":
         with open(path, "rb") as fh:
             if fh.read(4) != EXR_MAGIC:
-                raise ValueError(f"{bad} (no OpenEXR signature)")
+                raise InputError(f"{bad} (no OpenEXR signature)")
         try:
             import OpenEXR
             with OpenEXR.File(str(path), header_only=True) as f:
                 (x0, y0), (x1, y1) = f.header()["dataWindow"]
         except Exception as err:  # noqa: BLE001 - OpenEXR raises bare RuntimeErrors
-            raise ValueError(f"{bad} ({' '.join(str(err).split())})") from None
+            raise InputError(f"{bad} ({' '.join(str(err).split())})") from None
         return [int(x1 - x0 + 1), int(y1 - y0 + 1)]
     with open(path, "rb") as fh:
         if not fh.readline().startswith(b"#?"):
-            raise ValueError(f"{bad} (no Radiance '#?' signature)")
+            raise InputError(f"{bad} (no Radiance '#?' signature)")
         for _ in range(64):
             line = fh.readline()
             if not line:
@@ -50,9 +52,9 @@ def image_size(path: Path) -> list[int]:
                 if not (parts[1].isdigit() and parts[3].isdigit()):
                     break
                 if not fh.read(4):
-                    raise ValueError(f"{bad} (no pixel data after the header)")
+                    raise InputError(f"{bad} (no pixel data after the header)")
                 return [int(parts[3]), int(parts[1])]
-    raise ValueError(f"{bad} (no resolution line in the header)")
+    raise InputError(f"{bad} (no resolution line in the header)")
 
 
 def build_hdri_source(src_dir: str | os.PathLike, out_dir: str | os.PathLike,
@@ -70,12 +72,12 @@ def build_hdri_source(src_dir: str | os.PathLike, out_dir: str | os.PathLike,
         raise FileNotFoundError(f"HDRI source folder {str(src)!r} does not exist")
     images = sorted(p for p in src.iterdir() if p.suffix.lower() in EXTENSIONS and p.is_file())
     if not images:
-        raise ValueError(f"HDRI source folder {str(src)!r} holds no {list(EXTENSIONS)} files")
+        raise InputError(f"HDRI source folder {str(src)!r} holds no {list(EXTENSIONS)} files")
     if license is None:
         lic_file = next((p for p in src.iterdir() if p.name.lower() in ("license.txt",
                                                                          "license")), None)
         if lic_file is None:
-            raise ValueError(f"no licence given for the HDRIs in {str(src)!r}: pass license= "
+            raise InputError(f"no licence given for the HDRIs in {str(src)!r}: pass license= "
                              "(--license) or put a license.txt next to the images")
         license = lic_file.read_text().strip().splitlines()[0]
     sizes = {path: image_size(path) for path in images}  # every image checked before writing
@@ -85,7 +87,7 @@ def build_hdri_source(src_dir: str | os.PathLike, out_dir: str | os.PathLike,
     for path in images:
         asset_id = "".join(c if c.isalnum() or c in "-_" else "_" for c in path.stem.lower())
         if asset_id in entries:
-            raise ValueError(f"two HDRIs map to the id {asset_id!r} in {str(src)!r}")
+            raise InputError(f"two HDRIs map to the id {asset_id!r} in {str(src)!r}")
         meta = {"category": "hdri", "description": f"environment map {path.name}",
                 "source_file": path.name}
         meta["resolution"] = sizes[path]

@@ -19,6 +19,8 @@ from pathlib import Path
 
 import numpy as np
 
+from kubric.errors import InputError
+
 #: V-HACD settings used for every non-convex mesh (pybullet.vhacd keyword arguments); see
 #: benchmarks/bench_assets.py for the speed / tightness trade-off that chose them.
 VHACD_PARAMS = {"resolution": 200000, "depth": 16, "concavity": 0.001,
@@ -49,7 +51,7 @@ def mass_properties(parts) -> dict:
         inertias.append(np.asarray(props["inertia"], dtype=np.float64))
     total = float(sum(vols))
     if not total > 0.0:
-        raise ValueError(f"mesh volume must be positive, got {total!r} (open or inverted mesh)")
+        raise InputError(f"mesh volume must be positive, got {total!r} (open or inverted mesh)")
     com = sum(v * c for v, c in zip(vols, coms, strict=True)) / total
     inertia = np.zeros((3, 3))
     for v, c, i in zip(vols, coms, inertias, strict=True):
@@ -161,7 +163,7 @@ def decompose(mesh, method: str = "auto") -> tuple[list, str]:
     ``"vhacd"`` or ``"coacd"`` (always decompose with that tool).
     """
     if method not in DECOMPOSITION_METHODS:
-        raise ValueError(f"decomposition method must be one of {list(DECOMPOSITION_METHODS)}, "
+        raise InputError(f"decomposition method must be one of {list(DECOMPOSITION_METHODS)}, "
                          f"got {method!r}")
     if method == "auto":
         parts = convex_parts_if_any(mesh)
@@ -191,13 +193,13 @@ def write_hulls_obj(hulls, path: str | os.PathLike) -> None:
     lines, offset = [], 1
     for k, hull in enumerate(hulls):
         lines.append(f"o hull_{k:03d}")
-        lines.extend("v " + " ".join(_fmt(x) for x in v) for v in hull.vertices)
+        lines.extend("v " + " ".join(fmt(x) for x in v) for v in hull.vertices)
         lines.extend("f " + " ".join(str(int(i) + offset) for i in f) for f in hull.faces)
         offset += len(hull.vertices)
     Path(path).write_text("\n".join(lines) + "\n")
 
 
-def _fmt(x: float) -> str:
+def fmt(x: float) -> str:
     """Fixed formatting of a coordinate: 9 significant digits, no '-0'."""
     s = f"{float(x):.9g}"
     return "0" if s in ("-0", "0") else s

@@ -21,6 +21,8 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+from kubric.errors import InputError
+
 API_URL = "https://api.polyhaven.com"
 NAME = "PolyHavenHDRIs"
 VERSION = "1.0"
@@ -34,10 +36,10 @@ def _pick_file(files: dict, asset_id: str, resolution: str, fmt: str) -> dict:
     hdri = files.get("hdri") if isinstance(files, dict) else None
     if not isinstance(hdri, dict) or resolution not in hdri:
         have = sorted(hdri) if isinstance(hdri, dict) else []
-        raise ValueError(f"{asset_id}: no {resolution!r} HDRI file (available: {have})")
+        raise InputError(f"{asset_id}: no {resolution!r} HDRI file (available: {have})")
     entry = hdri[resolution].get(fmt) if isinstance(hdri[resolution], dict) else None
     if not isinstance(entry, dict) or not all(k in entry for k in ("url", "size", "md5")):
-        raise ValueError(f"{asset_id}: no {fmt!r} file with url/size/md5 at {resolution!r}")
+        raise InputError(f"{asset_id}: no {fmt!r} file with url/size/md5 at {resolution!r}")
     return entry
 
 
@@ -52,11 +54,11 @@ def build_polyhaven(out_dir: str | os.PathLike, resolution: str = "2k", fmt: str
     from kubric.assets.download import DownloadError, fetch_file, get_json
 
     if resolution not in RESOLUTIONS:
-        raise ValueError(f"resolution must be one of {list(RESOLUTIONS)}, got {resolution!r}")
+        raise InputError(f"resolution must be one of {list(RESOLUTIONS)}, got {resolution!r}")
     if fmt not in FORMATS:
-        raise ValueError(f"format must be one of {list(FORMATS)}, got {fmt!r}")
+        raise InputError(f"format must be one of {list(FORMATS)}, got {fmt!r}")
     if limit is not None and limit < 1:
-        raise ValueError(f"limit must be at least 1, got {limit!r}")
+        raise InputError(f"limit must be at least 1, got {limit!r}")
     base = base_url.rstrip("/")
     listing = get_json(f"{base}/assets?t=hdris")
     if not isinstance(listing, dict) or not all(isinstance(v, dict) for v in listing.values()):

@@ -18,6 +18,8 @@ import os
 import re
 from pathlib import Path
 
+from kubric.errors import InputError
+
 NAME = "PybulletObjects"
 #: 2.0: visual GLBs carry the source's appearance (texture, MTL colour or URDF colour)
 VERSION = "2.0"
@@ -66,7 +68,7 @@ def urdf_visual_color(urdf: Path) -> tuple[float, float, float, float] | None:
     try:
         robot = ET.parse(urdf).getroot()
     except ET.ParseError as err:
-        raise ValueError(f"URDF {urdf} is not valid XML: {err}") from err
+        raise InputError(f"URDF {urdf} is not valid XML: {err}") from err
     named = {m.get("name"): m for m in robot.findall("material")}
     material = robot.find("./link/visual/material")
     if material is None:
@@ -79,7 +81,7 @@ def urdf_visual_color(urdf: Path) -> tuple[float, float, float, float] | None:
     try:
         values = [float(v) for v in color.get("rgba").split()]
     except ValueError as err:
-        raise ValueError(f"URDF {urdf}: color rgba must be numbers, got "
+        raise InputError(f"URDF {urdf}: color rgba must be numbers, got "
                          f"{color.get('rgba')!r}") from err
     return as_rgba(values, f"URDF {urdf} color rgba")
 

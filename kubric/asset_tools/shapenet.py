@@ -35,6 +35,8 @@ from pathlib import Path
 
 import numpy as np
 
+from kubric.errors import InputError
+
 NAME = "ShapeNetCore.v2"
 VERSION = "1.0"
 LICENSE = ("ShapeNet terms of use: non-commercial research and educational use only "
@@ -51,10 +53,10 @@ def read_taxonomy(path: str | os.PathLike) -> dict[str, list[str]]:
     try:
         data = json.loads(path.read_text())
     except (OSError, json.JSONDecodeError) as err:
-        raise ValueError(f"ShapeNet taxonomy {str(path)!r} is not readable JSON: {err}") from None
+        raise InputError(f"ShapeNet taxonomy {str(path)!r} is not readable JSON: {err}") from None
     if not isinstance(data, list) or not all(isinstance(d, dict) and "synsetId" in d and
                                              "name" in d for d in data):
-        raise ValueError(f"ShapeNet taxonomy {str(path)!r}: expected a list of objects with "
+        raise InputError(f"ShapeNet taxonomy {str(path)!r}: expected a list of objects with "
                          "'synsetId' and 'name'")
     return {str(d["synsetId"]): [n.strip() for n in str(d["name"]).split(",") if n.strip()]
             for d in data}
@@ -181,7 +183,7 @@ def build_shapenet(src_dir: str | os.PathLike, out_dir: str | os.PathLike, synse
     if synsets:
         unknown = sorted(set(synsets) - set(taxonomy))
         if unknown:
-            raise ValueError(f"unknown synset ids {unknown}; taxonomy.json has e.g. "
+            raise InputError(f"unknown synset ids {unknown}; taxonomy.json has e.g. "
                              f"{sorted(taxonomy)[:5]}")
     models = find_models(src, synsets)
     jobs, per_synset, skipped = [], {}, []
@@ -201,7 +203,7 @@ def build_shapenet(src_dir: str | os.PathLike, out_dir: str | os.PathLike, synse
         jobs.append(ConvertJob(f"{synset}/{model}", str(obj), LICENSE, up="y", metadata=meta,
                                repair=repair_mesh))
     if not jobs and not skipped:
-        raise ValueError(f"no SYNSET/MODEL/{MODEL_FILE.as_posix()} under {str(src)!r}"
+        raise InputError(f"no SYNSET/MODEL/{MODEL_FILE.as_posix()} under {str(src)!r}"
                          + (f" for synsets {sorted(synsets)}" if synsets else ""))
     report = convert_jobs(jobs, out_dir, name, VERSION, workers=workers, progress=progress,
                           skipped=skipped)

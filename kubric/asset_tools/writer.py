@@ -25,6 +25,7 @@ import numpy as np
 
 from kubric.asset_tools import physics
 from kubric.assets.archive import write_archive
+from kubric.errors import InputError
 
 OBJ_IMPORT_KWARGS = {"forward_axis": "Y", "up_axis": "Z"}  # z-up OBJ into Blender unchanged
 
@@ -81,22 +82,22 @@ class Collision:
 
 def _geometry_xml(col: Collision) -> str:
     if col.kind == "box":
-        return '<box size="{} {} {}"/>'.format(*(physics._fmt(v) for v in col.params))
+        return '<box size="{} {} {}"/>'.format(*(physics.fmt(v) for v in col.params))
     if col.kind == "sphere":
-        return f'<sphere radius="{physics._fmt(col.params[0])}"/>'
+        return f'<sphere radius="{physics.fmt(col.params[0])}"/>'
     if col.kind == "cylinder":
-        r, h = (physics._fmt(v) for v in col.params)
+        r, h = (physics.fmt(v) for v in col.params)
         return f'<cylinder radius="{r}" length="{h}"/>'
     if col.kind in ("hulls", "concave"):
         return '<mesh filename="collision_geometry.obj" scale="1 1 1"/>'
-    raise ValueError(f"Collision.kind must be box, sphere, cylinder, hulls or concave, "
+    raise InputError(f"Collision.kind must be box, sphere, cylinder, hulls or concave, "
                      f"got {col.kind!r}")
 
 
 def urdf_text(name: str, mass: float, inertia: np.ndarray, col: Collision,
               visual_file: str, friction: float = 0.5) -> str:
     """A one-link URDF: inertial at the origin (mesh centred on its centre of mass)."""
-    f = physics._fmt
+    f = physics.fmt
     i = np.asarray(inertia, dtype=np.float64)
     concave = ' concave="yes"' if col.kind == "concave" else ""
     return "\n".join([
@@ -139,7 +140,7 @@ def mtl_text(material_name: str) -> str:
 def _write_visual_obj(mesh, path: Path, material: str | None = None) -> None:
     """z-up OBJ with UVs when the mesh has them; ``material``: use that material of
     ``visual_geometry.mtl`` (written by the caller) for every face."""
-    f = physics._fmt
+    f = physics.fmt
     lines = [f"mtllib {MTL_NAME}"] if material else []
     lines += ["v " + " ".join(f(x) for x in v) for v in mesh.vertices]
     uv = getattr(mesh.visual, "uv", None)
@@ -149,7 +150,7 @@ def _write_visual_obj(mesh, path: Path, material: str | None = None) -> None:
         lines += ["f " + " ".join(f"{i + 1}/{i + 1}" for i in face) for face in mesh.faces]
     else:
         if material:
-            raise ValueError("a textured OBJ needs UVs: the mesh has none (or not one per vertex)")
+            raise InputError("a textured OBJ needs UVs: the mesh has none (or not one per vertex)")
         lines += ["f " + " ".join(str(i + 1) for i in face) for face in mesh.faces]
     path.write_text("\n".join(lines) + "\n")
 
@@ -228,12 +229,12 @@ def package_object(asset_id: str, visual, out_dir: str | os.PathLike, *, collisi
                 (stage / TEXTURE_NAME).write_bytes(bytes(texture_png))
             _write_visual_obj(visual, stage / vis_name, material)
         elif texture_png is not None:
-            raise ValueError(f"{asset_id}: texture_png is only supported with visual_format "
+            raise InputError(f"{asset_id}: texture_png is only supported with visual_format "
                              f"'obj', got {visual_format!r}")
         elif visual_format == "glb":
             write_visual_glb(visual, stage / vis_name)
         else:
-            raise ValueError(f"visual_format must be 'obj' or 'glb', got {visual_format!r}")
+            raise InputError(f"visual_format must be 'obj' or 'glb', got {visual_format!r}")
         if collision.kind == "concave":
             _write_visual_obj(visual, stage / "collision_geometry.obj")
         else:

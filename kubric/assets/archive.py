@@ -23,6 +23,8 @@ import tempfile
 import zlib
 from pathlib import Path, PurePosixPath
 
+from kubric.errors import KubricError
+
 #: default limits of :func:`safe_extract` (bytes).
 MAX_MEMBER_BYTES = 512 * 1024**2
 MAX_TOTAL_BYTES = 2 * 1024**3
@@ -32,7 +34,7 @@ MAX_TOTAL_BYTES = 2 * 1024**3
 WRITE_ERRNOS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EACCES, errno.EPERM})
 
 
-class AssetArchiveError(RuntimeError):
+class AssetArchiveError(KubricError, RuntimeError):
     """Base of the archive errors."""
 
 

@@ -21,6 +21,8 @@ from pathlib import Path
 
 import numpy as np
 
+from kubric.errors import InputError
+
 
 def _floats(text, n, default):
     if text is None:
@@ -29,7 +31,7 @@ def _floats(text, n, default):
     if len(vals) == 1 and n == 3:
         vals = vals * 3
     if len(vals) != n:
-        raise ValueError(f"expected {n} numbers, got {text!r}")
+        raise InputError(f"expected {n} numbers, got {text!r}")
     return np.asarray(vals, dtype=np.float64)
 
 
@@ -48,7 +50,7 @@ def _geometry_mesh(geom, urdf_dir: Path, where: str):
     import trimesh
 
     if geom is None or len(geom) == 0:
-        raise ValueError(f"{where}: <visual> without <geometry>")
+        raise InputError(f"{where}: <visual> without <geometry>")
     shape = geom[0]
     tag = shape.tag
     if tag == "box":
@@ -68,10 +70,10 @@ def _geometry_mesh(geom, urdf_dir: Path, where: str):
             raise FileNotFoundError(f"{where}: mesh {name!r} not found at {str(path)!r}")
         mesh = trimesh.load(str(path), force="mesh", process=True)
         if len(mesh.faces) == 0 or not np.all(np.isfinite(mesh.vertices)):
-            raise ValueError(f"{where}: mesh {name!r} is empty or has non-finite vertices")
+            raise InputError(f"{where}: mesh {name!r} is empty or has non-finite vertices")
         mesh.apply_scale(_floats(shape.get("scale"), 3, (1, 1, 1)))
         return mesh
-    raise ValueError(f"{where}: unsupported visual geometry <{tag}> (allowed: mesh, box, "
+    raise InputError(f"{where}: unsupported visual geometry <{tag}> (allowed: mesh, box, "
                      "sphere, cylinder, capsule)")
 
 
@@ -84,7 +86,7 @@ def link_visuals(urdf: str | os.PathLike) -> dict[str, object]:
     try:
         root = ET.parse(urdf).getroot()
     except (ET.ParseError, OSError) as err:
-        raise ValueError(f"URDF {str(urdf)!r} is not readable XML: {err}") from None
+        raise InputError(f"URDF {str(urdf)!r} is not readable XML: {err}") from None
     out = {}
     for link in root.findall("link"):
         name = link.get("name")
@@ -121,7 +123,7 @@ def root_link(urdf: str | os.PathLike) -> str:
                 if j.find("child") is not None}
     roots = [lk.get("name") for lk in root.findall("link") if lk.get("name") not in children]
     if len(roots) != 1:
-        raise ValueError(f"URDF {str(urdf)!r} must have exactly one root link, found {roots}")
+        raise InputError(f"URDF {str(urdf)!r} must have exactly one root link, found {roots}")
     return roots[0]
 
 

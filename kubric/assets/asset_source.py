@@ -22,55 +22,18 @@ from pathlib import Path
 
 import numpy as np
 
+from kubric.assets import remote_source
 from kubric.assets.archive import safe_extract
-
-ASSET_TYPES = ("FileBasedObject", "Texture")
-ENTRY_FIELDS = ("id", "asset_type", "license", "kwargs", "metadata")
-MANIFEST_FIELDS = ("name", "assets")
-ASSET_DIR = "{asset_dir}"
-
-
-class ManifestError(ValueError):
-    """A manifest that is missing a field, has a wrong type or an unknown asset type."""
-
-
-def cache_dir() -> Path:
-    """Where generated and extracted assets live: ``$KUBRIC_CACHE_DIR`` or ``~/.cache/kubric``."""
-    env = os.environ.get("KUBRIC_CACHE_DIR")
-    return Path(env).expanduser() if env else Path.home() / ".cache" / "kubric"
-
-
-def _require_fields(value, fields, where: str, not_object: str) -> None:
-    if not isinstance(value, dict):
-        raise ManifestError(f"{where}: {not_object}, got {type(value).__name__}")
-    for field in fields:
-        if field not in value:
-            raise ManifestError(f"{where}: missing required field {field!r} "
-                                f"(required: {list(fields)})")
-
-
-def validate_manifest(manifest, where: str = "manifest") -> dict:
-    """Check the structure of a loaded manifest; raise :class:`ManifestError` naming the problem."""
-    _require_fields(manifest, MANIFEST_FIELDS, where, "must be a JSON object")
-    assets = manifest["assets"]
-    if not isinstance(assets, dict):
-        raise ManifestError(f"{where}: 'assets' must be an object {{id: entry}}, "
-                            f"got {type(assets).__name__}")
-    for key, entry in assets.items():
-        here = f"{where}: asset {key!r}"
-        _require_fields(entry, ENTRY_FIELDS, here, "entry must be an object")
-        if entry["id"] != key:
-            raise ManifestError(f"{here}: 'id' is {entry['id']!r}, must equal its key {key!r}")
-        if entry["asset_type"] not in ASSET_TYPES:
-            raise ManifestError(f"{here}: unknown asset_type {entry['asset_type']!r}; "
-                                f"allowed: {list(ASSET_TYPES)}")
-        for field in ("kwargs", "metadata"):
-            if not isinstance(entry[field], dict):
-                raise ManifestError(f"{here}: {field!r} must be an object, "
-                                    f"got {type(entry[field]).__name__}")
-        if "path" in entry and not isinstance(entry["path"], str):
-            raise ManifestError(f"{here}: 'path' must be a string, got {entry['path']!r}")
-    return manifest
+from kubric.assets.manifest import (  # noqa: F401  (public here too: kubric.assets exports them)
+    ASSET_DIR,
+    ASSET_TYPES,
+    ENTRY_FIELDS,
+    MANIFEST_FIELDS,
+    ManifestError,
+    cache_dir,
+    validate_manifest,
+)
+from kubric.errors import InputError
 
 
 def _resolve(value, asset_dir: Path):
@@ -109,7 +72,6 @@ class AssetSource:
     """
 
     def __init__(self, path: str | os.PathLike, scratch_dir: str | os.PathLike | None = None):
-        from kubric.assets import remote_source
         self.remote = None  # a RemoteSource for URLs (kubric.assets.remote_source)
         if remote_source.is_remote(path):
             self.remote = remote_source.RemoteSource(path)
@@ -196,7 +158,7 @@ class AssetSource:
         is a ``KeyError`` naming the known ones).
         """
         if not 0.0 <= float(fraction) <= 1.0:
-            raise ValueError(f"AssetSource.get_test_split: fraction must be in [0, 1], "
+            raise InputError(f"AssetSource.get_test_split: fraction must be in [0, 1], "
                              f"got {fraction!r}")
         if category is None:
             ids = self.all_asset_ids
@@ -217,7 +179,7 @@ class AssetSource:
         out 10 % of all sorted ids with a fixed seed), then filtered, so the held-out assets of a
         category are the same whichever categories are asked for."""
         if split not in (None, "train", "test"):
-            raise ValueError(f"AssetSource.asset_ids: split must be 'train', 'test' or None, "
+            raise InputError(f"AssetSource.asset_ids: split must be 'train', 'test' or None, "
                              f"got {split!r}")
         ids = self.all_asset_ids
         if split is not None:
@@ -266,9 +228,8 @@ class AssetSource:
         target = self.scratch_dir / (_safe_name(asset_id) + stamp)
         self._hold_scratch_dir()
         if not target.is_dir():
-            from kubric.assets.remote_source import verify_checksums
             if archive.is_file():
-                verify_checksums(archive, self.db[asset_id], f"asset {asset_id!r} ({archive})")
+                remote_source.verify_checksums(archive, self.db[asset_id], f"asset {asset_id!r} ({archive})")
             safe_extract(archive, target, asset_id)
             self._extracted.append(target)
         return target

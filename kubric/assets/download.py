@@ -19,12 +19,14 @@ import urllib.error
 import urllib.request
 from pathlib import Path
 
+from kubric.errors import KubricError
+
 USER_AGENT = "kubric-assets/1.0 (+https://github.com/google-research/kubric)"
 CHUNK = 1 << 16
 TIMEOUT_S = 60
 
 
-class DownloadError(RuntimeError):
+class DownloadError(KubricError, RuntimeError):
     """A download that failed, was cut too often, or does not match its size / checksum."""
 
 

@@ -31,11 +31,14 @@ from __future__ import annotations
 
 import contextlib
 import hashlib
+import json
 import os
 import re
 import time
 from pathlib import Path
 
+from kubric.assets.manifest import ManifestError, cache_dir, validate_manifest
+from kubric.errors import KubricError
 from kubric.io import storage
 
 TIMEOUT_ENV = "KUBRIC_FETCH_TIMEOUT"
@@ -46,7 +49,7 @@ RETRIES = 2  # extra attempts after a transfer cut short
 USER_AGENT = "kubric-asset-source/1.0"
 
 
-class RemoteSourceError(RuntimeError):
+class RemoteSourceError(KubricError, RuntimeError):
     """An asset-source URL that cannot be fetched, or a file that fails its checks (one line)."""
 
 
@@ -88,7 +91,6 @@ def _safe(text: str) -> str:
 
 def cache_folder(url: str) -> Path:
     """The cache folder of the source whose manifest is at ``url``."""
-    from kubric.assets.asset_source import cache_dir
     murl = manifest_url(url)
     folder = murl.rsplit("/", 2)[-2] if murl.count("/") > 2 else "source"
     digest = hashlib.sha256(murl.encode()).hexdigest()[:16]
@@ -267,9 +269,6 @@ class RemoteSource:
 
     def _check_manifest(self, path: Path) -> None:
         """A manifest that is not valid JSON or off the format is never cached."""
-        import json
-
-        from kubric.assets.asset_source import ManifestError, validate_manifest
         try:
             manifest = json.loads(path.read_bytes())
         except (json.JSONDecodeError, UnicodeDecodeError) as err:

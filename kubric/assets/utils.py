@@ -29,8 +29,9 @@ def get_clevr_lights(light_jitter: float = 1.0, rng=None) -> list:
     Args:
       light_jitter: scale of the positional jitter (m); 0 gives the base positions. Must be ≥ 0.
       rng: ``numpy.random.RandomState`` or ``Generator``, drawn from three numbers per light in
-        the order of :data:`kubric.assets.clevr.LIGHTS`. ``None`` means the worker rng bound by ``kb.setup``
-        (see :mod:`kubric.randomness`); without one it is a ``TypeError``.
+        the order of :data:`kubric.assets.clevr.LIGHTS`. ``None`` means the worker rng bound by
+        ``kb.setup``, else (as upstream) an unseeded generator whose jitter is not reproducible
+        (see :mod:`kubric.randomness`).
     Returns:
       ``[sun (DirectionalLight), lamp_back, lamp_key, lamp_fill (RectAreaLight)]``, not yet
       added to any scene (``scene += get_clevr_lights(rng=rng)`` adds them all).

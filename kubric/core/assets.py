@@ -6,7 +6,8 @@ validated properties (see :mod:`kubric.core.traits`), keyframes, and a link to t
 renderer) of every scene it belongs to. Assigning a property notifies each of those views once via
 ``view.on_change(asset, name, value)``; ``keyframe_insert`` notifies via
 ``view.on_keyframe(asset, name, frame)`` and ``keyframe_delete`` via
-``view.on_keyframe_delete(asset, name, frame)``.
+``view.on_keyframe_delete(asset, name, frame)``. Scripts may also register callbacks with
+upstream Kubric's (traitlets') ``asset.observe(handler, names, type="change" | "keyframe")``.
 
 Keyframe interpolation (``get_value_at``, ``at_frame``, ``get_values_over_time``): vectors and
 scalars interpolate **linearly**, quaternions by **slerp** (shorter arc), anything else holds the
@@ -94,6 +95,41 @@ class Asset(kt.HasProperties):
         for view in self.views:
             view.on_change(self, name, value)
 
+    # ------------------------------------------------------------------ observers
+    def observe(self, handler, names=None, type: str = "change") -> None:
+        """Call ``handler(change)`` after each assignment (``type="change"``; ``change`` has
+        ``name``, ``owner``, ``old``, ``new``, ``type``) or ``keyframe_insert`` (``"keyframe"``;
+        ``name``, ``owner``, ``frame``, ``type``) of the properties ``names`` (one name, a list,
+        or None for all) — upstream Kubric's traitlets observer API."""
+        if type not in ("change", "keyframe"):
+            raise ValueError(f"{self.uid}.observe: type must be 'change' or 'keyframe', got "
+                             f"{type!r}")
+        if not callable(handler):
+            raise TypeError(f"{self.uid}.observe: handler must be callable, got {handler!r}")
+        wanted = None if names is None else ((names,) if isinstance(names, str) else tuple(names))
+        for name in wanted or ():
+            self.get_property(name)  # raises naming the allowed properties
+        self.__dict__.setdefault("_observers", []).append((handler, wanted, type))
+
+    def unobserve(self, handler, names=None, type: str = "change") -> None:
+        """Remove a callback registered with the same arguments by :meth:`observe`."""
+        wanted = None if names is None else ((names,) if isinstance(names, str) else tuple(names))
+        observers = self.__dict__.get("_observers", [])
+        if (handler, wanted, type) not in observers:
+            raise ValueError(f"{self.uid}: no observer {handler!r} for {wanted} ({type})")
+        observers.remove((handler, wanted, type))
+
+    def _notify_observers(self, type: str, name: str, **fields) -> None:
+        for handler, wanted, kind in list(self.__dict__.get("_observers", ())):
+            if kind == type and (wanted is None or name in wanted):
+                handler(Change(name=name, owner=self, type=type, **fields))
+
+    def _set_property(self, name: str, value: Any, notify: bool = True) -> None:
+        old = self._values.get(name)
+        super()._set_property(name, value, notify)
+        if notify and not self._silent:
+            self._notify_observers("change", name, old=old, new=self._values[name])
+
     # ------------------------------------------------------------------ keyframes
     def keyframe_insert(self, name: str, frame: int) -> None:
         """Store the current value of property ``name`` at ``frame`` and notify every view."""
@@ -104,6 +140,7 @@ class Asset(kt.HasProperties):
         self.keyframes[name][frame] = self._values[name]
         for view in self.views:
             view.on_keyframe(self, name, frame)
+        self._notify_observers("keyframe", name, frame=frame)
 
     def keyframe_delete(self, name: str, frame: int) -> None:
         """Remove the keyframe of ``name`` at ``frame`` and notify every view; a missing one is a
@@ -197,6 +234,16 @@ class Asset(kt.HasProperties):
         fields = [("name", self._name), *self._values.items()]
         shown = sorted(f"{key}={_short_repr(value)}" for key, value in fields)
         return f"<{self.uid} {' '.join(shown)}>"
+
+
+class Change(dict):
+    """What an :meth:`Asset.observe` handler receives: a dict whose keys are also attributes."""
+
+    def __getattr__(self, key):
+        try:
+            return self[key]
+        except KeyError:
+            raise AttributeError(key) from None
 
 
 def _short_repr(value) -> str:

@@ -37,7 +37,7 @@ CAMERA_TO_OPENCV = np.diag([1.0, -1.0, -1.0])
 CAMERA_TO_OPENCV.setflags(write=False)
 
 
-def _resolution(camera, resolution=None) -> tuple[int, int]:
+def image_size(camera, resolution=None) -> tuple[int, int]:
     if resolution is not None:
         w, h = (int(v) for v in resolution)
     else:
@@ -50,14 +50,14 @@ def _resolution(camera, resolution=None) -> tuple[int, int]:
 
 def principal_point(camera, resolution=None) -> tuple[float, float]:
     """Normalised principal point (cx, cy) in [0, 1] image coordinates (y down)."""
-    w, h = _resolution(camera, resolution)
+    w, h = image_size(camera, resolution)
     return 0.5 - float(camera.shift_x), 0.5 + float(camera.shift_y) * w / h
 
 
 def normalised_intrinsics(camera, resolution=None) -> np.ndarray:
     """Upstream Kubric's 3×3 ``K`` (see module doc); for orthographic cameras the affine map
     ``(u, v, 1) = K @ (x_cam, y_cam, 1)``."""
-    w, h = _resolution(camera, resolution)
+    w, h = image_size(camera, resolution)
     cx, cy = principal_point(camera, (w, h))
     if is_orthographic(camera):
         s = float(camera.orthographic_scale)
@@ -71,7 +71,7 @@ def pixel_intrinsics(camera, resolution=None) -> np.ndarray:
     """OpenCV 3×3 pixel intrinsics (perspective cameras only)."""
     if is_orthographic(camera):
         raise ValueError(f"{camera.uid} is orthographic: it has no pinhole pixel intrinsics")
-    w, h = _resolution(camera, resolution)
+    w, h = image_size(camera, resolution)
     cx, cy = principal_point(camera, (w, h))
     f = camera.focal_length / camera.sensor_width * w
     return np.array([[f, 0.0, cx * w], [0.0, f, cy * h], [0.0, 0.0, 1.0]])
@@ -114,7 +114,7 @@ def project_points(camera, points, frame: float | None = None, resolution=None) 
 
 def _project_camera_points(camera, cam: np.ndarray, resolution) -> np.ndarray:
     """(u, v, ±1) of points (..., 3) already in the camera frame."""
-    w, h = _resolution(camera, resolution)
+    w, h = image_size(camera, resolution)
     cx, cy = principal_point(camera, (w, h))
     if is_orthographic(camera):
         s = float(camera.orthographic_scale)
@@ -135,7 +135,7 @@ def _project_camera_points(camera, cam: np.ndarray, resolution) -> np.ndarray:
 def project_to_pixels(camera, points, frame: float | None = None, resolution=None):
     """World points (..., 3) → (pixel xy (..., 2), depth (...)): depth is the distance to the camera
     centre (perspective) or to the image plane (orthographic)."""
-    w, h = _resolution(camera, resolution)
+    w, h = image_size(camera, resolution)
     m = world_to_camera(camera, frame)
     cam = np.asarray(points, dtype=np.float64) @ m[:3, :3].T + m[:3, 3]
     xy = _project_camera_points(camera, cam, (w, h))[..., :2] * np.array([w, h], dtype=np.float64)
@@ -143,27 +143,47 @@ def project_to_pixels(camera, points, frame: float | None = None, resolution=Non
     return xy, depth
 
 
+def pinhole_rays(intrinsics_pixels, camera_to_world, pixels_xy):
+    """The one pixel-ray function of a pinhole camera: rays through pixel positions (..., 2)
+    (x right, y down; the centre of pixel (row r, column c) is (c + 0.5, r + 0.5)) of a camera
+    with OpenCV intrinsics ``intrinsics_pixels`` (3, 3: fx, fy, cx, cy in pixels, no skew) and
+    ``camera_to_world`` (4, 4) in Blender camera axes (x right, y up, −z forward). Returns world
+    (origins (..., 3), unit directions (..., 3)), float64."""
+    k = np.asarray(intrinsics_pixels, dtype=np.float64)
+    if k.shape != (3, 3) or k[0, 1] != 0:
+        raise ValueError(f"pinhole_rays: intrinsics must be a 3×3 matrix without skew, got "
+                         f"{k.tolist()}")
+    xy = np.asarray(pixels_xy, dtype=np.float64)
+    local = np.stack([(xy[..., 0] - k[0, 2]) / k[0, 0], -(xy[..., 1] - k[1, 2]) / k[1, 1],
+                      -np.ones(xy.shape[:-1])], axis=-1)
+    local /= np.linalg.norm(local, axis=-1, keepdims=True)
+    m = np.asarray(camera_to_world, dtype=np.float64)
+    dirs = local @ m[:3, :3].T
+    return np.broadcast_to(m[:3, 3], dirs.shape).copy(), dirs
+
+
+def pixel_centres(height: int, width: int) -> np.ndarray:
+    """(H, W, 2) pixel-centre positions (x, y) = (c + 0.5, r + 0.5) of every pixel (r, c)."""
+    rows, cols = np.meshgrid(np.arange(height) + 0.5, np.arange(width) + 0.5, indexing="ij")
+    return np.stack([cols, rows], axis=-1)
+
+
 def pixel_rays(camera, pixels_xy, frame: float | None = None, resolution=None):
     """Rays through pixel positions (..., 2): returns (origins (..., 3), unit directions (..., 3))
-    in world coordinates."""
-    w, h = _resolution(camera, resolution)
+    in world coordinates (perspective cameras: :func:`pinhole_rays`)."""
+    w, h = image_size(camera, resolution)
+    m = camera_to_world(camera, frame)
+    if not is_orthographic(camera):
+        return pinhole_rays(pixel_intrinsics(camera, (w, h)), m, pixels_xy)
     xy = np.asarray(pixels_xy, dtype=np.float64)
     u, v = xy[..., 0] / w, xy[..., 1] / h
     cx, cy = principal_point(camera, (w, h))
-    m = camera_to_world(camera, frame)
     rot, centre = m[:3, :3], m[:3, 3]
-    if is_orthographic(camera):
-        s = float(camera.orthographic_scale)
-        local = np.stack([(u - cx) * s, -(v - cy) * s * h / w, np.zeros_like(u)], axis=-1)
-        origins = local @ rot.T + centre
-        dirs = np.broadcast_to(-rot[:, 2], origins.shape).copy()
-        return origins, dirs
-    fx = camera.focal_length / camera.sensor_width
-    fy = fx * w / h
-    local = np.stack([(u - cx) / fx, -(v - cy) / fy, -np.ones_like(u)], axis=-1)
-    local /= np.linalg.norm(local, axis=-1, keepdims=True)
-    dirs = local @ rot.T
-    return np.broadcast_to(centre, dirs.shape).copy(), dirs
+    s = float(camera.orthographic_scale)
+    local = np.stack([(u - cx) * s, -(v - cy) * s * h / w, np.zeros_like(u)], axis=-1)
+    origins = local @ rot.T + centre
+    dirs = np.broadcast_to(-rot[:, 2], origins.shape).copy()
+    return origins, dirs
 
 
 def unproject_pixels(camera, pixels_xy, depth, frame: float | None = None, resolution=None):

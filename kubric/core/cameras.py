@@ -76,7 +76,7 @@ class PerspectiveCamera(Camera):
     @property
     def sensor_height(self) -> float:
         """mm, from the scene's aspect ratio (square pixels)."""
-        w, h = geo._resolution(self)
+        w, h = geo.image_size(self)
         return self.sensor_width * h / w
 
 

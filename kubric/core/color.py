@@ -63,6 +63,11 @@ class Color(tuple):
             values.append(f)
         return super().__new__(cls, values)
 
+    def __getnewargs__(self) -> tuple[float, float, float, float]:
+        # pickle / copy rebuild a tuple subclass by calling __new__ with these arguments; without
+        # this they would pass the whole tuple as ``r``
+        return tuple(self)
+
     r = property(lambda self: self[0])
     g = property(lambda self: self[1])
     b = property(lambda self: self[2])
@@ -152,3 +157,15 @@ def get_color(color) -> Color:
     if len(values) not in (3, 4):
         raise ValueError(f"a colour needs 3 or 4 components in [0, 1], got {color!r}")
     return Color(*values)
+
+
+def srgb_to_linear(srgb) -> np.ndarray:
+    """sRGB-encoded values in [0, 1] → linear values (IEC 61966-2-1; inputs clipped to [0, 1])."""
+    c = np.clip(np.asarray(srgb, dtype=np.float64), 0.0, 1.0)
+    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+
+
+def linear_to_srgb(linear) -> np.ndarray:
+    """Linear values in [0, 1] → sRGB-encoded values in [0, 1] (inputs clipped to [0, 1])."""
+    c = np.clip(np.asarray(linear, dtype=np.float64), 0.0, 1.0)
+    return np.where(c <= 0.0031308, 12.92 * c, 1.055 * c ** (1 / 2.4) - 0.055)

@@ -14,8 +14,11 @@ from kubric.core.objects import Object3D
 
 
 class Light(Object3D):
-    """Base class of all lights: ``color`` (RGBA) and ``intensity`` (≥ 0)."""
+    """Base class of all lights: ``color`` (RGBA) and ``intensity`` (≥ 0). Lights are part of the
+    background (``background`` defaults to True, as upstream), so ``scene.foreground_assets``
+    lists objects only."""
 
+    property_defaults = {"background": True}
     color = kt.RGBA(get_color("white"), "light colour")
     intensity = kt.Float(1.0, low=0.0, doc="power (W) or irradiance (W/m², sun)")
 
@@ -35,10 +38,11 @@ class PointLight(Light):
 
 
 class SpotLight(Light):
-    """Cone light: ``spot_size`` full cone angle (radians), ``spot_blend`` soft edge in [0, 1]."""
+    """Cone light: ``spot_size`` full cone angle (radians), ``spot_blend`` soft edge in [0, 1]
+    (defaults π/4 and 1, as upstream)."""
 
     spot_size = kt.Float(np.pi / 4, 0.0, np.pi, "full cone angle (radians)")
-    spot_blend = kt.Float(0.0, 0.0, 1.0, "softness of the cone edge")
+    spot_blend = kt.Float(1.0, 0.0, 1.0, "softness of the cone edge")
 
 
 class RectAreaLight(Light):

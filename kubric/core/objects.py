@@ -91,7 +91,7 @@ class PhysicalObject(Object3D):
     angular_velocity = kt.Vector3D((0.0, 0.0, 0.0), "angular velocity (rad/s), world frame")
     static = kt.Property(False, kt.as_bool(), "fixed during simulation")
     mass = kt.Float(1.0, low=0.0, doc="mass in kg")
-    friction = kt.Float(0.0, 0.0, 1.0, "friction coefficient (default 0, as upstream)")
+    friction = kt.Float(0.5, 0.0, 1.0, "friction coefficient (default 0.5, as upstream)")
     restitution = kt.Float(0.5, 0.0, 1.0, "restitution (bounciness)")
     bounds = kt.Property(((0.0, 0.0, 0.0), (0.0, 0.0, 0.0)), kt.as_bounds(),
                          "local axis-aligned bounds ((x0, y0, z0), (x1, y1, z1)), unscaled")

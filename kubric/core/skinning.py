@@ -10,8 +10,9 @@ Pure numpy, float64. Conventions (docs/characters.md):
 * ``L_j = rest_local_j @ R(q_j)`` with ``rest_local_j = inv(bone_rest[parent]) @ bone_rest[j]``;
   the root's ``rest_local`` is ``bone_rest[root]`` translated by ``root_offset``.
   ``G_j = G_parent @ L_j`` (bone → model, posed); ``S_j = G_j @ inv(bone_rest[j])`` (skinning).
-* Linear-blend skinning: ``v' = Σ_k w_k S_{idx_k} v`` (as a dense (V, J) weight matrix); vertices with zero total weight keep their
-  rest position (Blender's armature modifier leaves unweighted vertices in place).
+* Linear-blend skinning: ``v' = Σ_k w_k S_{idx_k} v`` (as a dense (V, J) weight matrix);
+  vertices with zero total weight keep their rest position (Blender's armature modifier leaves
+  unweighted vertices in place).
 """
 
 from __future__ import annotations

@@ -128,6 +128,16 @@ class HasProperties:
         finally:
             self._silent = False
 
+    def __reduce_ex__(self, protocol):
+        """Assets and scenes are linked to their views (simulator, renderer) and are not values:
+        pickling or copying one is refused with this message instead of a weakref error."""
+        uid = getattr(self, "uid", None)
+        what = f"{type(self).__name__} {uid!r}" if uid else type(self).__name__
+        raise TypeError(f"{what} cannot be pickled or copied (it is linked to its scene's "
+                        "views); pickle plain values instead: "
+                        "asset.metadata, property values, kb.get_instance_info(scene), "
+                        "kb.get_scene_metadata(scene), kb.get_camera_info(camera)")
+
     @classmethod
     def property_names(cls) -> tuple[str, ...]:
         """Names of all declared properties, in declaration order (base classes first)."""

@@ -93,9 +93,10 @@ def cmd_info(args) -> int:
 
 
 def cmd_schema(args) -> int:
-    from kubric.io.schema import SchemaError, get_schema, schema_markdown
+    from kubric.io.schema import SchemaError, schema_markdown
+    from kubric.pipeline.recipe import schema_of
     try:
-        print(schema_markdown(get_schema(args.recipe)), end="")
+        print(schema_markdown(schema_of(args.recipe)), end="")
     except SchemaError as err:
         return _error("datasets schema", err)
     return 0

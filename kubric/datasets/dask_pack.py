@@ -41,7 +41,7 @@ from collections.abc import Mapping, Sequence
 
 from kubric.datasets import layout, packer
 from kubric.datasets.layout import DatasetError
-from kubric.io import storage
+from kubric.io import scene_dir, storage
 from kubric.io.json_io import read_json, write_json
 
 PLAN_FILE = "plan.json"
@@ -181,16 +181,16 @@ def _list_scenes(scenes_dir: str, mirror: pathlib.Path) -> tuple[list[str], list
         complete, incomplete = packer.find_scenes(pathlib.Path(scenes_dir))
         return [str(p) for p in complete], complete, incomplete
     names = storage.listdir(scenes_dir)
-    complete = storage.complete_scenes(scenes_dir)
-    incomplete = sum(1 for n in names if n.startswith("scene_") and n not in complete)
+    complete = scene_dir.complete_scenes(scenes_dir)
+    incomplete = sum(1 for n in names if scene_dir.is_scene_name(n) and n not in complete)
     locations, folders = [], []
     for name in sorted(complete):
         location = storage.join(scenes_dir, name)
         folder = mirror / name
         folder.mkdir(parents=True)
         try:
-            (folder / "metadata.json").write_bytes(
-                storage.read_bytes(storage.join(location, "metadata.json")))
+            (folder / scene_dir.METADATA_FILE).write_bytes(
+                storage.read_bytes(storage.join(location, scene_dir.METADATA_FILE)))
         except FileNotFoundError:
             pass  # no seed / schema from it: reported as the local packer does
         locations.append(location)

@@ -5,8 +5,7 @@ from __future__ import annotations
 import pathlib
 
 from kubric.datasets.layout import read_info
-from kubric.datasets.source import schema_from_json
-from kubric.io.schema import shape_text
+from kubric.io.schema import Schema, shape_text
 
 
 def _size(num_bytes: int) -> str:
@@ -21,7 +20,7 @@ def dataset_info(dataset_dir) -> str:
     """The text ``kubric datasets info`` prints."""
     path = pathlib.Path(dataset_dir)
     info = read_info(path)
-    schema = schema_from_json(info["schema_json"])
+    schema = Schema.from_json(info["schema_json"])
     dims = dict(info["dims"])
     size = sum(p.stat().st_size for p in path.iterdir() if p.is_file())
     lines = [f"dataset {info['name']} at {path}",

@@ -11,6 +11,7 @@ from __future__ import annotations
 import pathlib
 import re
 
+from kubric.errors import KubricError
 from kubric.io.json_io import read_json
 
 FORMAT = "kubric-dataset"
@@ -20,7 +21,7 @@ FILE_FORMAT = "array_record"
 NAME_PATTERN = re.compile(r"^[a-z][a-z0-9_]*$")
 
 
-class DatasetError(ValueError):
+class DatasetError(KubricError, ValueError):
     """Bad input to packing / loading (one-line message)."""
 
 

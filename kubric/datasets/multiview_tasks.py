@@ -46,7 +46,7 @@ from __future__ import annotations
 import numpy as np
 
 from kubric.datasets.layout import DatasetError
-from kubric.datasets.tasks import register_task
+from kubric.datasets.task_registry import register_task
 
 #: ``multiview`` layer option → (top-level feature, key in the item)
 MULTIVIEW_LAYERS = {

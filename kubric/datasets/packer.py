@@ -32,9 +32,11 @@ from collections.abc import Mapping, Sequence
 
 from kubric.datasets import layout
 from kubric.datasets.layout import DatasetError
-from kubric.datasets.scene_reader import SceneError, SceneReader, is_complete
+from kubric.io import scene_dir
 from kubric.io.json_io import read_json, write_json
-from kubric.io.schema import Schema, SchemaError, get_schema
+from kubric.io.scene_reader import SceneError, SceneReader
+from kubric.io.schema import Schema, SchemaError
+from kubric.pipeline.recipe import schema_of
 
 PROGRESS_FILE = "progress.json"
 DEFAULT_SPLITS = "train=0.9,validation=0.1"
@@ -93,20 +95,12 @@ def find_scenes(scenes_dir: pathlib.Path) -> tuple[list[pathlib.Path], int]:
     """(complete scene directories in name order, number of incomplete ones). Scene directories
     are those named ``scene_*`` (the worker's naming) or holding ``_SUCCESS``; the worker's
     hidden work directories count as incomplete; other folders (``logs``) are ignored."""
-    complete, incomplete = [], 0
-    for entry in sorted(scenes_dir.iterdir()):
-        if not entry.is_dir():
-            continue
-        if is_complete(entry):
-            complete.append(entry)
-        elif entry.name.startswith("scene_") or (entry.name.startswith(".scene_")
-                                                 and ".incomplete" in entry.name):
-            incomplete += 1
-    return complete, incomplete
+    return scene_dir.survey(scenes_dir)
 
 
 def _seed_of(scene: pathlib.Path) -> int:
-    meta = read_json(scene / "metadata.json") if (scene / "metadata.json").is_file() else {}
+    meta_file = scene / scene_dir.METADATA_FILE
+    meta = read_json(meta_file) if meta_file.is_file() else {}
     seed = meta.get("metadata", {}).get("seed", meta.get("flags", {}).get("seed"))
     if seed is None:
         digits = "".join(c for c in scene.name if c.isdigit())
@@ -118,7 +112,7 @@ def _seed_of(scene: pathlib.Path) -> int:
 
 def _recipe_of(scene: pathlib.Path) -> str:
     try:
-        return str(read_json(scene / "metadata.json")["flags"]["recipe"])
+        return str(read_json(scene / scene_dir.METADATA_FILE)["flags"]["recipe"])
     except (OSError, KeyError, TypeError, ValueError):
         raise DatasetError(f"{str(scene)!r}: metadata.json is missing or names no recipe "
                            "(flags.recipe); pass --schema") from None
@@ -130,7 +124,7 @@ def _schema_and_dims(complete: list[pathlib.Path], schema) -> tuple[Schema, dict
     errors = []
     for scene in complete:
         try:
-            found = get_schema(schema if schema is not None else _recipe_of(scene))
+            found = schema_of(schema if schema is not None else _recipe_of(scene))
             return found, SceneReader(scene, found).dims
         except (SceneError, DatasetError, OSError) as err:
             errors.append(err)
@@ -391,7 +385,6 @@ def _finalise(work, state, schema, name, dims, split_fractions, incomplete, feat
     import tensorflow_datasets as tfds
 
     from kubric import __version__
-    from kubric.datasets.source import schema_to_json
     split_infos, counts, scenes, shard_lengths = [], {}, {}, {}
     for split in split_fractions:
         shards = [sh for sh in state["shards"].get(split, []) if sh["scenes"]]
@@ -415,7 +408,7 @@ def _finalise(work, state, schema, name, dims, split_fractions, incomplete, feat
                 "dims": dims, "splits": split_fractions, "counts": counts,
                 "shard_lengths": shard_lengths, "scenes": scenes,
                 "incomplete_skipped": incomplete, "kubric_version": __version__,
-                "schema_json": schema_to_json(schema)},
+                "schema_json": schema.to_json()},
                work / layout.INFO_FILE)
     return counts
 

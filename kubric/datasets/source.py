@@ -21,23 +21,7 @@ import numpy as np
 
 from kubric.datasets import layout
 from kubric.datasets.layout import DatasetError
-from kubric.io.layers import LayerFormat
 from kubric.io.schema import Feature, Schema
-
-
-def schema_to_json(schema: Schema) -> dict:
-    return {"name": schema.name, "version": schema.version, "description": schema.description,
-            "features": [{k: (list(v) if isinstance(v, tuple) else v)
-                          for k, v in vars(f).items()} for f in schema.features],
-            "layers": {k: vars(v) for k, v in schema.layers.items()}}
-
-
-def schema_from_json(data: dict) -> Schema:
-    features = tuple(Feature(**{k: (tuple(v) if isinstance(v, list) else v)
-                                for k, v in f.items()}) for f in data["features"])
-    layers = {k: LayerFormat(**v) for k, v in data.get("layers", {}).items()}
-    return Schema(data["name"], features, layers, data.get("description", ""),
-                  data.get("version", "1.0.0"))
 
 
 def _regular(f: Feature, value, dims: dict):
@@ -74,7 +58,7 @@ class DataSource:
             raise DatasetError(f"{str(self.dataset_dir)!r} has no split {split!r} (splits: "
                                f"{', '.join(have)})")
         self.split = split
-        self.schema = schema_from_json(self.info["schema_json"])
+        self.schema = Schema.from_json(self.info["schema_json"])
         self.dims = dict(self.info["dims"])
         self.task = get_task(task)
         self.task_options = self.task.check_options(task_options)

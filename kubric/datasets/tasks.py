@@ -33,102 +33,19 @@ a task whose ``requires`` it lacks fails in one line naming the tasks the datase
 
 from __future__ import annotations
 
-import dataclasses
-from collections.abc import Callable
-
 import numpy as np
 
+from kubric.core import camera_geometry as geo
 from kubric.datasets.layout import DatasetError
-from kubric.datasets.scene_reader import dequantise
-
-
-@dataclasses.dataclass(frozen=True)
-class Task:
-    """A registered task (see module doc). ``requires``: feature names (or name prefixes such as
-    ``camera``) a dataset must have for the task to serve it (default: ``features``);
-    ``extra_features(schema, options)`` adds top-level features to decode that depend on the
-    options and the dataset (e.g. ``multiview``'s optional layers); ``wants_schema`` passes the
-    dataset's schema to ``fn`` as ``schema=``."""
-
-    name: str
-    fn: Callable | None
-    features: tuple[str, ...] | None = None
-    per_frame: bool = False
-    options: tuple[str, ...] = ()
-    doc: str = ""
-    requires: tuple[str, ...] = ()
-    extra_features: Callable | None = None
-    wants_schema: bool = False
-
-    def check_options(self, options: dict) -> dict:
-        unknown = sorted(set(options) - set(self.options))
-        if unknown:
-            raise DatasetError(f"task {self.name!r}: unknown option(s) {unknown}; options: "
-                               f"{list(self.options) or 'none'}")
-        return dict(options)
-
-    def missing(self, schema) -> list[str]:
-        """The required feature names (or prefixes) ``schema`` lacks."""
-        names = schema.names
-        return [r for r in self.requires or self.features or ()
-                if r not in names and not any(n.startswith(r + "/") for n in names)]
-
-    def decode_keys(self, schema, options: dict) -> tuple[str, ...] | None:
-        """Top-level features to decode (None: all)."""
-        if self.features is None:
-            return None
-        extra = tuple(self.extra_features(schema, options)) if self.extra_features else ()
-        return tuple(dict.fromkeys(self.features + extra))
-
-    def __call__(self, example: dict, frame, source) -> dict:
-        if self.fn is None:
-            return example
-        if self.wants_schema:
-            return self.fn(example, frame, schema=source.schema, **source.task_options)
-        return self.fn(example, frame, **source.task_options)
-
-
-TASKS: dict[str, Task] = {}
-
-
-def register_task(name: str, features: tuple[str, ...] | None = None, per_frame: bool = False,
-                  options: tuple[str, ...] = (), requires: tuple[str, ...] = (),
-                  extra_features: Callable | None = None, wants_schema: bool = False):
-    """Decorator registering ``fn(example, frame, **options) -> dict`` as task ``name``
-    (:class:`Task` for ``requires``, ``extra_features`` and ``wants_schema``)."""
-    def wrap(fn):
-        TASKS[name] = Task(name, fn, tuple(features) if features else None, per_frame,
-                           tuple(options), (fn.__doc__ or "").strip().split("\n")[0],
-                           tuple(requires), extra_features, wants_schema)
-        return fn
-    return wrap
-
-
-def servable_tasks(schema) -> list[str]:
-    """The names of the registered tasks that a dataset of ``schema`` can serve."""
-    return [name for name in sorted(TASKS) if not TASKS[name].missing(schema)]
-
-
-def check_servable(task: Task, schema, where: str) -> None:
-    """One-line :class:`DatasetError` when ``task`` cannot read a dataset of ``schema``."""
-    missing = task.missing(schema)
-    if missing:
-        raise DatasetError(f"task {task.name!r} cannot read {where} (schema {schema.name!r}): it "
-                           f"needs {missing}; this dataset serves the tasks "
-                           f"{', '.join(servable_tasks(schema))}")
-
-
-TASKS["all"] = Task("all", None, None, False, (), "every feature, nested numpy dict")
-
-
-def get_task(name) -> Task:
-    if isinstance(name, Task):
-        return name
-    if name is None:
-        return TASKS["all"]
-    if name not in TASKS:
-        raise DatasetError(f"unknown task {name!r} (tasks: {', '.join(sorted(TASKS))})")
-    return TASKS[name]
+from kubric.datasets.task_registry import (  # noqa: F401  (the registry's public names)
+    TASKS,
+    Task,
+    check_servable,
+    get_task,
+    register_task,
+    servable_tasks,
+)
+from kubric.io.scene_reader import dequantise
 
 
 def resize_frames(frames: np.ndarray, size) -> np.ndarray:
@@ -180,14 +97,8 @@ def pixel_rays(intrinsics_pixels: np.ndarray, camera_to_world: np.ndarray, heigh
     (c + 0.5, r + 0.5)); ``camera_to_world`` maps Blender camera axes (x right, y up, −z
     forward) to the world.
     """
-    rows, cols = np.meshgrid(np.arange(height) + 0.5, np.arange(width) + 0.5, indexing="ij")
-    pixels = np.stack([cols, rows, np.ones_like(rows)], axis=-1)
-    cv_dirs = pixels @ np.linalg.inv(np.asarray(intrinsics_pixels, np.float64)).T
-    blender_dirs = cv_dirs * np.array([1.0, -1.0, -1.0])
-    matrix = np.asarray(camera_to_world, np.float64)
-    dirs = blender_dirs @ matrix[:3, :3].T
-    dirs /= np.linalg.norm(dirs, axis=-1, keepdims=True)
-    origins = np.broadcast_to(matrix[:3, 3], dirs.shape)
+    origins, dirs = geo.pinhole_rays(intrinsics_pixels, camera_to_world,
+                                     geo.pixel_centres(height, width))
     return origins.astype(np.float32), dirs.astype(np.float32)
 
 

@@ -92,7 +92,7 @@ def encode_frames(frames: np.ndarray) -> list[bytes]:
 
 
 def nested_example(schema: Schema, flat: Mapping) -> dict:
-    """A flat example (:mod:`kubric.datasets.scene_reader`) → the nested dict TFDS encodes
+    """A flat example (:mod:`kubric.io.scene_reader`) → the nested dict TFDS encodes
     (sequence groups as lists of per-element dicts)."""
     tfds = _tfds()
     root: dict = {}

@@ -1,7 +1,7 @@
 """``kubric pack --verify``: re-read every packed example and compare it with its scene directory.
 
 Each example is decoded by the loader (:func:`kubric.datasets.load`) and compared with what the
-packer reads from the scene (:class:`~kubric.datasets.scene_reader.SceneReader`): every feature
+packer reads from the scene (:class:`~kubric.io.scene_reader.SceneReader`): every feature
 must be equal, bit for bit (integers, the stored uint16 samples, float32 metadata, text).
 """
 
@@ -12,9 +12,9 @@ import pathlib
 import numpy as np
 
 from kubric.datasets.layout import DatasetError, read_info
-from kubric.datasets.scene_reader import SceneReader
 from kubric.datasets.source import load
 from kubric.datasets.tfds_io import flatten
+from kubric.io.scene_reader import SceneReader
 
 
 def values_equal(a, b) -> bool:

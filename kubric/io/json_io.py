@@ -26,6 +26,7 @@ from typing import Any
 
 import numpy as np
 
+from kubric.errors import InputError
 from kubric.io.paths import PathLike, as_path, atomic_write_bytes, read_bytes
 
 JSON_INDENT = 2
@@ -132,7 +133,7 @@ def read_json(filename: PathLike) -> Any:
     try:
         return json.loads(text)
     except json.JSONDecodeError as err:
-        raise ValueError(f"{str(path)!r} is not valid JSON: {err}") from err
+        raise InputError(f"{str(path)!r} is not valid JSON: {err}") from err
 
 
 def write_pkl(data: Any, filename: PathLike) -> None:

@@ -47,6 +47,7 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
+from kubric.errors import InputError
 from kubric.io import png_io, tiff_io
 from kubric.io.json_io import read_json, write_json
 from kubric.io.paths import PathLike, as_path, atomic_write_bytes, read_bytes
@@ -134,11 +135,6 @@ def _check_unit_interval(arr: np.ndarray, lo: float, hi: float, what: str) -> No
         raise ValueError(f"{what}: values must lie in [{lo}, {hi}], got range [{vmin}, {vmax}]")
 
 
-def _unit_interval_to_uint16(arr: np.ndarray, lo: float, hi: float) -> np.ndarray:
-    scaled = (np.clip(arr.astype(np.float64), lo, hi) - lo) * (png_io.UINT16_MAX / (hi - lo))
-    return np.rint(scaled).astype(np.uint16)
-
-
 def _png_of(quantise: Callable) -> Callable:
     """Frame encoder quantising one (H, W, C) frame at a time (C = 2 gets a zero third channel):
     a layer's 16-bit copy and its float64 temporaries never exist whole."""
@@ -182,7 +178,7 @@ def _prepare_layer(name: str, fmt: LayerFormat, data, ranges: dict
         return arr, png_io.encode_png        # already: stored as they are (see module doc)
     lo = -1.0 if fmt.kind == "signed_unit" else 0.0
     _check_unit_interval(arr, lo, 1.0, what)
-    return arr, _png_of(lambda frame: _unit_interval_to_uint16(frame, lo, 1.0))
+    return arr, _png_of(lambda frame: png_io.scale_to_uint16(frame, lo, 1.0))
 
 
 def write_image_dict(data_dict: Mapping[str, np.ndarray], directory: PathLike,
@@ -247,7 +243,7 @@ def _frame_paths(directory, template: str) -> list:
             found[int(match.group(1))] = path
     missing = sorted(set(range(len(found))) - set(found))
     if missing:
-        raise ValueError(f"{str(directory)!r}: frames of {template!r} must be numbered "
+        raise InputError(f"{str(directory)!r}: frames of {template!r} must be numbered "
                          f"0..{len(found) - 1}; missing indices {missing[:10]}")
     return [found[i] for i in range(len(found))]
 
@@ -268,11 +264,11 @@ def _decode_frame(name: str, fmt: LayerFormat, path, value_range, raw: bool = Fa
             if arr.dtype == np.uint8 and fmt.kind != "scaled":  # written from uint8 samples
                 arr = (lo + arr.astype(np.float64) * ((hi - lo) / 255.0)).astype(np.float32)
             elif arr.dtype != np.uint16:
-                raise ValueError(f"{str(path)!r}: layer {name!r} must be a 16-bit PNG")
+                raise InputError(f"{str(path)!r}: layer {name!r} must be a 16-bit PNG")
             else:
                 arr = png_io.unscale_from_uint16(arr, lo, hi)
     if arr.shape[-1] < fmt.channels:
-        raise ValueError(f"{str(path)!r}: layer {name!r} needs {fmt.channels} channels, the "
+        raise InputError(f"{str(path)!r}: layer {name!r} needs {fmt.channels} channels, the "
                          f"file has {arr.shape[-1]}")
     return arr[..., :fmt.channels]
 
@@ -285,22 +281,25 @@ def _layer_range(directory, name: str, value_range, fmt: LayerFormat):
         range_path = directory / DATA_RANGES_FILE
         ranges = read_json(range_path) if range_path.exists() else {}
         if name not in ranges:
-            raise ValueError(f"{str(range_path)!r} has no range for layer {name!r}")
+            raise InputError(f"{str(range_path)!r} has no range for layer {name!r}")
         value_range = ranges[name]
-    return png_io._range_pair(value_range, f"read_layer({name!r})")
+    return png_io.range_pair(value_range, f"read_layer({name!r})")
 
 
 def read_frame(directory: PathLike, name: str, index: int, file_templates: Mapping[str, str]
-               | None = None, value_range=None) -> np.ndarray:
+               | None = None, value_range=None,
+               formats: Mapping[str, LayerFormat] | None = None) -> np.ndarray:
     """Frame ``index`` (0-based) of one layer as an (H, W, C) array, decoded like
-    :func:`read_layer` (which reads all frames); only that one file is read."""
+    :func:`read_layer` (which reads all frames); only that one file is read. ``formats`` adds
+    layers beyond :data:`LAYERS` (a recipe schema's ``layers``)."""
     directory = as_path(directory)
-    if name not in LAYERS:
-        raise ValueError(f"read_frame: unknown layer {name!r}; known: {sorted(LAYERS)}")
-    path = directory / frame_filename(_templates(file_templates, LAYERS)[name], int(index))
+    table = layer_table(formats)
+    if name not in table:
+        raise ValueError(f"read_frame: unknown layer {name!r}; known: {sorted(table)}")
+    path = directory / frame_filename(_templates(file_templates, table)[name], int(index))
     if not path.is_file():
         raise FileNotFoundError(f"{str(directory)!r} has no frame {index} of layer {name!r}")
-    fmt = LAYERS[name]
+    fmt = table[name]
     return _decode_frame(name, fmt, path, _layer_range(directory, name, value_range, fmt))
 
 
@@ -325,7 +324,7 @@ def read_layer(directory: PathLike, name: str, file_templates: Mapping[str, str]
         value_range = _layer_range(directory, name, value_range, fmt)
     frames = [_decode_frame(name, fmt, p, value_range, raw) for p in paths]
     if len({f.shape for f in frames}) > 1:
-        raise ValueError(f"{str(directory)!r}: frames of layer {name!r} differ in shape")
+        raise InputError(f"{str(directory)!r}: frames of layer {name!r} differ in shape")
     return np.stack(frames)
 
 

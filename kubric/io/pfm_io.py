@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from kubric.errors import InputError
 from kubric.io.paths import PathLike, as_path, atomic_write_bytes
 
 
@@ -41,25 +42,25 @@ def decode_pfm(data: bytes) -> np.ndarray:
     while len(lines) < 3:  # three header lines (a comment line starting with # is skipped)
         end = data.find(b"\n", pos)
         if end < 0:
-            raise ValueError("not a PFM file: truncated header")
+            raise InputError("not a PFM file: truncated header")
         line = data[pos:end].strip()
         pos = end + 1
         if not line.startswith(b"#"):
             lines.append(line)
     kind, dims, scale = lines
     if kind not in (b"PF", b"Pf"):
-        raise ValueError(f"not a PFM file: header {kind[:10]!r} (expected PF or Pf)")
+        raise InputError(f"not a PFM file: header {kind[:10]!r} (expected PF or Pf)")
     try:
         width, height = (int(v) for v in dims.split())
         scale_value = float(scale)
     except ValueError:
-        raise ValueError(f"not a PFM file: bad size {dims[:30]!r} or scale {scale[:30]!r}") \
+        raise InputError(f"not a PFM file: bad size {dims[:30]!r} or scale {scale[:30]!r}") \
             from None
     channels = 3 if kind == b"PF" else 1
     count = width * height * channels
     body = data[pos:pos + 4 * count]
     if width < 1 or height < 1 or len(body) != 4 * count:
-        raise ValueError(f"PFM file: {width}×{height}×{channels} samples expected, "
+        raise InputError(f"PFM file: {width}×{height}×{channels} samples expected, "
                          f"{len(data) - pos} bytes of data found")
     arr = np.frombuffer(body, dtype="<f4" if scale_value < 0 else ">f4")
     shape = (height, width, 3) if channels == 3 else (height, width)

@@ -6,7 +6,10 @@ Sample conventions (all images are ``(H, W, C)`` arrays, row 0 at the top):
   (grey), 3 (RGB) or 4 (RGBA). C = 2 is padded with a zero third channel and stored as RGB (as
   upstream Kubric did for flow), so it reads back with C = 3. Other integer dtypes must lie in
   [0, 65535] and are stored as 16-bit; floats must lie in [0, 1] and are stored as
-  ``round(x * 65535)`` in 16 bits. Nothing is ever wrapped or clipped: out-of-range values raise.
+  ``floor(x * 65535)`` in 16 bits — truncated exactly as upstream Kubric's ``write_png`` did, so
+  the same floats give the same file (docs/compatibility.md; the scene directory's 16-bit layers
+  and :func:`write_scaled_png` round instead). Nothing is ever wrapped or clipped: out-of-range
+  values raise.
 * :func:`write_palette_png` stores integer labels: an 8-bit palette PNG while the largest label is
   ≤ 255, otherwise a 16-bit grey PNG (labels > 65535 raise ``ValueError``).
 * :func:`write_scaled_png` maps floats to 16 bits as ``round((v - min) / (max - min) * 65535)``
@@ -32,6 +35,7 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
+from kubric.errors import InputError
 from kubric.io.palette import label_palette
 from kubric.io.paths import PathLike, as_path, atomic_write_bytes, read_bytes
 
@@ -141,13 +145,16 @@ def check_image(data, what: str, channels: Sequence[int] = (1, 2, 3, 4)) -> np.n
 
 
 def unit_float_to_uint16(arr: np.ndarray, what: str) -> np.ndarray:
-    """Floats in [0, 1] → ``round(x * 65535)`` uint16; NaN or values outside [0, 1] raise."""
+    """Floats in [0, 1] → ``floor(x * 65535)`` uint16 (upstream's truncation, computed in the
+    input's own precision as upstream did); NaN or values outside [0, 1] raise."""
     if not np.all(np.isfinite(arr)):
         raise ValueError(f"{what}: values must be finite, found NaN or inf")
     lo, hi = float(arr.min()), float(arr.max())
     if lo < 0.0 or hi > 1.0:
         raise ValueError(f"{what}: float values must lie in [0, 1], got range [{lo}, {hi}]")
-    return np.rint(arr.astype(np.float64) * UINT16_MAX).astype(np.uint16)
+    if arr.dtype.itemsize < 4:  # float16 cannot hold 65535 · x
+        arr = arr.astype(np.float32)
+    return (arr * UINT16_MAX).astype(np.uint16)  # astype truncates toward 0 (values are ≥ 0)
 
 
 def to_png_samples(data, what: str) -> np.ndarray:
@@ -302,7 +309,7 @@ def write_scaled_png(data: np.ndarray, filename: PathLike) -> dict[str, float]:
 def png_header(data: bytes, name: str = "data") -> dict:
     """Width, height, bitdepth and colour type from a PNG's IHDR chunk."""
     if len(data) < 33 or data[:8] != PNG_SIGNATURE or data[12:16] != b"IHDR":
-        raise ValueError(f"{name} is not a PNG file (bad signature or missing IHDR)")
+        raise InputError(f"{name} is not a PNG file (bad signature or missing IHDR)")
     width, height, bitdepth, color_type = struct.unpack(">IIBB", data[16:26])
     return {"width": width, "height": height, "bitdepth": bitdepth, "color_type": color_type}
 
@@ -312,9 +319,9 @@ def png_samples_layout(data: bytes, name: str = "data") -> tuple[tuple[int, int,
     header = png_header(data, name)
     bitdepth, color_type = header["bitdepth"], header["color_type"]
     if color_type not in CHANNELS_FOR_COLOR_TYPE:
-        raise ValueError(f"{name}: invalid PNG colour type {color_type}")
+        raise InputError(f"{name}: invalid PNG colour type {color_type}")
     if bitdepth not in (8, 16) and color_type != PALETTE_COLOR_TYPE:
-        raise ValueError(f"{name}: only 8- and 16-bit PNG samples are supported, got {bitdepth}")
+        raise InputError(f"{name}: only 8- and 16-bit PNG samples are supported, got {bitdepth}")
     shape = (header["height"], header["width"], CHANNELS_FOR_COLOR_TYPE[color_type])
     return shape, bitdepth, color_type
 
@@ -334,9 +341,9 @@ def decode_png(data: bytes, name: str = "data") -> tuple[np.ndarray, np.ndarray 
     try:
         arr = imagecodecs.png_decode(data)
     except Exception as err:  # PngError, or UnicodeDecodeError from libpng's message on garbage
-        raise ValueError(f"{name}: corrupt PNG data ({type(err).__name__}: {err})") from None
+        raise InputError(f"{name}: corrupt PNG data ({type(err).__name__}: {err})") from None
     if arr.dtype != (np.uint16 if bitdepth == 16 else np.uint8) or arr.size != np.prod(shape):
-        raise ValueError(f"{name}: decoded {arr.dtype} {arr.shape}, but the header says "
+        raise InputError(f"{name}: decoded {arr.dtype} {arr.shape}, but the header says "
                          f"{bitdepth}-bit {shape}")
     return arr.reshape(shape), None
 
@@ -350,7 +357,7 @@ def _decode_palette_png(data: bytes, shape: tuple, name: str) -> tuple[np.ndarra
             palette = np.array(img.getpalette() or [], dtype=np.uint8).reshape(-1, 3)
             arr = np.asarray(img)
     except (OSError, SyntaxError) as err:  # Pillow raises SyntaxError for some broken chunks
-        raise ValueError(f"{name}: corrupt PNG data ({err})") from None
+        raise InputError(f"{name}: corrupt PNG data ({err})") from None
     return arr.astype(np.uint8, copy=False).reshape(shape), palette
 
 
@@ -364,12 +371,12 @@ def read_png(filename: PathLike, rescale_range=None) -> np.ndarray:
     arr, _ = decode_png(read_bytes(path), repr(str(path)))
     if rescale_range is None:
         return arr
-    lo, hi = _range_pair(rescale_range, f"read_png({str(path)!r})")
+    lo, hi = range_pair(rescale_range, f"read_png({str(path)!r})")
     top = 255.0 if arr.dtype == np.uint8 else float(UINT16_MAX)
     return (arr.astype(np.float64) * ((hi - lo) / top) + lo).astype(np.float32)
 
 
-def _range_pair(value_range, what: str) -> tuple[float, float]:
+def range_pair(value_range, what: str) -> tuple[float, float]:
     if isinstance(value_range, Mapping):
         if "min" not in value_range or "max" not in value_range:
             raise ValueError(f"{what}: range dict needs 'min' and 'max', got {value_range!r}")
@@ -393,10 +400,10 @@ def read_scaled_png(filename: PathLike, value_range) -> np.ndarray:
     or a ``(min, max)`` pair. 2-channel data comes back with its zero padding channel (C = 3).
     """
     path = as_path(filename)
-    lo, hi = _range_pair(value_range, f"read_scaled_png({str(path)!r})")
+    lo, hi = range_pair(value_range, f"read_scaled_png({str(path)!r})")
     arr, _ = decode_png(read_bytes(path), repr(str(path)))
     if arr.dtype != np.uint16:
-        raise ValueError(f"read_scaled_png({str(path)!r}): expected a 16-bit PNG, got 8-bit")
+        raise InputError(f"read_scaled_png({str(path)!r}): expected a 16-bit PNG, got 8-bit")
     return unscale_from_uint16(arr, lo, hi)
 
 
@@ -409,7 +416,7 @@ def read_palette_png(filename: PathLike, return_palette: bool = False):
     path = as_path(filename)
     arr, palette = decode_png(read_bytes(path), repr(str(path)))
     if arr.shape[2] != 1:
-        raise ValueError(f"read_palette_png({str(path)!r}): a label PNG has 1 channel "
+        raise InputError(f"read_palette_png({str(path)!r}): a label PNG has 1 channel "
                          f"(palette or grey), this one has {arr.shape[2]}")
     labels = arr.astype(np.uint32)
     return (labels, palette) if return_palette else labels

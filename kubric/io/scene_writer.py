@@ -1,54 +1,54 @@
-"""Write a scene directory as a recipe's :class:`~kubric.io.schema.Schema` declares it.
+"""The one writer of a scene directory: what a recipe's :class:`~kubric.io.schema.Schema` declares.
 
-:func:`write_scene` checks the rendered layers and the ``metadata.json`` / ``events.json``
-content against the schema *before* writing anything (a field the schema reads but the recipe
-did not produce is a one-line :class:`~kubric.io.schema.SchemaError`), then writes the layers with
-the schema's layer formats and the two JSON files. ``_SUCCESS`` is not written here: the worker
-writes it last (:mod:`kubric.pipeline.worker`).
+:func:`write_scene` is how every recipe writes its scene (the names are those of
+:mod:`kubric.io.scene_dir`):
+
+1. before writing anything, :func:`check_scene_content` checks that every feature's source is
+   there (a layer the schema reads but the recipe did not render, a missing metadata field: a
+   one-line :class:`~kubric.io.schema.SchemaError`);
+2. it writes the layers with the schema's layer formats (standard and the recipe's own),
+   ``data_ranges.json``, ``metadata.json``, ``events.json`` and the recipe's other files
+   (``files``: JSON documents, numpy archives such as ``tracks.npz``, or bytes);
+3. it then reads the written directory back through :class:`~kubric.io.scene_reader.SceneReader`
+   — the packer's own reader, every conversion and cast it applies — so a scene that would not
+   pack fails when it is written, naming the feature, not when it is packed.
+
+``_SUCCESS`` is not written here: the worker writes it last (:mod:`kubric.pipeline.worker`).
 """
 
 from __future__ import annotations
 
+import io
 from collections.abc import Mapping
 
 import numpy as np
 
 from kubric.io.json_io import write_json
 from kubric.io.layers import write_image_dict
-from kubric.io.paths import PathLike, as_path
-from kubric.io.schema import Feature, Schema, SchemaError, get_schema
-
-METADATA_FILE, EVENTS_FILE = "metadata.json", "events.json"
-
-
-def lookup(tree, path: str, what: str):
-    """``tree[a][b][0]`` for ``path`` ``"a.b.0"``; :class:`SchemaError` naming ``what`` when a
-    step is missing."""
-    value = tree
-    for step in path.split("."):
-        try:
-            value = value[int(step)] if step.lstrip("-").isdigit() and not isinstance(
-                value, Mapping) else value[step]
-        except (KeyError, IndexError, TypeError):
-            raise SchemaError(f"{what}: no field {path!r}") from None
-    return value
-
-
-def element_value(feature: Feature, element, what: str):
-    """The value of instance / collision ``feature`` in one ``element`` (a dict of
-    ``metadata.json["instances"]`` or ``events.json["collisions"]``): its field, or the
-    feature's ``default`` where the element lacks the field and the feature has one."""
-    try:
-        return lookup(element, feature.source_arg, what)
-    except SchemaError:
-        if feature.default is None:
-            raise
-        return feature.default
+from kubric.io.paths import PathLike, as_path, atomic_write_bytes
+from kubric.io.scene_dir import EVENTS_FILE, METADATA_FILE
+from kubric.io.scene_reader import SceneError, SceneReader, element_value, lookup
+from kubric.io.schema import Schema, SchemaError, get_schema
 
 
 def check_scene_content(schema: Schema, layers: Mapping[str, np.ndarray], metadata: Mapping,
                         events: Mapping) -> None:
     """Raise :class:`SchemaError` (one line) when a feature's source is missing."""
+    meta = metadata.get("metadata", {}) if isinstance(metadata, Mapping) else None
+    if not isinstance(meta, Mapping) or "resolution" not in meta or "num_frames" not in meta:
+        raise SchemaError(f"schema {schema.name!r}: metadata.json['metadata'] must give "
+                          "'resolution' [width, height] and 'num_frames' (every reader needs them)")
+    try:
+        width, height = (int(v) for v in meta["resolution"])
+        dims = (int(meta["num_frames"]), height, width)
+    except (TypeError, ValueError):
+        raise SchemaError(f"schema {schema.name!r}: metadata resolution "
+                          f"{meta['resolution']!r} / num_frames {meta['num_frames']!r} are not "
+                          "[width, height] and a count") from None
+    for name, layer in layers.items():
+        if np.shape(layer)[:3] != dims:
+            raise SchemaError(f"schema {schema.name!r}: layer {name!r} has (T, H, W) "
+                              f"{np.shape(layer)[:3]}, the metadata says {dims}")
     tables = {"meta": (metadata.get("metadata", {}), "metadata.json['metadata']"),
               "camera": (metadata.get("camera", {}), "metadata.json['camera']")}
     for f in schema.features:
@@ -71,11 +71,52 @@ def check_scene_content(schema: Schema, layers: Mapping[str, np.ndarray], metada
                               f"collision {k}")
 
 
+def _write_file(path, content) -> None:
+    """One of a recipe's other files: a dict / list → JSON; a dict of arrays for a ``.npz``
+    name → a numpy archive; bytes as they are."""
+    if isinstance(content, bytes | bytearray):
+        atomic_write_bytes(bytes(content), path)
+    elif path.suffix == ".npz":
+        buffer = io.BytesIO()
+        np.savez_compressed(buffer, **content)
+        atomic_write_bytes(buffer.getvalue(), path)
+    elif isinstance(content, Mapping | list):
+        write_json(content, path)
+    else:
+        raise TypeError(f"write_scene: file {path.name!r}: expected bytes, a JSON document or "
+                        f"(for .npz) a dict of arrays, got {type(content).__name__}")
+
+
+def resolved_for_check(schema: Schema, reader: SceneReader) -> Schema:
+    """``schema`` with the class labels whose names are collected when packing resolved from this
+    one scene (so every value of the scene is a known name)."""
+    names = {}
+    for f in schema.features:
+        if f.names_from_scenes:
+            values = sorted({str(v) for v in reader.raw_values(f)})
+            if values:
+                names[f.name] = values
+    return schema.with_names(names) if names else schema
+
+
+def check_written(schema: Schema | str, scene) -> None:
+    """Read scene directory ``scene`` back as the packer will (every feature, every conversion);
+    :class:`SchemaError` (one line, naming the schema and the feature) when it does not pack."""
+    schema = get_schema(schema)
+    reader = SceneReader(scene, schema)
+    try:
+        SceneReader(scene, resolved_for_check(schema, reader)).example()
+    except (SceneError, SchemaError) as err:
+        raise SchemaError(f"schema {schema.name!r}: the scene written does not pack: "
+                          f"{str(err).replace(repr(str(scene)) + ' ', '')}") from None
+
+
 def write_scene(schema: Schema | str, out_dir: PathLike, layers: Mapping[str, np.ndarray],
                 metadata: Mapping, events: Mapping | None = None,
-                max_write_threads: int = 16) -> dict:
-    """Check ``layers`` / ``metadata`` / ``events`` against ``schema`` and write them into
-    ``out_dir`` (layer files, ``data_ranges.json``, ``metadata.json``, ``events.json``).
+                files: Mapping[str, object] | None = None, max_write_threads: int = 16) -> dict:
+    """Write one scene directory as ``schema`` declares it (see the module doc) into
+    ``out_dir``: layers, ``data_ranges.json``, ``metadata.json``, ``events.json`` (default: no
+    collisions) and ``files`` ({file name: content}); then check it in full.
     Returns the ranges written to ``data_ranges.json``."""
     schema = get_schema(schema)
     events = {"collisions": []} if events is None else events
@@ -85,4 +126,7 @@ def write_scene(schema: Schema | str, out_dir: PathLike, layers: Mapping[str, np
                               formats=schema.layers)
     write_json(metadata, out_dir / METADATA_FILE)
     write_json(events, out_dir / EVENTS_FILE)
+    for name, content in (files or {}).items():
+        _write_file(out_dir / name, content)
+    check_written(schema, out_dir)
     return ranges

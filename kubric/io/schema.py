@@ -53,10 +53,12 @@ dataset stores the resolved names.
 from __future__ import annotations
 
 import dataclasses
-import importlib
 import re
-from collections.abc import Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 
+import numpy as np
+
+from kubric.errors import KubricError
 from kubric.io.layers import LAYERS, LayerFormat, layer_table
 
 #: named dimensions and what they count
@@ -69,21 +71,67 @@ SEQUENCES = {"instances/": "N", "events/collisions/": "K"}
 ENCODINGS = ("none", "png", "zlib", "text", "class_label", "bbox")
 DTYPES = ("uint8", "uint16", "int32", "int64", "float32", "bool", "str")
 SOURCE_KINDS = ("scene_name", "layer", "range", "meta", "camera", "instance", "collision", "npz")
+#: the splits of a multi-view scene's views (NeRF's transforms_{split}.json), in index order
+VIEW_SPLITS = ("train", "val", "test")
+UINT16_MAX = 65535
+
+
+def _hex_to_rgb(value) -> np.ndarray:
+    text = str(value)
+    digits = text[1:] if text.startswith("#") else ""
+    if len(digits) not in (6, 8) or any(c not in "0123456789abcdefABCDEF" for c in digits):
+        raise ValueError(f"{value!r} is not a '#rrggbb' or '#rrggbbaa' colour")
+    return np.array([int(digits[i:i + 2], 16) / 255.0 for i in (0, 2, 4)], dtype=np.float32)
+
+
+def _split_indices(value) -> np.ndarray:
+    names = [v["split"] if isinstance(v, Mapping) else v for v in value]
+    unknown = sorted({str(n) for n in names} - set(VIEW_SPLITS))
+    if unknown:
+        raise ValueError(f"splits {unknown} are not in {VIEW_SPLITS}")
+    return np.array([VIEW_SPLITS.index(n) for n in names], dtype=np.int64)
+
+
+def _negative_to_uint16_max(value) -> np.ndarray:
+    arr = np.asarray(value, dtype=np.int64)
+    return np.where(arr < 0, UINT16_MAX, arr)
+
+
+@dataclasses.dataclass(frozen=True)
+class Conversion:
+    """A conversion a feature may name in ``convert``: what it does (for the docs) and the
+    function the reader applies to the value read from the scene directory."""
+
+    doc: str
+    apply: Callable
+
+
 #: conversions a feature may name in ``convert``
-CONVERSIONS = {
-    "hex_to_rgb": "colour hex string '#rrggbb' → float32 (3,) in [0, 1]",
-    "floor": "number → its floor (e.g. a fractional collision frame → the frame it falls in)",
-    "negative_to_uint16_max": "−1 (no instance) → 65535, as upstream's uint16 instance indices",
-    "split_index": "per-view split names (a list of {'split': name} or of names) → their "
-                   "indices in (train, val, test)",
+CONVERSIONS: dict[str, Conversion] = {
+    "hex_to_rgb": Conversion("colour hex string '#rrggbb' (or '#rrggbbaa', as kb.Color.hexstr "
+                             "writes it: alpha dropped) → float32 (3,) in [0, 1]", _hex_to_rgb),
+    "floor": Conversion("number → its floor (e.g. a fractional collision frame → the frame it "
+                        "falls in)",
+                        lambda v: np.floor(np.asarray(v, dtype=np.float64)).astype(np.int64)),
+    "negative_to_uint16_max": Conversion("−1 (no instance) → 65535, as upstream's uint16 "
+                                         "instance indices", _negative_to_uint16_max),
+    "split_index": Conversion("per-view split names (a list of {'split': name} or of names) → "
+                              "their indices in (train, val, test)", _split_indices),
 }
+
+
+def convert(name: str, value):
+    """``value`` after conversion ``name`` (the empty name: unchanged)."""
+    return CONVERSIONS[name].apply(value) if name else value
+
+
 #: ``names`` of a class label whose names are collected from the scenes when packing
 NAMES_FROM_SCENES = ("<sorted values found when packing>",)
 #: version of the schema contract (bumped when a feature changes meaning, never for additions)
 SCHEMA_VERSION = "1.0.0"
 
 
-class SchemaError(ValueError):
+class SchemaError(KubricError, ValueError):
     """A schema, or a value checked against it, breaks the contract (one-line message)."""
 
 
@@ -234,6 +282,33 @@ class Schema:
                       + tuple(features), {**self.layers, **dict(layers or {})},
                       description or self.description, self.version)
 
+    def to_json(self) -> dict:
+        """The schema as a JSON document (what a packed dataset stores beside its shards)."""
+        return {"name": self.name, "version": self.version, "description": self.description,
+                "features": [{k: (list(v) if isinstance(v, tuple) else v)
+                              for k, v in vars(f).items()} for f in self.features],
+                "layers": {k: vars(v) for k, v in self.layers.items()}}
+
+    @classmethod
+    def from_json(cls, data: Mapping) -> Schema:
+        """The inverse of :meth:`to_json`; :class:`SchemaError` (one line) for a document that
+        is not a schema or whose major version this code does not read."""
+        if not isinstance(data, Mapping) or not isinstance(data.get("features"), list):
+            raise SchemaError("schema document: expected an object with a 'features' list")
+        version = str(data.get("version", SCHEMA_VERSION))
+        if version.split(".")[0] != SCHEMA_VERSION.split(".")[0]:
+            raise SchemaError(f"schema {data.get('name')!r} has version {version}; this kubric "
+                              f"reads schema versions {SCHEMA_VERSION.split('.')[0]}.x")
+        try:
+            features = tuple(Feature(**{k: (tuple(v) if isinstance(v, list) else v)
+                                        for k, v in f.items()}) for f in data["features"])
+            layers = {k: LayerFormat(**v) for k, v in dict(data.get("layers", {})).items()}
+        except TypeError as err:
+            raise SchemaError(f"schema {data.get('name')!r}: malformed feature or layer: "
+                              f"{err}") from None
+        return cls(str(data["name"]), features, layers, str(data.get("description", "")),
+                   version)
+
     def with_names(self, names: Mapping[str, Iterable[str]]) -> Schema:
         """This schema with the class-label names of the features in ``names`` replaced (how
         the packer resolves :data:`NAMES_FROM_SCENES`)."""
@@ -259,11 +334,11 @@ def layer_channels(arg: str, what: str = "source") -> tuple[str, slice]:
 
 
 # ------------------------------------------------------------------------------ registry
-#: schemas by recipe name
+#: schemas by name. A recipe's schema (and its variants, e.g. ``movi_a_tracks``) is registered
+#: when the recipe class is (:class:`kubric.pipeline.recipe.Recipe`); other code may register
+#: its own with :func:`register_schema`. Lookups by recipe name that must see the built-in
+#: recipes go through :func:`kubric.pipeline.recipe.schema_of`, which imports them first.
 REGISTRY: dict[str, Schema] = {}
-#: modules that declare the built-in recipes' schemas (imported on first lookup)
-BUILTIN_SCHEMA_MODULES = ("kubric.recipes.movi_schema", "kubric.recipes.multiview_schema",
-                          "kubric.recipes.vbr_schema", "kubric.recipes.pose_estimation_schema")
 
 
 def register_schema(schema: Schema) -> Schema:
@@ -274,38 +349,14 @@ def register_schema(schema: Schema) -> Schema:
     return schema
 
 
-def builtin_schemas() -> dict[str, Schema]:
-    """The schemas the built-in schema modules declare, by name — not those other code (a test,
-    a user's module) registered in this process, so generated docs never depend on what ran
-    before."""
-    found: dict[str, Schema] = {}
-    for module in BUILTIN_SCHEMA_MODULES:
-        for value in vars(importlib.import_module(module)).values():
-            for item in (value.values() if isinstance(value, dict) else (value,)):
-                if isinstance(item, Schema) and REGISTRY.get(item.name) is item:
-                    found[item.name] = item
-    return found
-
-
-def get_schema(name: str) -> Schema:
-    """The schema of recipe ``name``: a registered schema, or the ``schema`` attribute of the
-    recipe :func:`kubric.pipeline.get_recipe` finds for ``name`` (``module:Class`` too).
-    Raises :class:`SchemaError` (one line) when there is none."""
+def get_schema(name: Schema | str) -> Schema:
+    """``name`` itself when it is a :class:`Schema`, else the registered schema of that name;
+    :class:`SchemaError` (one line, naming the known schemas) when there is none."""
     if isinstance(name, Schema):
         return name
-    for module in BUILTIN_SCHEMA_MODULES:
-        importlib.import_module(module)
     if name in REGISTRY:
         return REGISTRY[name]
-    known = ", ".join(sorted(REGISTRY))
-    try:
-        from kubric.pipeline.recipe import get_recipe
-        schema = getattr(get_recipe(name), "schema", None)
-    except (ValueError, ImportError):
-        schema = None
-    if isinstance(schema, Schema):
-        return schema
-    raise SchemaError(f"unknown recipe schema {name!r} (schemas: {known})")
+    raise SchemaError(f"unknown recipe schema {name!r} (schemas: {', '.join(sorted(REGISTRY))})")
 
 
 # ------------------------------------------------------------------------------ docs
@@ -347,7 +398,7 @@ def dims_markdown() -> str:
     return "\n".join(f"* `{k}`: {v}" for k, v in DIMS.items()) + "\n"
 
 
-__all__ = ["CONVERSIONS", "DIMS", "Feature", "LAYERS", "LayerFormat", "NAMES_FROM_SCENES",
-           "REGISTRY", "Schema", "builtin_schemas", "layer_channels",
+__all__ = ["CONVERSIONS", "DIMS", "Conversion", "Feature", "LAYERS", "LayerFormat",
+           "NAMES_FROM_SCENES", "REGISTRY", "Schema", "VIEW_SPLITS", "convert", "layer_channels",
            "SchemaError", "SEQUENCES", "dims_markdown", "get_schema", "register_schema",
            "schema_markdown"]

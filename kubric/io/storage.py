@@ -19,10 +19,12 @@ import pathlib
 import re
 from collections.abc import Callable
 
+from kubric.errors import KubricError
+
 _URL_RE = re.compile(r"^([a-zA-Z][a-zA-Z0-9+.\-]*)://(.*)$")
 
 
-class StorageError(ValueError):
+class StorageError(KubricError, ValueError):
     """A malformed, unreachable or unwritable location (one line, names the location)."""
 
 

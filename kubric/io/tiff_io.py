@@ -19,6 +19,7 @@ import zlib
 
 import numpy as np
 
+from kubric.errors import InputError
 from kubric.io.paths import PathLike, as_path, atomic_write_bytes, read_bytes
 
 # TIFF tag ids and field types used here.
@@ -101,7 +102,7 @@ def decode_tiff(data: bytes, name: str = "data") -> np.ndarray:
     try:
         arr = imagecodecs.tiff_decode(data, index=0)
     except Exception as err:  # TiffError, or IndexError when the file holds no image
-        raise ValueError(f"{name} is not a TIFF file libtiff can read ({type(err).__name__}: "
+        raise InputError(f"{name} is not a TIFF file libtiff can read ({type(err).__name__}: "
                          f"{err})") from None
     return arr.reshape(arr.shape[0], arr.shape[1], -1)
 

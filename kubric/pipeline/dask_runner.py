@@ -33,6 +33,8 @@ import uuid
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
+from kubric.errors import UsageError
+from kubric.io.scene_dir import scene_name
 from kubric.pipeline.runner import PARENT_ENV, Runner, RunSummary, run_logged, usable_cores
 
 #: the resource every scene task asks for (one per worker slot).
@@ -40,7 +42,7 @@ RESOURCE = "scene"
 _ADDRESS_RE = re.compile(r"^(tcp|tls)://([^\s:/]+|\[[0-9a-fA-F:]+\]):(\d{1,5})$")
 
 
-class ClusterError(ValueError):
+class ClusterError(UsageError, ValueError):
     """A bad ``--cluster`` value or a cluster that cannot be reached or started (one line)."""
 
 
@@ -212,7 +214,6 @@ class DaskRunner(Runner):
         self.poll = 5.0   # seconds between a running task's checks of the stop event
 
     def _submit(self, seed: int, attempt: int):
-        from kubric.pipeline.worker import scene_name
         return self.client.submit(
             scene_task, self.command(seed), attempt, self.timeout, self.threads_per_scene,
             f"kubric-stop-{self.run_id}", self.poll, resources={RESOURCE: 1}, pure=False,

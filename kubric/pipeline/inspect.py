@@ -1,9 +1,11 @@
 """``kubric inspect SCENE_DIR``: a text summary of a scene directory and a contact sheet.
 
 The contact sheet shows, for up to ``max_rows`` evenly spaced frames (rows), the layers RGB,
-segmentation (in the colours of the segmentation PNGs, :mod:`kubric.io.palette`), depth (near =
-bright, background black), forward flow (hue = direction, saturation = magnitude relative to the
-largest) and normals ((n + 1) / 2) side by side. A ``.gif`` path writes an animation instead:
+segmentation (in the colours of the segmentation PNGs, :mod:`kubric.io.palette`), depth (a
+viridis-like map over the scene's nearest to farthest surface, background black), forward flow
+(the Middlebury wheel: hue = direction, saturation = magnitude relative to the scene's largest)
+and normals ((n + 1) / 2) side by side, in the colours of ``kubric view``
+(:mod:`kubric.annotations.pictures`). A ``.gif`` path writes an animation instead:
 one image per frame with the same columns.
 When the scene has ``tracks.npz``, the RGB column shows up to ``MAX_DRAWN_TRACKS`` point tracks
 (:func:`draw_tracks`): a coloured trail over the last ``TRAIL_FRAMES`` frames (segments between
@@ -17,50 +19,24 @@ import pathlib
 
 import numpy as np
 
+from kubric.annotations import pictures
+from kubric.core.camera_geometry import BACKGROUND_DEPTH
+from kubric.errors import InputError
 from kubric.io.palette import label_palette
+from kubric.io.scene_dir import EVENTS_FILE, METADATA_FILE, is_complete
 
 COLUMNS = ("rgba", "segmentation", "depth", "forward_flow", "normal")
 MAX_DRAWN_TRACKS = 64
 TRAIL_FRAMES = 8
 
 
-def hsv_to_rgb(h, s, v) -> np.ndarray:
-    """Vectorised HSV (each in [0, 1]) → (..., 3) RGB in [0, 1]."""
-    i = np.floor(h * 6.0).astype(np.int64) % 6
-    f = h * 6.0 - np.floor(h * 6.0)
-    p, q, t = v * (1 - s), v * (1 - s * f), v * (1 - s * (1 - f))
-    table = np.stack([np.stack(c, axis=-1) for c in
-                      ((v, t, p), (q, v, p), (p, v, t), (p, q, v), (t, p, v), (v, p, q))])
-    index = np.broadcast_to(i[None, ..., None], (1, *i.shape, 3))
-    return np.take_along_axis(table, index, axis=0)[0]
-
-
 def colourise(name: str, layer: np.ndarray, background_depth: float | None = None) -> np.ndarray:
-    """(T, H, W, C) layer → (T, H, W, 3) uint8 picture (see module doc)."""
-    if name == "rgba":
-        rgb = layer[..., :3].astype(np.float32)
-        alpha = layer[..., 3:4].astype(np.float32) / 255.0 if layer.shape[-1] == 4 else 1.0
-        return (rgb * alpha).astype(np.uint8)
-    if name == "segmentation":
-        labels = layer[..., 0].astype(np.int64)
-        return label_palette(int(labels.max()) + 1)[labels]
-    if name == "depth":
-        d = layer[..., 0].astype(np.float64)
-        hit = d < (background_depth if background_depth is not None else np.inf) * 0.999
-        out = np.zeros(d.shape, dtype=np.float64)
-        if hit.any():
-            near, far = d[hit].min(), d[hit].max()
-            out[hit] = 1.0 - 0.8 * (d[hit] - near) / max(far - near, 1e-9)
-        return np.repeat((out * 255).astype(np.uint8)[..., None], 3, axis=-1)
-    if name in ("forward_flow", "backward_flow"):
-        dy, dx = layer[..., 0].astype(np.float64), layer[..., 1].astype(np.float64)
-        mag = np.hypot(dx, dy)
-        hue = (np.arctan2(dy, dx) / (2 * np.pi)) % 1.0
-        sat = mag / max(mag.max(), 1e-9)
-        return (hsv_to_rgb(hue, sat, np.ones_like(hue)) * 255).astype(np.uint8)
-    if name == "normal":
-        return ((np.clip(layer, -1, 1) + 1) / 2 * 255).astype(np.uint8)
-    raise ValueError(f"no picture for layer {name!r}; allowed: {COLUMNS}")
+    """(T, H, W, C) layer → (T, H, W, 3) uint8 picture (:func:`kubric.annotations.pictures.
+    layer_pictures`, the colouriser ``kubric view`` uses too)."""
+    if name not in COLUMNS:
+        raise InputError(f"no picture for layer {name!r}; allowed: {COLUMNS}")
+    return pictures.layer_pictures(name, layer, BACKGROUND_DEPTH if background_depth is None
+                                   else background_depth)
 
 
 def track_colours(n: int) -> np.ndarray:
@@ -119,7 +95,7 @@ def draw_tracks(frames: np.ndarray, tracks: dict) -> np.ndarray:
 def summarise(scene_dir: pathlib.Path, layers: dict, metadata: dict, events: dict) -> str:
     meta = metadata.get("metadata", {})
     lines = [f"scene {scene_dir}",
-             f"  complete: {(scene_dir / '_SUCCESS').exists()}  seed: {meta.get('seed')}  "
+             f"  complete: {is_complete(scene_dir)}  seed: {meta.get('seed')}  "
              f"resolution: {meta.get('resolution')}  frames: {meta.get('num_frames')} "
              f"({meta.get('frame_start')}..{meta.get('frame_end')})  background: "
              f"{meta.get('background')}"]
@@ -149,7 +125,7 @@ def contact_sheet(layers: dict, background_depth: float | None, path: pathlib.Pa
 
     names = [n for n in COLUMNS if n in layers]
     if not names:
-        raise ValueError(f"no layer to show; expected some of {COLUMNS}")
+        raise InputError(f"no layer to show; expected some of {COLUMNS}")
     pictures = [colourise(n, layers[n], background_depth) for n in names]
     if tracks is not None and names[0] == "rgba":
         pictures[0] = draw_tracks(pictures[0], tracks)
@@ -178,19 +154,18 @@ def inspect_scene(scene_dir, sheet=None) -> str:
     unless ``sheet`` says so (datasets may be read-only; finished scenes stay as written)."""
     from kubric import file_io
     from kubric.annotations.track_files import TRACKS_FILE, read_tracks
-    from kubric.core.camera_geometry import BACKGROUND_DEPTH
 
     scene_dir = pathlib.Path(scene_dir)
     if not scene_dir.is_dir():
         raise FileNotFoundError(f"{str(scene_dir)!r} is not a directory")
-    meta_path = scene_dir / "metadata.json"
+    meta_path = scene_dir / METADATA_FILE
     metadata = file_io.read_json(meta_path) if meta_path.exists() else {}
-    events_path = scene_dir / "events.json"
+    events_path = scene_dir / EVENTS_FILE
     events = file_io.read_json(events_path) if events_path.exists() else {}
     schema = _schema_of(metadata)
     layers = file_io.read_image_dict(scene_dir, formats=schema.layers if schema else None)
     if not layers:
-        raise ValueError(f"{str(scene_dir)!r} holds no image layers")
+        raise InputError(f"{str(scene_dir)!r} holds no image layers")
     sheet = pathlib.Path(sheet) if sheet else default_sheet(scene_dir.resolve().name)
     background = metadata.get("metadata", {}).get("background_depth", BACKGROUND_DEPTH)
     tracks, extra = None, ""
@@ -213,7 +188,7 @@ def inspect_url(scene_url: str, sheet=None) -> str:
     from kubric.io import storage
 
     scene_url = storage.normalise(scene_url)
-    if not storage.isfile(storage.join(scene_url, "_SUCCESS")):
+    if not is_complete(scene_url):
         what = "does not exist" if not storage.listdir(scene_url) else \
             "is incomplete (no _SUCCESS: an interrupted or running upload)"
         raise FileNotFoundError(f"{scene_url!r} {what}")
@@ -227,10 +202,11 @@ def inspect_url(scene_url: str, sheet=None) -> str:
 
 def _schema_of(metadata: dict):
     """The recipe schema named by ``flags.recipe`` (None when unknown)."""
-    from kubric.io.schema import SchemaError, get_schema
+    from kubric.io.schema import SchemaError
+    from kubric.pipeline.recipe import schema_of
     recipe = metadata.get("flags", {}).get("recipe")
     try:
-        return get_schema(recipe) if recipe else None
+        return schema_of(recipe) if recipe else None
     except SchemaError:
         return None
 

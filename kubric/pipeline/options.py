@@ -26,6 +26,7 @@ from typing import Any
 
 from kubric.core.resolution import ALLOWED as RESOLUTIONS_ALLOWED
 from kubric.core.resolution import parse_resolution
+from kubric.errors import UsageError
 
 #: environment variable lifting every option's default upper bound (``limit``)
 ALLOW_LARGE_ENV = "KUBRIC_ALLOW_LARGE"
@@ -34,7 +35,7 @@ _TRUE = {"1", "true", "yes", "on"}
 _FALSE = {"0", "false", "no", "off"}
 
 
-class OptionError(ValueError):
+class OptionError(UsageError, ValueError):
     """A bad option value or name (one-line message)."""
 
 

@@ -14,10 +14,16 @@ or as a function with :func:`recipe`::
     @recipe("tiny", frames=Option(4, "number of frames", low=1))
     def tiny(seed, options, out_dir): ...
 
-Subclassing with ``name=`` registers the recipe. ``Recipe(**values)`` converts and checks every
-option at once (an :class:`~kubric.pipeline.options.OptionError` with a one-line message otherwise)
-and then calls :meth:`Recipe.check` for cross-option checks, all before any rendering. The seed
-alone determines the scene: ``generate`` must draw every random number from
+Subclassing with ``name=`` registers the recipe. A recipe owns its output contract: ``schema`` (a
+:class:`~kubric.io.schema.Schema` named like the recipe) and ``variants`` (schemas of the same
+scenes with more features, e.g. ``movi_a_tracks``) are registered with it; every built-in recipe
+must declare one (a TypeError at import otherwise), and writes its scenes with
+:func:`kubric.io.scene_writer.write_scene`, which checks them against it.
+
+``Recipe(**values)`` converts and checks every option at once (an
+:class:`~kubric.pipeline.options.OptionError` with a one-line message otherwise) and then calls
+:meth:`Recipe.check` for cross-option checks, all before any rendering. The seed alone
+determines the scene: ``generate`` must draw every random number from
 ``numpy.random.RandomState(seed)`` (or generators derived from it).
 """
 
@@ -32,6 +38,7 @@ import types
 from collections.abc import Callable, Mapping
 from typing import Any, ClassVar
 
+from kubric.io.schema import Schema, SchemaError, get_schema, register_schema
 from kubric.pipeline.options import Option, OptionError, convert_all, parse_assignments
 
 #: registered recipes by name.
@@ -48,10 +55,15 @@ class Recipe(abc.ABC):
       name: registry name (set by ``class X(Recipe, name="...")``).
       options: ``{name: Option}`` declared on the class and its bases.
       values: ``{name: value}`` of this instance, converted and checked.
+      schema: the output contract of its scenes (None only for recipes outside
+        ``kubric.recipes`` that are never packed, e.g. a test's).
+      variants: further schemas over the same scenes (e.g. with point tracks).
     """
 
     name: ClassVar[str] = ""
     options: ClassVar[dict[str, Option]] = {}
+    schema: ClassVar[Schema | None] = None
+    variants: ClassVar[tuple[Schema, ...]] = ()
 
     def __init_subclass__(cls, name: str | None = None, **kwargs):
         super().__init_subclass__(**kwargs)
@@ -66,6 +78,7 @@ class Recipe(abc.ABC):
                 raise ValueError(f"recipe name {name!r} is already taken by "
                                  f"{REGISTRY[name].__module__}.{REGISTRY[name].__qualname__}")
             cls.name = name
+            _register_schemas(cls)
             REGISTRY[name] = cls
         elif not cls.name:
             cls.name = cls.__name__
@@ -103,6 +116,57 @@ class Recipe(abc.ABC):
         for key, value in self.values.items():
             out[key] = str(value) if isinstance(value, pathlib.Path) else value
         return out
+
+
+def _register_schemas(cls: type[Recipe]) -> None:
+    """Register the schemas a recipe class declares; TypeError (one line) for a built-in recipe
+    without one, or a declaration that is not a Schema."""
+    if cls.schema is None:
+        if cls.__module__.startswith(BUILTIN_MODULES):
+            raise TypeError(f"recipe {cls.name!r} ({cls.__module__}.{cls.__qualname__}) declares "
+                            "no schema: set the class attribute `schema` to its "
+                            "kubric.io.schema.Schema (see docs/architecture.md)")
+        return
+    for schema in (cls.schema, *cls.variants):
+        if not isinstance(schema, Schema):
+            raise TypeError(f"recipe {cls.name!r}: schema / variants must be "
+                            f"kubric.io.schema.Schema objects, got {type(schema).__name__}")
+    if cls.schema.name != cls.name:  # scenes name their recipe; the packer finds the schema so
+        raise TypeError(f"recipe {cls.name!r} declares schema {cls.schema.name!r}: a recipe's "
+                        "schema carries the recipe's name (declare its own, e.g. with "
+                        "Schema.extend)")
+    for schema in (cls.schema, *cls.variants):
+        register_schema(schema)
+
+
+def schema_of(spec: Schema | str) -> Schema:
+    """The schema named ``spec`` (a recipe's, or a variant's like ``movi_a_tracks``), or the
+    schema of the recipe ``spec`` names (``module:Class`` too). The built-in recipes are imported
+    first. :class:`SchemaError` (one line) when there is none."""
+    if isinstance(spec, Schema):
+        return spec
+    load_builtin()
+    try:
+        return get_schema(spec)
+    except SchemaError as missing:
+        try:
+            schema = get_recipe(spec).schema
+        except (ValueError, ImportError):
+            schema = None
+        if schema is None:
+            raise missing from None
+        return schema
+
+
+def builtin_schemas() -> dict[str, Schema]:
+    """Every schema the built-in recipes declare (their own and their variants), by name — not
+    those other code registered in this process, so generated docs never depend on what ran
+    before."""
+    found: dict[str, Schema] = {}
+    for cls in load_builtin().values():
+        for schema in (cls.schema, *cls.variants):
+            found[schema.name] = schema
+    return dict(sorted(found.items()))
 
 
 def recipe(name: str, **options: Option) -> Callable[[Callable], type[Recipe]]:

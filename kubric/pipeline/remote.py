@@ -14,7 +14,9 @@ import tempfile
 import time
 
 from kubric.io import storage
-from kubric.pipeline.worker import SUCCESS, SceneResult, run_scene, scene_name
+from kubric.io.scene_dir import SUCCESS_FILE as SUCCESS
+from kubric.io.scene_dir import scene_name
+from kubric.pipeline.worker import SceneResult, run_scene
 
 
 def run_scene_remote(recipe, seed: int, out_url: str, scratch: str | None = None,

@@ -32,7 +32,8 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 from kubric.io import storage
-from kubric.pipeline.worker import SUCCESS, remove_stale, scene_name
+from kubric.io.scene_dir import complete_scenes, is_complete, scene_name
+from kubric.pipeline.worker import remove_stale
 
 #: environment variable telling a worker to die with the runner that started it.
 PARENT_ENV = "KUBRIC_RUNNER_PID"
@@ -234,7 +235,7 @@ class Runner(abc.ABC):
         return storage.join(self.out_root, scene_name(seed))
 
     def scene_complete(self, seed: int) -> bool:
-        return storage.isfile(storage.join(self.scene_location(seed), SUCCESS))
+        return is_complete(self.scene_location(seed))
 
     def command(self, seed: int) -> list[str]:
         return worker_command(self.recipe_spec, seed, self.out_root, self.assignments)
@@ -274,7 +275,7 @@ class Runner(abc.ABC):
             pathlib.Path(self.out_root).mkdir(parents=True, exist_ok=True)
             remove_stale(pathlib.Path(self.out_root))
         self.logs.prepare()
-        complete = set(storage.complete_scenes(self.out_root, SUCCESS))
+        complete = set(complete_scenes(self.out_root))
         todo = []
         for seed in self.seeds:
             (summary.skipped if scene_name(seed) in complete else todo).append(seed)

@@ -14,40 +14,23 @@ copy), or a work directory whose process is gone, is removed and the scene redon
 
 from __future__ import annotations
 
-import json
 import os
 import pathlib
-import re
 import shutil
 import time
 from dataclasses import dataclass
 
+from kubric.io.scene_dir import (
+    SUCCESS_FILE,
+    is_complete,
+    parse_work_dir,
+    scene_name,
+    work_dir_name,
+    write_success,
+)
 from kubric.pipeline.cleanup import own, pid_alive, release
 
-SUCCESS = "_SUCCESS"
-_WORK_RE = re.compile(r"^\.(scene_\d{8,})\.incomplete-(\d+)$")
-
-
-def scene_name(seed: int) -> str:
-    if isinstance(seed, bool) or int(seed) != seed or seed < 0:
-        raise ValueError(f"seed must be an integer ≥ 0, got {seed!r}")
-    return f"scene_{int(seed):08d}"
-
-
-def is_complete(scene_dir: pathlib.Path) -> bool:
-    """True when ``scene_dir`` holds ``_SUCCESS``."""
-    return (pathlib.Path(scene_dir) / SUCCESS).is_file()
-
-
-def write_success(directory, **info) -> pathlib.Path:
-    """Mark ``directory`` complete: write ``_SUCCESS`` (JSON of ``info``, e.g. recipe, seed,
-    seconds) atomically — a temporary file renamed into place. The one writer of the marker
-    (:func:`run_scene` and ``kb.done``). Returns the marker's path."""
-    marker = pathlib.Path(directory) / SUCCESS
-    tmp = marker.with_name(f".{SUCCESS}.{os.getpid()}.tmp")
-    tmp.write_text(json.dumps(info) + "\n")
-    os.replace(tmp, marker)
-    return marker
+SUCCESS = SUCCESS_FILE  # the completion marker's name (kubric.io.scene_dir)
 
 
 def stale_work_dirs(out_root: pathlib.Path, seed: int | None = None) -> list[pathlib.Path]:
@@ -57,10 +40,10 @@ def stale_work_dirs(out_root: pathlib.Path, seed: int | None = None) -> list[pat
         return []
     stale = []
     for entry in out_root.iterdir():
-        m = _WORK_RE.match(entry.name)
-        if not m or (seed is not None and m.group(1) != scene_name(seed)):
+        parsed = parse_work_dir(entry.name)
+        if not parsed or (seed is not None and parsed[0] != scene_name(seed)):
             continue
-        if not pid_alive(int(m.group(2))):
+        if not pid_alive(parsed[1]):
             stale.append(entry)
     return sorted(stale)
 
@@ -84,6 +67,7 @@ class SceneResult:
 def run_scene(recipe, seed: int, out_root) -> SceneResult:
     """Generate scene ``seed`` with ``recipe`` (a :class:`~kubric.pipeline.recipe.Recipe`
     instance) under ``out_root`` atomically (see module doc)."""
+    from kubric import randomness  # here, not at module level: it imports the asset sources
     start = time.time()
     out_root = pathlib.Path(out_root)
     final = out_root / scene_name(seed)
@@ -91,13 +75,14 @@ def run_scene(recipe, seed: int, out_root) -> SceneResult:
         return SceneResult(seed, final, "skipped", 0.0)
     out_root.mkdir(parents=True, exist_ok=True)
     remove_stale(out_root, seed)
-    work = out_root / f".{final.name}.incomplete-{os.getpid()}"
+    work = out_root / work_dir_name(seed, os.getpid())
     if work.exists():
         shutil.rmtree(work)
     work.mkdir()
     own(work)  # removed at exit even when Blender turns a signal into an immediate exit
     try:
-        recipe.generate(seed, work)
+        with randomness.explicit_rng_only(f"recipe {recipe.name!r}"):  # rng= always explicit
+            recipe.generate(seed, work)
         if is_complete(final):  # another process finished the same seed meanwhile
             shutil.rmtree(work, ignore_errors=True)
             return SceneResult(seed, final, "skipped", time.time() - start)

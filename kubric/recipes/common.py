@@ -86,3 +86,36 @@ def check_min_max(recipe) -> None:
         if recipe.values[low] > recipe.values[high]:
             raise OptionError(f"{recipe.name}: option {low}={recipe.values[low]} must be ≤ "
                               f"{high}={recipe.values[high]}")
+
+
+def annotate_instances(scene, layers: dict, candidates, order=None, before_relabel=None) -> list:
+    """The instance annotations every recipe makes, in this order: visibility per frame of every
+    asset → the instance list (``order(candidates)``, by default the candidates sorted by visible
+    pixels, hidden ones dropped) → ``before_relabel(instances)`` (e.g. point tracks, which need
+    the renderer's labels) → the segmentation relabelled to that list → 2D boxes. Returns the
+    instance list."""
+    import kubric as kb
+
+    kb.compute_visibility(layers["segmentation"], scene.assets)
+    instances = list((order or kb.post_processing.visible_sorted)(candidates))
+    if before_relabel is not None:
+        before_relabel(instances)
+    layers["segmentation"] = kb.adjust_segmentation_idxs(layers["segmentation"], scene.assets,
+                                                         instances)
+    kb.compute_bboxes(layers["segmentation"], instances)
+    return instances
+
+
+def scene_documents(recipe, scene, seed: int, instances, collisions=None, **metadata) -> tuple:
+    """(``metadata.json``, ``events.json``) of a scene: the recipe's flags, the scene metadata
+    (``metadata`` adds recipe fields), the camera per frame, the instances (in the order of the
+    relabelled segmentation) and the collision events between them."""
+    import kubric as kb
+
+    meta = kb.get_scene_metadata(scene, seed=int(seed), num_instances=len(instances), **metadata)
+    document = {"flags": recipe.flags(seed), "metadata": meta,
+                "camera": kb.get_camera_info(scene.camera),
+                "instances": kb.get_instance_info(scene, instances)}
+    events = {"collisions": kb.process_collisions(collisions, scene, instances)
+              if collisions is not None else []}
+    return document, events

@@ -22,6 +22,7 @@ import numpy as np
 import kubric as kb
 from kubric.assets import clevr
 from kubric.pipeline import Option
+from kubric.recipes import multiview_schema
 from kubric.recipes.common import source_location
 from kubric.recipes.multiview_base import MultiviewBase, open_source, orbit_positions
 
@@ -38,6 +39,8 @@ SHAPES = ("cube", "cylinder", "sphere", "cone", "torus", "suzanne", "teapot", "t
 class ComplexBrdf(MultiviewBase, name="complex_brdf"):
     """Complex BRDFs: one object, random colour, metal (specular) or rubber (Lambertian),
     3 point lights on the upper hemisphere, 24 fixed views, 12 bounces."""
+
+    schema = multiview_schema.COMPLEX_BRDF
 
     num_views = Option(24, "number of camera views on the fixed orbit", low=1, high=10000)
     material = Option("random", "metal (specular), rubber (Lambertian) or random per seed",

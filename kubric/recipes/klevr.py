@@ -18,7 +18,6 @@ surface with the depth layer (``xyz`` (N,3) float32 world metres, ``rgb`` (N,3) 
 from __future__ import annotations
 
 import abc
-import io
 import json
 import pathlib
 
@@ -28,14 +27,15 @@ from kubric.assets import clevr
 from kubric.core import camera_geometry as geo
 from kubric.io.paths import atomic_write_bytes
 from kubric.pipeline import Option, OptionError, float_range
+from kubric.recipes import multiview_schema
 from kubric.recipes.common import open_existing_source as open_source
 from kubric.recipes.common import source_location
 from kubric.recipes.multiview_base import (
+    ExtraOutputs,
     MultiviewBase,
     kubasic_object,
     open_hdri_source,
     sized_object,
-    write_label_layer,
 )
 
 KLEVR_SHAPES = "cube,cylinder,sphere,cone,torus"
@@ -117,20 +117,21 @@ class _SemanticScenes(MultiviewBase):
                             "semantic_id": names.index(category) + 1}
             self.add_upright(scene, obj, rng, occupied, self.region)
 
-    def extra_outputs(self, scene, layers, instances, out_dir, meta):
+    def extra_outputs(self, scene, layers, instances, meta):
         semantic = semantic_layer(layers["segmentation"], instances)
-        write_label_layer(semantic, "semantic_{:05d}.png", out_dir)
+        extra = ExtraOutputs(layers={"semantic": semantic})
         if self.write_points:
             cloud = point_cloud(scene.camera, list(scene.frames), layers, semantic)
-            buffer = io.BytesIO()
-            np.savez_compressed(buffer, **cloud)
-            atomic_write_bytes(buffer.getvalue(), out_dir / "points.npz")
+            extra.files[multiview_schema.POINTS_FILE] = cloud
             meta["num_points"] = int(len(cloud["xyz"]))
-        return {"semantic_file": "semantic_{:05d}.png"}
+        return extra
 
 
 class Klevr(_SemanticScenes, name="klevr"):
     """KLEVR: 4–12 upright KuBasic shapes on a grey floor, many views, semantic labels, points."""
+
+    schema = multiview_schema.KLEVR
+    variants = (multiview_schema.POINT_SCHEMAS["klevr"],)
 
     shapes = Option(KLEVR_SHAPES, "comma-separated KuBasic shapes = the semantic classes")
     size_range = Option((0.8, 1.4), "object scale range low,high (shapes fit a 1 m cube)",
@@ -164,6 +165,9 @@ class Klevr(_SemanticScenes, name="klevr"):
 
 class ToyBox(_SemanticScenes, name="toybox"):
     """ToyBox: 4–12 upright objects of an asset source with categories, HDRI background."""
+
+    schema = multiview_schema.TOYBOX
+    variants = (multiview_schema.POINT_SCHEMAS["toybox"],)
 
     objects = Option(None, "asset source folder whose assets have metadata.category (required)",
                      type=source_location)

@@ -127,6 +127,7 @@ class MoviA(_ClevrLike, name="movi_a"):
     """MOVi-A: 3–10 CLEVR shapes (metal / rubber, 8 colours, 2 sizes), grey dome, CLEVR lamps."""
 
     schema = movi_schema.MOVI_A
+    variants = (movi_schema.MOVI_TRACKS["movi_a"],)
 
     def shape_ids(self, sources):
         missing = [s for s in clevr.SHAPES if s not in sources["kubasic"]]
@@ -157,6 +158,7 @@ class MoviB(_ClevrLike, name="movi_b"):
     """MOVi-B: 3–10 KuBasic shapes, size U(0.7, 1.4), random hue, dome of random hue."""
 
     schema = movi_schema.MOVI_B
+    variants = (movi_schema.MOVI_TRACKS["movi_b"],)
 
     size_range = Option((clevr.SIZES["small"], clevr.SIZES["large"]), "object scale range low,high",
                         type=float_range, low=0.01, limit=100.0)
@@ -178,6 +180,7 @@ class MoviC(MoviBase, name="movi_c"):
     """MOVi-C: 3–10 scanned-like objects with their own textures on an HDRI dome, HDRI light."""
 
     schema = movi_schema.MOVI_C
+    variants = (movi_schema.MOVI_TRACKS["movi_c"],)
 
     min_num_objects = Option(3, "fewest objects", low=1, high=100)
     max_num_objects = Option(10, "most objects", low=1, high=100)
@@ -331,6 +334,7 @@ class MoviD(MoviC, name="movi_d"):
     """MOVi-D: 10–20 static objects that settle first, then 1–3 dynamic ones thrown in."""
 
     schema = movi_schema.MOVI_D
+    variants = (movi_schema.MOVI_TRACKS["movi_d"],)
 
     min_num_objects = Option(10, "fewest static objects", low=0, high=100)
     max_num_objects = Option(20, "most static objects", low=0, high=100)
@@ -392,6 +396,7 @@ class MoviE(MoviD, name="movi_e"):
     camera=panning, at a point that moves on a line too)."""
 
     schema = movi_schema.MOVI_E
+    variants = (movi_schema.MOVI_TRACKS["movi_e"],)
 
     max_camera_movement = Option(4.0, "largest camera path length (m)", low=0.0, limit=100.0)
     camera = Option("linear", "linear: look at the origin; panning: the look-at point moves on "
@@ -419,6 +424,7 @@ class MoviF(MoviE, name="movi_f"):
     """MOVi-F: as E with motion blur U(0, max_motion_blur) frames, 512² by default."""
 
     schema = movi_schema.MOVI_F
+    variants = (movi_schema.MOVI_TRACKS["movi_f"],)
 
     resolution = Option((512, 512), MoviBase.resolution.help, type=MoviBase.resolution.type)
     max_motion_blur = Option(2.0, "largest shutter length (frames)", low=0.0, high=10.0)

@@ -29,10 +29,19 @@ import tempfile
 import numpy as np
 
 import kubric as kb
+from kubric.io.scene_dir import TRACKS_FILE
 from kubric.io.scene_writer import write_scene
 from kubric.pipeline import Option, OptionError, Recipe, resolution
-from kubric.recipes.common import check_min_max, check_source_options, kubasic_sources, source_location
+from kubric.recipes.common import (
+    annotate_instances,
+    check_min_max,
+    check_source_options,
+    kubasic_sources,
+    scene_documents,
+    source_location,
+)
 from kubric.recipes.render_quality import RenderQuality
+from kubric.renderer.base import BACKENDS
 
 DYNAMIC_SPAWN_REGION = ((-5.0, -5.0, 1.0), (5.0, 5.0, 5.0))
 STATIC_SPAWN_REGION = ((-7.0, -7.0, 0.0), (7.0, 7.0, 10.0))
@@ -89,6 +98,9 @@ class MoviBase(RenderQuality, Recipe):
                             type=source_location)
     save_state = Option(False, "also write scene.blend (animated) and scene.bullet (initial "
                         "physics state)")
+    renderer = Option("blender", "rendering backend (docs/renderers.md): blender = Cycles; "
+                      "raycast = embree, exact layers without bpy, RGB not photoreal",
+                      choices=tuple(BACKENDS))
     tracks = Option(0, "point tracks to sample and write to tracks.npz (0 = none; docs/tracks.md)",
                     low=0)
     track_queries = Option(None, "file of given track queries, rows (t, y, x) in pixels (.npy, "
@@ -107,8 +119,25 @@ class MoviBase(RenderQuality, Recipe):
             raise OptionError(f"{self.name}: option step_rate={self.step_rate} must be a multiple "
                               f"of frame_rate={self.frame_rate}")
         check_source_options(self)
+        self.check_renderer()
         self.check_tracks()
         check_min_max(self)
+
+    def check_renderer(self) -> None:
+        """Options that only the Blender backend honours fail here for another backend."""
+        if self.renderer == "blender":
+            return
+        given = [f"{name}={getattr(self, name)}" for name in ("samples", "denoise")
+                 if getattr(self, name) is not None]
+        if self.quality != "default":
+            given.append(f"quality={self.quality}")
+        if self.save_state:
+            given.append("save_state=True")
+        if getattr(self, "max_motion_blur", 0.0) > 0:
+            given.append(f"max_motion_blur={self.max_motion_blur}")
+        if given:
+            raise OptionError(f"{self.name}: renderer={self.renderer} has no {', '.join(given)}; "
+                              "these need renderer=blender")
 
     def check_tracks(self) -> None:
         """Bad track options fail here, before anything renders (one line)."""
@@ -202,27 +231,27 @@ class MoviBase(RenderQuality, Recipe):
             if self.save_state:  # the initial state, before the simulation (as upstream)
                 simulator.save_state(out_dir / "scene.bullet")
             _, collisions = simulator.run(frame_start=0, frame_end=scene.frame_end + 1)
-            renderer = kb.renderer.Blender(scene, scratch, motion_blur=blur,
-                                           **self.renderer_quality())
+            renderer = kb.renderer.create(self.renderer, scene, scratch,
+                                          **self.renderer_settings(motion_blur=blur))
             layers = renderer.render()
             if self.save_state:
                 renderer.save_state(out_dir / "scene.blend")
-            render_settings = {"engine": "CYCLES", "view_transform": "Standard",
-                               **self.quality_settings(), "motion_blur": blur}
+            render_settings = self.render_metadata(renderer)
             self.write_outputs(scene, layers, collisions, seed, out_dir, background,
                                render_settings)
             simulator.close()
 
-    def write_tracks(self, scene, layers, visible, seed, out_dir) -> None:
-        """tracks.npz (before the segmentation is relabelled); queries sampled with an rng
-        derived from the seed, so adding tracks changes nothing else in the scene."""
-        from kubric.annotations.track_files import TRACKS_FILE, write_tracks
+    def track_archive(self, scene, layers, visible, seed) -> dict:
+        """The point tracks of ``tracks.npz`` (computed before the segmentation is relabelled);
+        queries sampled with an rng derived from the seed, so adding tracks changes nothing else
+        in the scene."""
+        from kubric.annotations.track_files import tracks_archive
         from kubric.annotations.tracks import scene_tracks
         rng = np.random.RandomState([int(seed), 0x7472616B])
         tracks = scene_tracks(scene, layers, visible, rng, num_tracks=self.tracks,
                               queries=getattr(self, "_queries", None), stride=self.track_stride,
                               max_fraction=self.track_max_fraction)
-        write_tracks(tracks, out_dir / TRACKS_FILE)
+        return tracks_archive(tracks)
 
     def write_outputs(self, scene, layers, collisions, seed, out_dir, background,
                       render_settings) -> list:
@@ -230,18 +259,14 @@ class MoviBase(RenderQuality, Recipe):
         candidates = [a for a in scene.foreground_assets if isinstance(a, kb.PhysicalObject)]
         if "uv" in layers:
             render_settings = {**render_settings, "uv": "wrapped modulo 1 (textures repeat)"}
-        kb.compute_visibility(layers["segmentation"], scene.assets)
-        visible = kb.post_processing.visible_sorted(candidates)
+        files = {}
         if self.tracks or self.track_queries is not None:
-            self.write_tracks(scene, layers, visible, seed, out_dir)
-        layers["segmentation"] = kb.adjust_segmentation_idxs(layers["segmentation"],
-                                                             scene.assets, visible)
-        kb.compute_bboxes(layers["segmentation"], visible)
-        meta = kb.get_scene_metadata(scene, seed=int(seed), num_instances=len(visible),
-                                     background=background, renderer=render_settings)
-        metadata = {"flags": self.flags(seed), "metadata": meta,
-                    "camera": kb.get_camera_info(scene.camera),
-                    "instances": kb.get_instance_info(scene, visible)}
-        events = {"collisions": kb.process_collisions(collisions, scene, visible)}
-        write_scene(self.schema, out_dir, layers, metadata, events)  # checked against the schema
+            def add_tracks(visible):
+                files[TRACKS_FILE] = self.track_archive(scene, layers, visible, seed)
+        else:
+            add_tracks = None
+        visible = annotate_instances(scene, layers, candidates, before_relabel=add_tracks)
+        metadata, events = scene_documents(self, scene, seed, visible, collisions,
+                                           background=background, renderer=render_settings)
+        write_scene(self.schema, out_dir, layers, metadata, events, files=files)
         return visible

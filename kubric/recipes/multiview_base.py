@@ -29,6 +29,7 @@ Scene metadata added by this family: ``num_views``, ``views`` (per view: ``split
 from __future__ import annotations
 
 import abc
+import dataclasses
 import math
 import pathlib
 import tempfile
@@ -38,8 +39,17 @@ import numpy as np
 import kubric as kb
 from kubric.annotations import nerf_export
 from kubric.core import camera_geometry as geo
+from kubric.io.layers import LAYERS
+from kubric.io.scene_writer import write_scene
 from kubric.pipeline import Option, OptionError, Recipe, float_range, resolution
-from kubric.recipes.common import check_min_max, check_source_options, kubasic_sources, source_location
+from kubric.recipes.common import (
+    annotate_instances,
+    check_min_max,
+    check_source_options,
+    kubasic_sources,
+    scene_documents,
+    source_location,
+)
 from kubric.recipes.common import open_existing_source as open_source
 from kubric.recipes.movi_base import new_camera
 from kubric.recipes.render_quality import RenderQuality
@@ -47,9 +57,7 @@ from kubric.recipes.render_quality import RenderQuality
 #: layers every multi-view scene writes (no flow: the views are not a motion sequence)
 RENDERED_LAYERS = ("rgba", "depth", "segmentation", "normal", "object_coordinates")
 #: per-view file names added to every frame entry of the transforms files
-VIEW_FILES = {"depth_file": "depth_{:05d}.tiff", "segmentation_file": "segmentation_{:05d}.png",
-              "normal_file": "normal_{:05d}.png",
-              "object_coordinates_file": "object_coordinates_{:05d}.png"}
+VIEW_FILES = {f"{name}_file": LAYERS[name].template for name in RENDERED_LAYERS if name != "rgba"}
 #: the HDRI dome shows the HDRI ground-projected from this height (m), as MOVi-C
 HDRI_PROJECTION_HEIGHT = 2.0
 
@@ -143,29 +151,23 @@ def orbit_positions(count: int, distance: float, elevation_deg: float, target,
     return np.asarray(target, np.float64) + rel
 
 
-def write_label_layer(labels: np.ndarray, template: str, out_dir: pathlib.Path) -> None:
-    """Write (T, H, W[, 1]) integer labels as one palette PNG per view (``template`` with the
-    view index), 16-bit grey beyond 255 labels (the segmentation encoding)."""
-    from kubric.io import png_io
-    from kubric.io.paths import atomic_write_bytes
-
-    arr = np.asarray(labels)
-    arr = arr[..., None] if arr.ndim == 3 else arr
-    top = int(arr.max()) if arr.size else 0
-    bitdepth = 8 if top <= 255 else 16
-    for i, frame in enumerate(arr):
-        atomic_write_bytes(png_io.encode_labels(frame, max(top, 1), None, bitdepth, template),
-                           out_dir / template.format(i))
-
-
-def write_flag_mask(layers: dict, instances: list, flag: str, template: str,
-                    out_dir: pathlib.Path) -> None:
-    """Write a 0/1 mask per view: 1 where the segmentation shows an instance whose metadata
-    ``flag`` is true (e.g. ``is_salient``, ``is_impostor``)."""
+def flag_mask(layers: dict, instances: list, flag: str) -> np.ndarray:
+    """A 0/1 mask per view (T, H, W, 1) uint8: 1 where the segmentation shows an instance whose
+    metadata ``flag`` is true (e.g. ``is_salient``, ``is_impostor``)."""
     lut = np.zeros(len(instances) + 1, np.uint8)
     for k, info in enumerate(instances, start=1):
         lut[k] = bool(info[flag])
-    write_label_layer(lut[layers["segmentation"]], template, out_dir)
+    return lut[layers["segmentation"]]
+
+
+@dataclasses.dataclass
+class ExtraOutputs:
+    """A multi-view recipe's own outputs: ``layers`` (each declared in its schema; the
+    transforms files' frame entries get ``<layer>_file`` with the schema's template),
+    ``files`` (other files of the scene directory, e.g. ``points.npz``)."""
+
+    layers: dict[str, np.ndarray] = dataclasses.field(default_factory=dict)
+    files: dict[str, object] = dataclasses.field(default_factory=dict)
 
 
 class MultiviewBase(RenderQuality, Recipe):
@@ -261,10 +263,10 @@ class MultiviewBase(RenderQuality, Recipe):
         ``metadata.renderer``). Default: none."""
         return {}
 
-    def extra_outputs(self, scene, layers, instances, out_dir, meta) -> dict:
-        """Write the recipe's own layers / files; return ``{key: template}`` added to every
-        frame entry of the transforms files. Default: none."""
-        return {}
+    def extra_outputs(self, scene, layers, instances, meta) -> ExtraOutputs:
+        """The recipe's own layers and files (``meta``, the scene metadata, may get fields).
+        Default: none."""
+        return ExtraOutputs()
 
     # ------------------------------------------------------------------ the pipeline
     def key_camera(self, scene, positions) -> None:
@@ -289,43 +291,34 @@ class MultiviewBase(RenderQuality, Recipe):
             self.add_objects(scene, rng, sources)
             self.key_camera(scene, self.camera_positions(rng))
             self.animate(scene, rng, splits, sources)
-            renderer = kb.renderer.Blender(scene, self.scratch / "render",
-                                           **self.renderer_quality(), **self.renderer_options())
+            renderer = kb.renderer.create(self.renderer, scene, self.scratch / "render",
+                                          **self.renderer_settings(**self.renderer_options()))
             layers = renderer.render(return_layers=RENDERED_LAYERS)
-        render_settings = {"engine": "CYCLES", "view_transform": "Standard",
-                           **self.quality_settings(), **self.renderer_options()}
+        render_settings = self.render_metadata(renderer)
         self.write_outputs(scene, layers, seed, out_dir, background, render_settings, splits)
 
     def write_outputs(self, scene, layers, seed, out_dir, background, render_settings,
                       splits) -> list:
         candidates = [a for a in scene.foreground_assets if isinstance(a, kb.PhysicalObject)]
-        kb.compute_visibility(layers["segmentation"], scene.assets)
-        visible = kb.post_processing.visible_sorted(candidates)
-        layers["segmentation"] = kb.adjust_segmentation_idxs(layers["segmentation"],
-                                                             scene.assets, visible)
-        kb.compute_bboxes(layers["segmentation"], visible)
-        kb.write_image_dict(layers, out_dir)
+        visible = annotate_instances(scene, layers, candidates)
         by_split = {s: [v for v, name in enumerate(splits) if name == s]
                     for s in nerf_export.SPLITS}
-        meta = kb.get_scene_metadata(
-            scene, seed=int(seed), num_instances=len(visible), background=background,
-            renderer=render_settings, num_views=self.num_views,
-            views=[{"split": s} for s in splits], split_ratio=list(self.split_ratio),
-            splits=by_split, look_at=list(self.look_at()))
-        instances = kb.get_instance_info(scene, visible)
+        metadata, events = scene_documents(
+            self, scene, seed, visible, background=background, renderer=render_settings,
+            num_views=self.num_views, views=[{"split": s} for s in splits],
+            split_ratio=list(self.split_ratio), splits=by_split, look_at=list(self.look_at()))
+        extra = self.extra_outputs(scene, layers, metadata["instances"], metadata["metadata"])
         view_files = dict(VIEW_FILES)
-        view_files.update(self.extra_outputs(scene, layers, instances, out_dir, meta))
-        kb.write_json(data={"flags": self.flags(seed), "metadata": meta,
-                            "camera": kb.get_camera_info(scene.camera),
-                            "instances": instances},
-                      filename=out_dir / "metadata.json")
-        kb.write_json(data={"collisions": []}, filename=out_dir / "events.json")
+        view_files.update({f"{name}_file": self.schema.layers[name].template
+                           for name in extra.layers})
         depth = layers["depth"][layers["depth"] < geo.BACKGROUND_DEPTH]
         near, far = (float(depth.min()), float(depth.max())) if depth.size else (0.0, 0.0)
-        files = nerf_export.nerf_transforms(
+        transforms = nerf_export.nerf_transforms(
             scene.camera, list(scene.frames), scene.resolution, splits, view_files,
             extra={"recipe": self.name, "seed": int(seed), "near": near, "far": far,
                    "split_ratio": list(self.split_ratio)})
-        for split, data in files.items():
-            kb.write_json(data=data, filename=out_dir / f"transforms_{split}.json")
+        files = {**extra.files, **{f"transforms_{split}.json": data
+                                   for split, data in transforms.items()}}
+        write_scene(self.schema, out_dir, {**layers, **extra.layers}, metadata, events,
+                    files=files)
         return visible

@@ -20,15 +20,17 @@ import numpy as np
 
 import kubric as kb
 from kubric.pipeline import Option, float_range
+from kubric.recipes import multiview_schema
 from kubric.recipes.common import open_existing_source as open_source
 from kubric.recipes.common import source_location
 from kubric.recipes.multiview_base import (
+    ExtraOutputs,
     MultiviewBase,
+    flag_mask,
     footprint_radius,
     open_hdri_source,
     sized_object,
     stand_upright,
-    write_flag_mask,
 )
 
 
@@ -68,6 +70,8 @@ class _HdriObjects(MultiviewBase):
 class MultiviewMatting(_HdriObjects, name="multiview_matting"):
     """Multi-view object matting: one salient object (easy) or plus clutter (hard), HDRI."""
 
+    schema = multiview_schema.MULTIVIEW_MATTING
+
     resolution = Option((256, 256), MultiviewBase.resolution.help,
                         type=MultiviewBase.resolution.type)
     difficulty = Option("easy", "easy: the salient object alone; hard: plus clutter",
@@ -100,13 +104,14 @@ class MultiviewMatting(_HdriObjects, name="multiview_matting"):
             obj.metadata = {**obj.metadata, "is_salient": False}
             self.add_upright(scene, obj, rng, occupied, self.region)
 
-    def extra_outputs(self, scene, layers, instances, out_dir, meta):
-        write_flag_mask(layers, instances, "is_salient", "mask_{:05d}.png", out_dir)
-        return {"mask_file": "mask_{:05d}.png"}
+    def extra_outputs(self, scene, layers, instances, meta):
+        return ExtraOutputs(layers={"mask": flag_mask(layers, instances, "is_salient")})
 
 
 class Nvs(_HdriObjects, name="nvs"):
     """Conditional novel view synthesis: a group of objects on an HDRI, 10 views at 128²."""
+
+    schema = multiview_schema.NVS
 
     min_num_objects = Option(3, "fewest objects", low=1, high=50)
     max_num_objects = Option(6, "most objects", low=1, high=50)

@@ -160,19 +160,20 @@ SVR = _register("svr", (
 ), description="Single-view reconstruction / pre-training: one object, random views, "
                "transparent background.")
 
+POINTS_FILE = "points.npz"
 #: The labelled point cloud of KLEVR / ToyBox (``points.npz``, written unless
 #: ``write_points=false``): pack with ``kubric pack DIR --schema klevr_points`` (or
 #: ``toybox_points``) to add these features.
 POINT_FEATURES = (
-    F("points/xyz", "float32", ("P", 3), "npz:points.npz:xyz", unit="m",
+    F("points/xyz", "float32", ("P", 3), f"npz:{POINTS_FILE}:xyz", unit="m",
       doc="surface point of every pixel that sees a surface, world frame"),
-    F("points/rgb", "uint8", ("P", 3), "npz:points.npz:rgb", doc="its RGB"),
-    F("points/class", "uint16", ("P",), "npz:points.npz:class",
+    F("points/rgb", "uint8", ("P", 3), f"npz:{POINTS_FILE}:rgb", doc="its RGB"),
+    F("points/class", "uint16", ("P",), f"npz:{POINTS_FILE}:class",
       doc="its semantic class (index in metadata/semantic_classes)"),
-    F("points/instance", "uint16", ("P",), "npz:points.npz:instance",
+    F("points/instance", "uint16", ("P",), f"npz:{POINTS_FILE}:instance",
       doc="its segmentation label (0 = background, k = instances[k − 1])"),
-    F("points/view", "uint16", ("P",), "npz:points.npz:view", doc="the view it was seen in"),
-    F("points/pixel", "uint16", ("P", 2), "npz:points.npz:pixel", unit="px",
+    F("points/view", "uint16", ("P",), f"npz:{POINTS_FILE}:view", doc="the view it was seen in"),
+    F("points/pixel", "uint16", ("P", 2), f"npz:{POINTS_FILE}:pixel", unit="px",
       doc="(row, col) of its pixel in that view"),
 )
 POINT_SCHEMAS = {s.name: register_schema(s.extend(

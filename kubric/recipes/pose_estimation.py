@@ -43,7 +43,7 @@ from kubric.recipes.people import (
     free_spots,
     open_people_sources,
 )
-from kubric.recipes.pose_estimation_schema import SCHEMA
+from kubric.recipes.pose_estimation_schema import SCHEMA, TRACKS_SCHEMA
 
 WALL_HEIGHT, ROOM_HALF_RANGE, PEOPLE_REGION, MIN_PERSON_GAP = 3.0, (4.0, 5.5), 1.2, 0.8
 CAMERA_DISTANCE, CAMERA_HEIGHT = (3.0, 4.5), (1.4, 1.8)
@@ -52,6 +52,7 @@ class PoseEstimation(MoviBase, name="pose_estimation"):
     """Pose estimation: 1–3 people performing motion clips in a random room, COCO keypoints."""
 
     schema = SCHEMA
+    variants = (TRACKS_SCHEMA,)
 
     min_num_people = Option(1, "fewest people", low=1, high=10)
     max_num_people = Option(3, "most people", low=1, high=10)

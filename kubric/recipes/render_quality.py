@@ -19,7 +19,7 @@ is a third of the frame's cost; below 16 samples the RMSE of object and edge pix
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 
 from kubric.pipeline import Option
 
@@ -48,7 +48,13 @@ def _profile_help() -> str:
 
 class RenderQuality:
     """Mixin of a recipe: the ``quality`` / ``samples`` / ``denoise`` options and their resolution
-    into renderer keyword arguments and ``metadata["renderer"]`` fields."""
+    into renderer keyword arguments and ``metadata["renderer"]`` fields.
+
+    ``renderer``: the backend of :data:`kubric.renderer.base.BACKENDS` the recipe renders with
+    (``blender`` unless the recipe declares a ``renderer`` option); the quality profile applies
+    to Blender only."""
+
+    renderer = "blender"
 
     quality = Option("default", "RGB render quality profile (" + _profile_help() +
                      "; measured cost and RMSE in docs/render-cost.md)", choices=tuple(PROFILES))
@@ -71,8 +77,18 @@ class RenderQuality:
                 "denoising_quality": p.denoising_quality,
                 "denoising_prefilter": p.denoising_prefilter}
 
-    def quality_settings(self) -> dict:
-        """``metadata["renderer"]`` fields: the profile's name and its resolved settings."""
-        p = asdict(self.quality_profile())
-        return {"quality": self.quality, "samples_per_pixel": p.pop("samples"),
-                "denoising": p.pop("denoise"), **p}
+    def renderer_settings(self, **options) -> dict:
+        """Keyword settings of :func:`kubric.renderer.create` for ``self.renderer``: Blender gets
+        the quality profile (:meth:`renderer_quality`) and ``options``; other backends ``options``
+        only (they have no path-traced RGB to tune)."""
+        if self.renderer == "blender":
+            return {**self.renderer_quality(), **options}
+        return dict(options)
+
+    def render_metadata(self, renderer) -> dict:
+        """``metadata["renderer"]``: the renderer's own ``settings()``, plus the quality profile's
+        name where it applies (Blender)."""
+        settings = renderer.settings()
+        if self.renderer == "blender":
+            settings["quality"] = self.quality
+        return settings

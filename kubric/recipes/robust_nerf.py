@@ -23,14 +23,16 @@ from __future__ import annotations
 import math
 
 from kubric.pipeline import Option, OptionError, float_range
+from kubric.recipes import multiview_schema
 from kubric.recipes.multiview_base import (
+    ExtraOutputs,
     MultiviewBase,
+    flag_mask,
     footprint_radius,
     free_place,
     kubasic_object,
     orbit_positions,
     stand_upright,
-    write_flag_mask,
 )
 
 PARKED_POSITION = (0.0, 0.0, -1000.0)
@@ -38,6 +40,8 @@ PARKED_POSITION = (0.0, 0.0, -1000.0)
 
 class RobustNerf(MultiviewBase, name="robust_nerf"):
     """Robust NeRF: static KuBasic scene + impostors that teleport or jitter in train views."""
+
+    schema = multiview_schema.ROBUST_NERF
 
     num_views = Option(32, "number of views on the orbit (the paper: ~300)", low=1, high=10000)
     min_num_objects = Option(4, "fewest static objects", low=1, high=100)
@@ -111,6 +115,5 @@ class RobustNerf(MultiviewBase, name="robust_nerf"):
                                "lower max_num_objects or raise region")
         return place
 
-    def extra_outputs(self, scene, layers, instances, out_dir, meta):
-        write_flag_mask(layers, instances, "is_impostor", "impostor_mask_{:05d}.png", out_dir)
-        return {"impostor_mask_file": "impostor_mask_{:05d}.png"}
+    def extra_outputs(self, scene, layers, instances, meta):
+        return ExtraOutputs(layers={"impostor_mask": flag_mask(layers, instances, "is_impostor")})

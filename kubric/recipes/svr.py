@@ -18,6 +18,7 @@ from __future__ import annotations
 import pathlib
 
 from kubric.pipeline import Option, OptionError, float_range
+from kubric.recipes import multiview_schema
 from kubric.recipes.common import source_location
 from kubric.recipes.movi import add_clevr_lights, category_list
 from kubric.recipes.multiview_base import MultiviewBase, open_source, sphere_cap_positions
@@ -26,6 +27,8 @@ from kubric.recipes.multiview_base import MultiviewBase, open_source, sphere_cap
 class Svr(MultiviewBase, name="svr"):
     """Single-view reconstruction / pre-training: asset k (seed k) in 24 random views on a
     transparent background, pose and category in the metadata."""
+
+    schema = multiview_schema.SVR
 
     num_views = Option(24, "number of random views of the object", low=1, high=10000)
     objects_source = Option(None, "mesh asset source (default: the KuBasic shapes)",

@@ -26,10 +26,11 @@ import math
 import numpy as np
 
 import kubric as kb
-from kubric.io import png_io, tiff_io
+from kubric.io import png_io
 from kubric.io.paths import atomic_write_bytes
 from kubric.pipeline import Option, OptionError, float_range
-from kubric.recipes.multiview_base import MultiviewBase, write_label_layer
+from kubric.recipes import multiview_schema
+from kubric.recipes.multiview_base import ExtraOutputs, MultiviewBase
 
 TEXTURE_AMPLITUDE = 0.12
 CUBE_ID = "textured_cube"
@@ -105,6 +106,8 @@ def band_of(cutoff: float, band_range, band_width: float) -> int:
 class TextureNerf(MultiviewBase, name="texture_nerf"):
     """Texture-structure NeRF: ~30 small cubes with band-limited textures of known cut-off."""
 
+    schema = multiview_schema.TEXTURE_NERF
+
     num_objects = Option(30, "number of cubes", low=1, high=200)
     size_range = Option((0.4, 0.7), "cube edge (m) low,high", type=float_range, low=0.05, limit=100.0)
     band_range = Option((-1.0, 2.0), "log10 of the texture cut-off (cycles per face) low,high",
@@ -144,13 +147,10 @@ class TextureNerf(MultiviewBase, name="texture_nerf"):
                             "band": band_of(cutoff, self.band_range, self.band_width)}
             self.add_upright(scene, obj, rng, occupied, self.region)
 
-    def extra_outputs(self, scene, layers, instances, out_dir, meta):
+    def extra_outputs(self, scene, layers, instances, meta):
         seg = layers["segmentation"]
         cutoff = np.zeros(len(instances) + 1, np.float32)
         band = np.zeros(len(instances) + 1, np.uint32)
         for k, info in enumerate(instances, start=1):
             cutoff[k], band[k] = info["cutoff_frequency"], info["band"]
-        write_label_layer(band[seg], "band_{:05d}.png", out_dir)
-        for i, frame in enumerate(cutoff[seg]):
-            atomic_write_bytes(tiff_io.encode_tiff(frame), out_dir / f"cutoff_{i:05d}.tiff")
-        return {"band_file": "band_{:05d}.png", "cutoff_file": "cutoff_{:05d}.tiff"}
+        return ExtraOutputs(layers={"band": band[seg], "cutoff": cutoff[seg]})

@@ -39,9 +39,17 @@ import tempfile
 import numpy as np
 
 import kubric as kb
+from kubric.io.scene_writer import write_scene
 from kubric.pipeline import Option, OptionError, Recipe, float_range, resolution
+from kubric.recipes import vbr_schema
 from kubric.recipes.articulated_models import MODELS, add_model
-from kubric.recipes.common import check_source_options, kubasic_sources, open_existing_source
+from kubric.recipes.common import (
+    annotate_instances,
+    check_source_options,
+    kubasic_sources,
+    open_existing_source,
+    scene_documents,
+)
 from kubric.recipes.complex_brdf import SHAPES
 from kubric.recipes.movi import add_clevr_lights
 from kubric.recipes.movi_base import new_camera
@@ -59,11 +67,20 @@ def unit_vector(rng) -> np.ndarray:
             return v / n
 
 
+
+def by_visible_pixels(parts) -> list:
+    """Every part (hidden ones too: an articulated object keeps all its links), most visible
+    pixels first, ties in model order."""
+    return sorted(parts, key=lambda p: -int(np.sum(p.metadata["visibility"])))
+
+
 class Vbr(RenderQuality, Recipe, name="vbr"):
     """Video-based reconstruction (LASR): a rigid or articulated object moves and spins for 30 frames.
 
     RGB, silhouette, flow with occlusion and a camera per frame, in our format and as a LASR
     sequence (lasr/)."""
+
+    schema = vbr_schema.VBR
 
     resolution = Option((256, 256), "(width, height) in pixels: N or WxH", type=resolution)
     num_frames = Option(30, "rendered frames (files 0 .. num_frames-1)", low=2, limit=10000)
@@ -215,27 +232,16 @@ class Vbr(RenderQuality, Recipe, name="vbr"):
             _, collisions = simulator.run(frame_start=0, frame_end=scene.frame_end + 1)
             if self.camera == "follow":
                 self.follow(scene, camera, base, centre)
-            renderer = kb.renderer.Blender(scene, scratch, **self.renderer_quality())
+            renderer = kb.renderer.create(self.renderer, scene, scratch,
+                                          **self.renderer_settings())
             layers = renderer.render()
-            settings = {"engine": "CYCLES", "view_transform": "Standard",
-                        **self.quality_settings()}
-            kb.compute_visibility(layers["segmentation"], scene.assets)
-            totals = [int(np.sum(p.metadata["visibility"])) for p in parts]
-            order = [parts[i] for i in sorted(range(len(parts)), key=lambda i: -totals[i])]
-            layers["segmentation"] = kb.adjust_segmentation_idxs(layers["segmentation"],
-                                                                 scene.assets, order)
-            kb.compute_bboxes(layers["segmentation"], order)
-            kb.write_image_dict(layers, out_dir)
-            meta = kb.get_scene_metadata(scene, seed=int(seed), num_instances=len(order),
-                                         background=background, renderer=settings,
-                                         object_type=kind, object_model=model,
-                                         lasr_sequence=sequence if self.lasr_export else None)
-            kb.write_json(data={"flags": self.flags(seed), "metadata": meta,
-                                "camera": kb.get_camera_info(scene.camera),
-                                "instances": kb.get_instance_info(scene, order)},
-                          filename=out_dir / "metadata.json")
-            kb.write_json(data={"collisions": kb.process_collisions(collisions, scene, order)},
-                          filename=out_dir / "events.json")
+            settings = self.render_metadata(renderer)
+            order = annotate_instances(scene, layers, parts, order=by_visible_pixels)
+            metadata, events = scene_documents(
+                self, scene, seed, order, collisions, background=background, renderer=settings,
+                object_type=kind, object_model=model,
+                lasr_sequence=sequence if self.lasr_export else None)
+            write_scene(self.schema, out_dir, layers, metadata, events)
             simulator.close()
         if self.lasr_export:
             from kubric.annotations.lasr_export import export_lasr

@@ -1,12 +1,17 @@
-"""Renderers: views of the scene model that make images.
+"""Renderers: views of the scene model that make images (the protocol: :mod:`.base`).
 
-``kubric.renderer.Blender`` (Cycles on ``bpy==5.0.1``) is loaded on first access, so
-``import kubric.renderer`` does not import bpy.
+``kubric.renderer.create(name, scene, scratch_dir, **settings)`` builds a registered backend
+(``blender``: Cycles on ``bpy==5.0.1``; ``raycast``: embree, exact layers without bpy). The
+backend classes ``Blender`` and ``Raycast`` are loaded on first access, so ``import kubric.renderer``
+imports neither bpy nor embree.
 """
 
 import importlib
 
-_LAZY = {"Blender": "kubric.renderer.blender"}
+from kubric.renderer.base import ALL_LAYERS, ANNOTATION_LAYERS, BACKENDS, Renderer, create
+
+__all__ = ["ALL_LAYERS", "ANNOTATION_LAYERS", "BACKENDS", "Renderer", "create"]
+_LAZY = {"Blender": "kubric.renderer.blender", "Raycast": "kubric.renderer.raycast"}
 
 
 def __getattr__(name):

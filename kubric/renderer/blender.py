@@ -12,6 +12,9 @@ kept between frames (``render.use_persistent_data``). The result is a dict of (T
 arrays (see blender_passes and the output contract): rgba uint8, depth/z float32 (metres),
 segmentation uint32, forward/backward_flow float32 (Δrow, Δcol in pixels), normal, uv,
 object_coordinates float32.
+It implements the renderer protocol of :mod:`kubric.renderer.base` (registered as ``blender``;
+recipes build it with ``kubric.renderer.create``); :meth:`Blender.settings` is what a scene's
+``metadata["renderer"]`` records.
 
 Options:
   samples_per_pixel (int ≥ 1), adaptive_sampling (bool), use_denoising (bool, OIDN),
@@ -24,7 +27,10 @@ Options:
   environment variable KUBRIC_USE_GPU is 1/true, else "CPU"), max_bounces (None = Blender's
   defaults, or an int ≥ 0 limiting every bounce kind), light_tree (bool, default False: faster on
   small lamp-lit scenes), verbose (bool: show Blender's console output), scratch_dir (where frames
-  are written; default a new temporary directory).
+  are written; default a new temporary directory), custom_scene (upstream's option: the path of a
+  ``.blend`` file that Blender opens instead of an empty scene; its objects are rendered with the
+  model's assets — background (label 0) in segmentation, unknown to the model and the simulator —
+  while its world is replaced by the scene's background / ambient settings).
 Render threads: Blender's automatic count (all cores), or exactly N when the environment variable
 KUBRIC_RENDER_THREADS is N ≥ 1 (set by ``kubric generate --threads-per-scene`` on Dask).
 Depth of field comes from the perspective camera's ``use_dof`` / ``focus_distance`` /
@@ -51,6 +57,7 @@ from kubric.renderer import blender_objects as bo
 from kubric.renderer import blender_passes as bp
 from kubric.renderer import blender_shadows as bs
 from kubric.renderer import blender_world as bw
+from kubric.renderer.base import Renderer
 
 
 @contextlib.contextmanager
@@ -140,8 +147,9 @@ def render_threads() -> int | None:
     return int(value)
 
 
-class Blender(TableView):
-    """Cycles renderer view (see module doc for options and output)."""
+class Blender(TableView, Renderer):
+    """Cycles renderer view (see module doc for options and output); implements the renderer
+    protocol of :mod:`kubric.renderer.base`."""
 
     samples_per_pixel = _live_option("samples_per_pixel", lambda n, v: _as_int(n, v, 1),
                                      _set_cycles("samples"))
@@ -208,9 +216,15 @@ class Blender(TableView):
     def __init__(self, scene, scratch_dir=None, adaptive_sampling=False, use_denoising=True,
                  samples_per_pixel=128, background_transparency=False, *, motion_blur=False,
                  device=None, max_bounces=None, light_tree=False, verbose=False,
-                 denoising_quality="HIGH", denoising_prefilter="ACCURATE"):
+                 denoising_quality="HIGH", denoising_prefilter="ACCURATE", custom_scene=None):
+        custom_scene = _custom_scene(custom_scene)
         self.bpy_scene = None
         self._options: dict = {}
+        self._given = {name for name, value, default in (
+            ("motion_blur", motion_blur, False), ("max_bounces", max_bounces, None),
+            ("background_transparency", background_transparency, False),
+            ("adaptive_sampling", adaptive_sampling, False), ("light_tree", light_tree, False))
+            if value is not default}
         self.samples_per_pixel = samples_per_pixel
         self.adaptive_sampling = adaptive_sampling
         self.use_denoising = use_denoising
@@ -230,6 +244,10 @@ class Blender(TableView):
         self.imported_materials: dict[str, list] = {}
         with self.quiet():
             bpy.ops.wm.read_factory_settings(use_empty=True)
+            if custom_scene is not None:  # a user's scene to render the model's assets into
+                bpy.ops.wm.open_mainfile(filepath=custom_scene)
+                for obj in bpy.data.objects:  # its objects are background in segmentation
+                    obj.pass_index = 0
             bpy.context.preferences.edit.keyframe_new_interpolation_type = "LINEAR"
             self.bpy_scene = bpy.context.scene
             self._setup_render_engine()
@@ -458,20 +476,7 @@ class Blender(TableView):
             if missing:
                 raise FileNotFoundError(f"Blender.render: missing texture file(s) {missing}; "
                                         "pass ignore_missing_textures=True to render anyway")
-        frames = list(self.scene.frames if frames is None else frames)
-        if not frames:
-            raise ValueError("Blender.render: frames is empty")
-        for f in frames:
-            if isinstance(f, bool) or not isinstance(f, (int, np.integer)):
-                raise TypeError(f"Blender.render: frames must be integers, got {f!r}")
-        frames = [int(f) for f in frames]
-        if min(frames) < 0:
-            raise ValueError(f"Blender.render: Blender renders frames ≥ 0 only, got {min(frames)}")
-        wanted = tuple(return_layers)
-        unknown = sorted(set(wanted) - set(bp.ALL_LAYERS))
-        if unknown:
-            raise ValueError(f"Blender.render: unknown layers {unknown}; allowed: "
-                             f"{list(bp.ALL_LAYERS)}")
+        frames, wanted = self.check_request(frames, return_layers)
         self._sync()
         out = _FrameStack(len(frames))
         if "rgba" in wanted:
@@ -496,6 +501,18 @@ class Blender(TableView):
                 for k in ann:
                     out.put(k, i, layers.pop(k))
         return {k: out.arrays[k] for k in wanted}
+
+    def settings(self) -> dict:
+        """``metadata["renderer"]``: engine, view transform and the RGB quality settings, plus
+        every option of motion_blur, max_bounces, background_transparency, adaptive_sampling and
+        light_tree that was given to the constructor (device and verbosity never change pixels
+        beyond float noise and are not recorded)."""
+        out = {"engine": "CYCLES", "view_transform": "Standard",
+               "samples_per_pixel": self.samples_per_pixel, "denoising": self.use_denoising,
+               "denoising_quality": self.denoising_quality,
+               "denoising_prefilter": self.denoising_prefilter}
+        out.update({name: getattr(self, name) for name in sorted(self._given)})
+        return out
 
     def render_still(self, frame=None, return_layers=bp.ALL_LAYERS, ignore_missing_textures=False):
         """Render one frame (default: Blender's current frame) → {layer: (H, W, C) array}."""
@@ -557,6 +574,18 @@ class _FrameStack:
         if layer not in self.arrays:
             self.arrays[layer] = np.empty((self.num_frames,) + frame.shape, frame.dtype)
         self.arrays[layer][index] = frame
+
+
+def _custom_scene(path) -> str | None:
+    """``custom_scene`` (upstream's option): None or an existing ``.blend`` file, as a str."""
+    if path is None:
+        return None
+    if not isinstance(path, (str, os.PathLike)) or Path(path).suffix.lower() != ".blend":
+        raise ValueError(f"Blender option custom_scene must be the path of a .blend file, got "
+                         f"{path!r}")
+    if not Path(path).is_file():
+        raise FileNotFoundError(f"Blender option custom_scene: {str(path)!r} does not exist")
+    return str(Path(path).resolve())
 
 
 def missing_texture_files() -> list[str]:

@@ -5,6 +5,8 @@
   (a colour in 5.0: the model's scalar tint t gives ``(1−t)·white + t·base colour``),
   ``Roughness``, ``IOR``, ``Transmission Weight``, ``Emission Color`` with ``Emission Strength`` 1.
   bpy 5.0 has no ``Transmission Roughness`` input: the model property is kept but has no effect.
+  Nodes keep Blender's default names (``"Principled BSDF"``, ``"Material Output"``), as upstream
+  Kubric's did, so scripts can look them up by name.
 * :class:`~kubric.core.materials.FlatMaterial` → Emission (strength 1) seen by camera rays; other
   rays see a Transparent BSDF when ``indirect_visibility`` is False (no reflections, no shadows);
   ``holdout`` replaces the camera-ray shader by a Holdout (alpha 0 in RGBA; annotation layers still
@@ -36,12 +38,19 @@ def load_image(texture: Texture):
                          f"{texture.filename!r}: {err}") from None
 
 
+#: Blender's own default node names, which upstream Kubric's materials kept and its scripts look
+#: up (``material.node_tree.nodes["Principled BSDF"]``); a flat material's nodes likewise
+#: ("Emission", "Holdout", "Transparent BSDF", "Light Path", "Mix Shader").
+PRINCIPLED_NODE = "Principled BSDF"
+OUTPUT_NODE = "Material Output"
+
+
 def _new_material(asset):
     mat = bpy.data.materials.new(asset.uid)
     nodes = mat.node_tree.nodes
     nodes.clear()
     out = nodes.new("ShaderNodeOutputMaterial")
-    out.name = "output"
+    out.name = OUTPUT_NODE
     return mat, out
 
 
@@ -104,7 +113,7 @@ def _connect_color(mat, socket, value, prefix):
 def build_principled(view, asset):
     mat, out = _new_material(asset)
     bsdf = mat.node_tree.nodes.new("ShaderNodeBsdfPrincipled")
-    bsdf.name = "bsdf"
+    bsdf.name = PRINCIPLED_NODE
     mat.node_tree.links.new(bsdf.outputs["BSDF"], out.inputs["Surface"])
     bsdf.inputs["Emission Strength"].default_value = 1.0
     return mat
@@ -112,7 +121,7 @@ def build_principled(view, asset):
 
 def _bsdf_input(input_name):
     def setter(view, asset, mat, value):
-        mat.node_tree.nodes["bsdf"].inputs[input_name].default_value = float(value)
+        mat.node_tree.nodes[PRINCIPLED_NODE].inputs[input_name].default_value = float(value)
     return setter
 
 
@@ -121,16 +130,16 @@ def _set_specular_tint(view, asset, mat, value):
     base = (1.0, 1.0, 1.0) if isinstance(color, Texture) else tuple(color)[:3]
     t = float(value)
     tint = tuple((1.0 - t) + t * c for c in base) + (1.0,)
-    mat.node_tree.nodes["bsdf"].inputs["Specular Tint"].default_value = tint
+    mat.node_tree.nodes[PRINCIPLED_NODE].inputs["Specular Tint"].default_value = tint
 
 
 def _set_principled_color(view, asset, mat, value):
-    _connect_color(mat, mat.node_tree.nodes["bsdf"].inputs["Base Color"], value, "color")
+    _connect_color(mat, mat.node_tree.nodes[PRINCIPLED_NODE].inputs["Base Color"], value, "color")
     _set_specular_tint(view, asset, mat, asset.specular_tint)
 
 
 def _set_emission(view, asset, mat, value):
-    mat.node_tree.nodes["bsdf"].inputs["Emission Color"].default_value = tuple(value)
+    mat.node_tree.nodes[PRINCIPLED_NODE].inputs["Emission Color"].default_value = tuple(value)
 
 
 PRINCIPLED_SETTERS = {
@@ -161,7 +170,7 @@ def _color_keyframer(socket_of):
 
 
 PRINCIPLED_KEYFRAMERS = {
-    "color": _color_keyframer(lambda m: m.node_tree.nodes["bsdf"].inputs["Base Color"]),
+    "color": _color_keyframer(lambda m: m.node_tree.nodes[PRINCIPLED_NODE].inputs["Base Color"]),
 }
 
 
@@ -169,12 +178,12 @@ PRINCIPLED_KEYFRAMERS = {
 def build_flat(view, asset):
     mat, out = _new_material(asset)
     nodes, links = mat.node_tree.nodes, mat.node_tree.links
-    emission = _named(nodes, "ShaderNodeEmission", "emission")
+    emission = _named(nodes, "ShaderNodeEmission", "Emission")
     emission.inputs["Strength"].default_value = 1.0
-    _named(nodes, "ShaderNodeHoldout", "holdout")
-    _named(nodes, "ShaderNodeBsdfTransparent", "transparent")
-    path = _named(nodes, "ShaderNodeLightPath", "light_path")
-    mix = _named(nodes, "ShaderNodeMixShader", "mix")
+    _named(nodes, "ShaderNodeHoldout", "Holdout")
+    _named(nodes, "ShaderNodeBsdfTransparent", "Transparent BSDF")
+    path = _named(nodes, "ShaderNodeLightPath", "Light Path")
+    mix = _named(nodes, "ShaderNodeMixShader", "Mix Shader")
     links.new(path.outputs["Is Camera Ray"], mix.inputs["Fac"])
     links.new(mix.outputs["Shader"], out.inputs["Surface"])
     _build_catch_nodes(nodes, links, emission)
@@ -216,22 +225,22 @@ def _build_catch_nodes(nodes, links, emission):
 
 def _rewire_flat(asset, mat):
     nodes, links = mat.node_tree.nodes, mat.node_tree.links
-    mix = nodes["mix"]
+    mix = nodes["Mix Shader"]
     for socket in (mix.inputs[1], mix.inputs[2]):
         for link in list(socket.links):
             links.remove(link)
     if asset.holdout:
-        camera_shader = nodes["holdout"]
+        camera_shader = nodes["Holdout"]
     else:
-        camera_shader = nodes["catch_mix"] if asset.catch_shadows else nodes["emission"]
-    other = nodes["emission"] if asset.indirect_visibility else nodes["transparent"]
+        camera_shader = nodes["catch_mix"] if asset.catch_shadows else nodes["Emission"]
+    other = nodes["Emission"] if asset.indirect_visibility else nodes["Transparent BSDF"]
     links.new(other.outputs[0], mix.inputs[1])
     links.new(camera_shader.outputs[0], mix.inputs[2])
 
 
 def _set_flat_color(view, asset, mat, value):
     nodes, links = mat.node_tree.nodes, mat.node_tree.links
-    emitted = nodes["emission"].inputs["Color"]
+    emitted = nodes["Emission"].inputs["Color"]
     _connect_color(mat, emitted, value, "color")
     caught = nodes["catch_scale"].inputs[6]  # the same colour feeds the shadow catcher
     for link in list(caught.links):
@@ -255,7 +264,7 @@ FLAT_SETTERS = {
 
 def _flat_color_keyframer():
     """Key the emitted colour and the shadow catcher's colour together."""
-    parts = [_color_keyframer(lambda m: m.node_tree.nodes["emission"].inputs["Color"]),
+    parts = [_color_keyframer(lambda m: m.node_tree.nodes["Emission"].inputs["Color"]),
              _color_keyframer(lambda m: m.node_tree.nodes["catch_scale"].inputs[6])]
 
     def key(view, asset, mat, frame):

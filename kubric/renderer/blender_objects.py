@@ -12,7 +12,9 @@ Geometry conventions (must agree with the model):
     file's frame (hierarchy transforms baked in), so its pose and scale come from the model only.
     OBJ, PLY and STL are imported without axis conversion (file x, y, z = Blender x, y, z); glTF and
     FBX importers convert their Y-up convention to Blender's Z-up (override with
-    ``render_import_kwargs``). ``.blend`` files: every mesh object of the file is appended.
+    ``render_import_kwargs``). ``.blend`` files: every mesh object of the file is appended, or
+    with upstream's ``render_import_kwargs={"filepath", "directory", "filename"}`` the one object
+    ``filename`` from ``directory`` = ``<file>.blend/Object`` (``bpy.ops.wm.append``).
   * Cameras: ``sensor_fit='HORIZONTAL'`` so ``sensor_width`` is the horizontal size and
     ``shift_x``/``shift_y`` are in units of the sensor width (kubric.core.camera_geometry).
   * Lights shine along their local −Z axis (Blender's convention and the model's).
@@ -90,14 +92,38 @@ def _import_fbx(path, **kw):
     bpy.ops.import_scene.fbx(filepath=path, **kw)
 
 
+#: the keywords of upstream's .blend import (``bpy.ops.wm.append``): ``directory`` is
+#: ``<file>.blend/Object`` and ``filename`` an object name in it; ``filepath`` (their join) optional
+BLEND_APPEND_KEYS = ("directory", "filename", "filepath")
+
+
 def _import_blend(path, **kw):
-    if kw:
-        raise ValueError(f".blend import takes no render_import_kwargs, got {sorted(kw)}")
-    with bpy.data.libraries.load(path, link=False) as (src, dst):
-        dst.objects = list(src.objects)
-    for obj in dst.objects:
-        if obj is not None:
-            bpy.context.scene.collection.objects.link(obj)
+    if not kw:  # every object of the file
+        with bpy.data.libraries.load(path, link=False) as (src, dst):
+            dst.objects = list(src.objects)
+        for obj in dst.objects:
+            if obj is not None:
+                bpy.context.scene.collection.objects.link(obj)
+        return
+    unknown = sorted(set(kw) - set(BLEND_APPEND_KEYS))
+    if unknown or "directory" not in kw or "filename" not in kw:
+        raise ValueError(f".blend render_import_kwargs must be bpy.ops.wm.append's directory= "
+                         f"('<file>.blend/Object') and filename= (an object name), filepath= "
+                         f"optional; got {sorted(kw)}")
+    directory = os.path.normpath(str(kw["directory"]))
+    library, _, kind = directory.rpartition(os.sep)
+    if os.path.normpath(library) != os.path.normpath(path) or kind != "Object":
+        raise ValueError(f".blend render_import_kwargs: directory {kw['directory']!r} must be "
+                         f"'{path}/Object' (objects inside render_filename)")
+    with bpy.data.libraries.load(path, link=False) as (src, _):
+        names = list(src.objects)
+    if kw["filename"] not in names:
+        raise ValueError(f".blend render_import_kwargs: {path!r} has no object "
+                         f"{kw['filename']!r}; objects: {names}")
+    args = {"directory": directory + os.sep, "filename": str(kw["filename"])}
+    if "filepath" in kw:
+        args["filepath"] = str(kw["filepath"])
+    bpy.ops.wm.append(**args)
 
 
 #: file extension → importer(path, **render_import_kwargs)

@@ -47,10 +47,8 @@ from __future__ import annotations
 import numpy as np
 
 from kubric.core import camera_geometry as geo
+from kubric.renderer.base import ALL_LAYERS, ANNOTATION_LAYERS  # noqa: F401  (their old home)
 
-ANNOTATION_LAYERS = ("depth", "z", "segmentation", "forward_flow", "backward_flow", "normal",
-                     "object_coordinates", "uv")
-ALL_LAYERS = ("rgba",) + ANNOTATION_LAYERS
 AOV_NAME = "object_coordinates"
 #: Cycles writes 1e10 where a ray hits nothing; anything beyond this is background.
 _NO_HIT = 1e9

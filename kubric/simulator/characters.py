@@ -22,6 +22,7 @@ import numpy as np
 import pybullet as pb
 
 from kubric.core.skinning import matrices_to_quaternions
+from kubric.errors import InputError
 
 MIN_HULL_VERTICES = 4
 
@@ -38,7 +39,7 @@ class CharacterBodies:
 def _uniform_scale(character) -> float:
     s = np.asarray(character.scale, np.float64)
     if np.ptp(s) > 1e-6 * np.abs(s).max():
-        raise ValueError(f"{character.uid}: PyBullet simulates characters with a uniform scale "
+        raise InputError(f"{character.uid}: PyBullet simulates characters with a uniform scale "
                          f"only, got scale {s.tolist()}")
     return float(s[0])
 

@@ -10,8 +10,8 @@ import threading
 
 import numpy as np
 
+from kubric.annotations import pictures as render
 from kubric.core.camera_geometry import BACKGROUND_DEPTH, CAMERA_TO_OPENCV
-from kubric.viewer import render
 from kubric.viewer.source import SceneError, SceneSource
 
 #: default cache size in bytes (decoded frames + PNG bytes)
@@ -138,7 +138,10 @@ class ViewerService:
         def make():
             if layer == "outline":
                 return render.to_png(render.outline(self.frame(name, "segmentation", index)))
-            return render.to_png(render.picture(layer, self.frame(name, layer, index), lo, hi))
+            kind = self.source.formats(name)[layer].kind if layer in self.source.formats(name) \
+                else None
+            return render.to_png(render.picture(layer, self.frame(name, layer, index), lo, hi,
+                                                kind))
         return self.cache.get_or_make(("png", name, layer, index, lo, hi), make)
 
     def probe(self, name: str, index: int, col: int, row: int) -> dict:

@@ -13,26 +13,29 @@ URL can reach a file outside the served folder. Every read is read-only.
 from __future__ import annotations
 
 import abc
+import functools
 import pathlib
 import re
 import time
 
 import numpy as np
 
+from kubric.errors import KubricError
 from kubric.io.json_io import read_json
-from kubric.io.layers import LAYERS, frame_filename, read_frame
+from kubric.io.layers import LAYERS, LayerFormat, frame_filename, read_frame
+from kubric.io.scene_dir import EVENTS_FILE, METADATA_FILE, SUCCESS_FILE, TRACKS_FILE
+from kubric.io.scene_dir import looks_like_scene as _looks_like_scene
 
 #: a scene name: letters, digits, ``_ . -``, not starting with a dot (no separators, no ``..``)
 NAME_PATTERN = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.\-]{0,199}\Z")
 #: layers the viewer shows, in the selector's order
 VIEW_LAYERS = ("rgba", "rgb", "depth", "z", "forward_flow", "backward_flow", "normal",
                "object_coordinates", "uv", "segmentation")
-SUCCESS_FILE = "_SUCCESS"
 #: how often a folder is rescanned for new scenes (seconds)
 RESCAN_SECONDS = 2.0
 
 
-class SceneError(Exception):
+class SceneError(KubricError):
     """A scene that cannot be shown (incomplete, corrupt): the page shows the message."""
 
 
@@ -67,6 +70,10 @@ class SceneSource(abc.ABC):
     def output_root(self, name: str) -> str:
         """The ``--out`` that regenerates the scene in place (shown in its worker command)."""
         return "OUT"
+
+    def formats(self, name: str) -> dict[str, LayerFormat]:
+        """The layers a scene may hold and how they are stored (default: the standard ones)."""
+        return {n: LAYERS[n] for n in VIEW_LAYERS}
 
     def check_name(self, name: str) -> str:
         """``name`` when it is a scene of this source; KeyError otherwise."""
@@ -126,19 +133,19 @@ class DirectorySource(SceneSource):
                    split=flags.get("split") or info.get("split"),
                    num_instances=len(meta.get("instances", [])),
                    num_frames=info.get("num_frames"), resolution=info.get("resolution"),
-                   layers=[n for n in VIEW_LAYERS if (directory / frame_filename(
-                       LAYERS[n].template, 0)).is_file()],
-                   has_tracks=(directory / "tracks.npz").is_file())
+                   layers=[n for n, fmt in self.formats(name).items()
+                           if (directory / frame_filename(fmt.template, 0)).is_file()],
+                   has_tracks=(directory / TRACKS_FILE).is_file())
         if not (directory / SUCCESS_FILE).is_file():
             row["error"] = f"incomplete scene: {name} has no {SUCCESS_FILE} (still being " \
                            "written, or its worker failed)"
         return row
 
     def metadata(self, name: str) -> dict:
-        return self._json(name, "metadata.json", required=True)
+        return self._json(name, METADATA_FILE, required=True)
 
     def events(self, name: str) -> dict:
-        return self._json(name, "events.json", required=False) or {"collisions": []}
+        return self._json(name, EVENTS_FILE, required=False) or {"collisions": []}
 
     def _json(self, name: str, filename: str, required: bool):
         path = self.directory(name) / filename
@@ -154,11 +161,22 @@ class DirectorySource(SceneSource):
             raise SceneError(f"{name}/{filename} is not a JSON object")
         return data
 
-    def frame(self, name: str, layer: str, index: int) -> np.ndarray:
-        if layer not in VIEW_LAYERS:
-            raise KeyError(f"unknown layer {layer!r}; allowed: {', '.join(VIEW_LAYERS)}")
+    def formats(self, name: str) -> dict[str, LayerFormat]:
+        """The layers a scene may hold: the standard ones the viewer draws, then those its
+        recipe's schema declares (klevr's semantic labels, texture_nerf's bands, ...)."""
         try:
-            return read_frame(self.directory(name), layer, index)
+            recipe = self.metadata(name).get("flags", {}).get("recipe")
+        except SceneError:
+            recipe = None
+        own = _recipe_layers(recipe) if isinstance(recipe, str) else {}
+        return {**super().formats(name), **own}
+
+    def frame(self, name: str, layer: str, index: int) -> np.ndarray:
+        formats = self.formats(name)
+        if layer not in formats:
+            raise KeyError(f"unknown layer {layer!r}; allowed: {', '.join(formats)}")
+        try:
+            return read_frame(self.directory(name), layer, index, formats=formats)
         except FileNotFoundError as err:
             raise KeyError(str(err)) from None
         except (ValueError, OSError, RuntimeError) as err:  # truncated / corrupt files
@@ -166,7 +184,7 @@ class DirectorySource(SceneSource):
 
     def tracks(self, name: str) -> dict | None:
         directory = self.directory(name)
-        if not (directory / "tracks.npz").is_file():
+        if not (directory / TRACKS_FILE).is_file():
             return None
         from kubric.annotations.track_files import read_tracks
         try:
@@ -175,6 +193,13 @@ class DirectorySource(SceneSource):
             raise SceneError(f"{name}/tracks.npz is unreadable: {err}") from None
 
 
-def _looks_like_scene(path: pathlib.Path) -> bool:
-    return (path / "metadata.json").is_file() or (path / SUCCESS_FILE).is_file() or \
-        path.name.startswith("scene_")
+@functools.lru_cache(maxsize=64)
+def _recipe_layers(recipe: str) -> dict[str, LayerFormat]:
+    """The layers the schema of ``recipe`` declares beyond the standard ones ({} when the recipe
+    is unknown here: its scenes show their standard layers)."""
+    from kubric.io.schema import SchemaError
+    from kubric.pipeline.recipe import schema_of
+    try:
+        return dict(schema_of(recipe).layers)
+    except (SchemaError, ValueError, ImportError):
+        return {}

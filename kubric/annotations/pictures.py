@@ -1,4 +1,5 @@
-"""Decoded layer frames → RGB(A) pictures for the page (then PNG bytes).
+"""Decoded layer frames → RGB(A) pictures: the one colouriser of layers, used by ``kubric view``
+and by ``kubric inspect``'s contact sheets.
 
 * ``rgba`` / ``rgb``: as stored (alpha kept).
 * ``depth`` / ``z``: a perceptual colour map (viridis-like: near = dark purple, far = yellow)
@@ -8,7 +9,7 @@
   beyond ``max_flow`` the colour darkens.
 * ``normal``: (n + 1) / 2 as RGB; ``object_coordinates`` and ``uv``: the values as RGB.
 * ``segmentation``: the label palette (:mod:`kubric.io.palette`: the colours of segmentation
-  PNGs and ``kubric inspect``; 0 black, then distinct hues);
+  PNGs; 0 black, then distinct hues);
   :func:`outline` draws only the label boundaries, transparent elsewhere, for the overlay.
 """
 
@@ -44,10 +45,11 @@ def depth_picture(depth: np.ndarray, lo: float, hi: float,
                   background: float = BACKGROUND_DEPTH) -> np.ndarray:
     d = depth[..., 0].astype(np.float64)
     t = np.clip((d - lo) / max(hi - lo, 1e-9), 0.0, 1.0) * (len(DEPTH_ANCHORS) - 1)
+    t = np.where(np.isfinite(t), t, 0.0)  # NaN samples: drawn as background below
     i = np.minimum(np.floor(t).astype(int), len(DEPTH_ANCHORS) - 2)
     f = (t - i)[..., None]
     rgb = DEPTH_ANCHORS[i] * (1 - f) + DEPTH_ANCHORS[i + 1] * f
-    rgb[~(d < background * 0.999)] = 0.0
+    rgb[~(d < background * 0.999)] = 0.0  # also NaN
     return (rgb * 255 + 0.5).astype(np.uint8)
 
 
@@ -89,25 +91,52 @@ def outline(labels: np.ndarray) -> np.ndarray:
     return rgba
 
 
+#: the picture of each layer kind (kubric.io.layers.LayerFormat.kind) for layers a recipe
+#: declares beyond the standard ones (e.g. klevr's semantic labels, texture_nerf's cut-offs)
+KIND_PICTURES = {"image8": "rgba", "labels": "segmentation", "tiff": "depth",
+                 "signed_unit": "normal", "unit": "uv", "scaled": "flow"}
+
+
 def picture(layer: str, frame: np.ndarray, lo: float | None = None,
-            hi: float | None = None) -> np.ndarray:
+            hi: float | None = None, kind: str | None = None) -> np.ndarray:
     """The (H, W, 3|4) uint8 picture of one decoded frame (module doc); ``lo`` / ``hi``: the
-    depth range (metres) or, for flows, ``hi`` = the magnitude shown fully saturated."""
+    depth range (metres) or, for flows, ``hi`` = the magnitude shown fully saturated. A layer a
+    recipe declares is drawn by its ``kind`` (:data:`KIND_PICTURES`): labels like the
+    segmentation, float TIFFs with the depth colour map over their own range."""
+    own = kind is not None and layer not in STANDARD_PICTURES
+    if own:
+        if kind not in KIND_PICTURES:
+            raise KeyError(f"no picture for layer kind {kind!r}; allowed: {sorted(KIND_PICTURES)}")
+        if kind == "tiff" and (lo is None or hi is None):
+            finite = frame[np.isfinite(frame)]
+            lo, hi = (float(finite.min()), float(finite.max())) if finite.size else (0.0, 1.0)
+            if hi <= lo:
+                hi = lo + 1.0
+        layer = KIND_PICTURES[kind]
+        if kind == "scaled" and frame.shape[-1] != 2:
+            frame, layer = np.clip((frame - frame.min()) / max(np.ptp(frame), 1e-9), 0, 1), "uv"
     if layer in ("rgba", "rgb"):
         return frame
     if layer in ("depth", "z"):
         if lo is None or hi is None:
             lo, hi = depth_range(frame)
-        return depth_picture(frame, lo, hi)
+        return depth_picture(frame, lo, hi, background=np.inf if own else BACKGROUND_DEPTH)
     if layer.endswith("flow"):
         return flow_picture(frame, hi)
     if layer == "normal":
         return ((np.clip(frame, -1, 1) + 1) / 2 * 255 + 0.5).astype(np.uint8)
     if layer in ("object_coordinates", "uv"):
-        return (np.clip(frame, 0, 1) * 255 + 0.5).astype(np.uint8)
+        rgb = np.clip(frame, 0, 1) * 255 + 0.5
+        return np.repeat(rgb, 3, axis=-1).astype(np.uint8) if frame.shape[-1] == 1 else \
+            rgb.astype(np.uint8)
     if layer == "segmentation":
         return segmentation_picture(frame)
-    raise KeyError(f"no picture for layer {layer!r}")
+    raise KeyError(f"no picture for layer {layer!r}; allowed: {', '.join(STANDARD_PICTURES)}, "
+                   "or a layer of a known kind")
+
+
+STANDARD_PICTURES = ("rgba", "rgb", "depth", "z", "forward_flow", "backward_flow", "flow",
+                     "normal", "object_coordinates", "uv", "segmentation")
 
 
 def depth_range(depth: np.ndarray, background: float = BACKGROUND_DEPTH) -> tuple[float, float]:
@@ -118,3 +147,20 @@ def depth_range(depth: np.ndarray, background: float = BACKGROUND_DEPTH) -> tupl
 
 def to_png(pixels: np.ndarray) -> bytes:
     return encode_png(np.ascontiguousarray(pixels))
+
+
+def layer_pictures(name: str, layer: np.ndarray,
+                   background: float = BACKGROUND_DEPTH) -> np.ndarray:
+    """(T, H, W, C) layer → (T, H, W, 3) uint8 pictures on one scale for all frames (depth over
+    the scene's nearest and farthest surface, flows saturated at the scene's largest
+    magnitude); RGBA is composited over black."""
+    if name in ("rgba", "rgb"):
+        rgb = layer[..., :3].astype(np.float32)
+        alpha = layer[..., 3:4].astype(np.float32) / 255.0 if layer.shape[-1] == 4 else 1.0
+        return (rgb * alpha).astype(np.uint8)
+    lo = hi = None
+    if name in ("depth", "z"):
+        lo, hi = depth_range(layer, background)
+    elif name.endswith("flow"):
+        hi = max(float(np.hypot(layer[..., 0], layer[..., 1]).max()), 1e-9)
+    return np.stack([picture(name, frame, lo, hi)[..., :3] for frame in layer])

@@ -16,53 +16,44 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from kubric.io import json_io, layers
-from kubric.io.scene_writer import EVENTS_FILE, METADATA_FILE, element_value, lookup
-from kubric.io.schema import Feature, Schema, SchemaError, layer_channels
-from kubric.pipeline.worker import SUCCESS, is_complete
+from kubric.errors import KubricError
+from kubric.io import json_io, layers, png_io
+from kubric.io.scene_dir import EVENTS_FILE, METADATA_FILE, is_complete
+from kubric.io.scene_dir import SUCCESS_FILE as SUCCESS
+from kubric.io.schema import UINT16_MAX, Feature, Schema, SchemaError, convert, layer_channels
 
-UINT16_MAX = 65535
 
-
-class SceneError(ValueError):
+class SceneError(KubricError, ValueError):
     """A scene directory that cannot become an example (corrupt or off-contract)."""
 
 
-def _hex_to_rgb(value) -> np.ndarray:
-    text = str(value).lstrip("#")
-    if len(text) != 6:
-        raise ValueError(f"{value!r} is not a '#rrggbb' colour")
-    return np.array([int(text[i:i + 2], 16) / 255.0 for i in (0, 2, 4)], dtype=np.float32)
-
-
-def _split_indices(value) -> np.ndarray:
-    from kubric.annotations.nerf_export import SPLITS
-    names = [v["split"] if isinstance(v, Mapping) else v for v in value]
-    unknown = sorted({str(n) for n in names} - set(SPLITS))
-    if unknown:
-        raise ValueError(f"splits {unknown} are not in {SPLITS}")
-    return np.array([SPLITS.index(n) for n in names], dtype=np.int64)
-
-
-def _convert(name: str, value):
-    if name == "split_index":
-        return _split_indices(value)
-    if name == "hex_to_rgb":
-        return _hex_to_rgb(value)
-    if name == "floor":
-        return np.floor(np.asarray(value, dtype=np.float64)).astype(np.int64)
-    if name == "negative_to_uint16_max":
-        arr = np.asarray(value, dtype=np.int64)
-        return np.where(arr < 0, UINT16_MAX, arr)
+def lookup(tree, path: str, what: str):
+    """``tree[a][b][0]`` for ``path`` ``"a.b.0"``; :class:`SchemaError` naming ``what`` when a
+    step is missing."""
+    value = tree
+    for step in path.split("."):
+        try:
+            value = value[int(step)] if step.lstrip("-").isdigit() and not isinstance(
+                value, Mapping) else value[step]
+        except (KeyError, IndexError, TypeError):
+            raise SchemaError(f"{what}: no field {path!r}") from None
     return value
 
 
-def quantise(values: np.ndarray, lo: float, hi: float) -> np.ndarray:
-    """``round((v - lo) / (hi - lo) · 65535)`` as uint16 (zeros when hi == lo)."""
-    if hi <= lo:
-        return np.zeros(values.shape, dtype=np.uint16)
-    scaled = (values.astype(np.float64) - lo) * (UINT16_MAX / (hi - lo))
-    return np.rint(np.clip(scaled, 0, UINT16_MAX)).astype(np.uint16)
+def element_value(feature: Feature, element, what: str):
+    """The value of instance / collision ``feature`` in one ``element`` (a dict of
+    ``metadata.json["instances"]`` or ``events.json["collisions"]``): its field, or the
+    feature's ``default`` where the element lacks the field and the feature has one."""
+    try:
+        return lookup(element, feature.source_arg, what)
+    except SchemaError:
+        if feature.default is None:
+            raise
+        return feature.default
+
+
+#: float → uint16 over [lo, hi]: the one quantiser of layers (kubric.io.png_io.scale_to_uint16)
+quantise = png_io.scale_to_uint16
 
 
 def dequantise(q: np.ndarray, value_range) -> np.ndarray:
@@ -201,7 +192,7 @@ class SceneReader:
     @staticmethod
     def _converted(f: Feature, value, what: str):
         try:
-            return _convert(f.convert, value)
+            return convert(f.convert, value)
         except (ValueError, TypeError, KeyError) as err:
             raise SchemaError(f"{what}: {f.convert}: {err}") from None
 
@@ -272,5 +263,5 @@ def read_scene_example(scene_dir, schema: Schema, names=None) -> dict:
     return SceneReader(scene_dir, schema).example(names)
 
 
-__all__ = ["SceneError", "SceneReader", "dequantise", "is_complete", "quantise",
-           "read_scene_example"]
+__all__ = ["SceneError", "SceneReader", "dequantise", "element_value", "is_complete", "lookup",
+           "quantise", "read_scene_example"]

@@ -1,0 +1,546 @@
+"""A CPU ray-casting renderer: the exact annotation layers from the scene model alone (no bpy).
+
+One ray per pixel centre (:func:`kubric.core.camera_geometry.pixel_rays`) is cast with Embree
+(``embreex`` through trimesh; ``pip install kubric[raycast]``) into the scene's meshes posed at
+the frame; Embree only finds the triangle, and the hit is then recomputed in float64 on that
+triangle, so every layer is the value at the surface point seen through the pixel centre, as the
+Blender backend's exact annotation render (:mod:`kubric.renderer.blender_passes`) defines it:
+
+* ``depth``: the distance from the camera centre along the ray; ``z`` = depth converted with
+  :func:`~kubric.core.camera_geometry.depth_to_z`; BACKGROUND_DEPTH (10000 m) where nothing is hit.
+* ``segmentation``: the object's ``segmentation_id``, else its position in ``scene.assets`` + 1.
+* ``normal``: world space, unit; flat faces: the posed triangle's normal; smooth meshes: the
+  vertex normals interpolated at the hit (angle-weighted, as Blender computes them); turned to face
+  the camera where the ray hits a back face (as Cycles does).
+* ``object_coordinates``: the hit in the object's unscaled local frame, (p − lo) / (hi − lo) over
+  the model's ``bounds``, clipped to [0, 1].
+* ``uv``: the mesh's texture coordinates at the hit, wrapped into [0, 1) (0 for meshes without).
+* ``forward_flow`` / ``backward_flow``: the hit point moves with its object's pose (position,
+  quaternion, scale at frame t ± 1, from the model's keyframes; held outside them) and is projected
+  with the camera of frame t ± 1; flow = that position − the pixel centre, as (Δrow, Δcol).
+* ``rgba``: NOT photoreal — base colour × (ambient + Lambert direct light from every lamp with a
+  hard shadow ray) / π, Standard view transform (sRGB, clipped): enough to look at a scene and
+  to make it complete against a recipe's schema; see docs/renderers.md for what it ignores.
+
+Geometry: ``Cube`` and ``Sphere`` are rebuilt exactly as the Blender backend builds them (cube:
+±1, Blender's cube UVs, flat; sphere: 128 × 64 UV sphere, smooth, Blender's UVs); a
+``FileBasedObject``'s ``render_filename`` is read with trimesh (OBJ, PLY, STL as they are; glTF /
+GLB converted from y-up to z-up as Blender's importer does); files without vertex normals (OBJ
+``vn``, PLY ``nx ny nz``, glTF ``NORMAL``) are flat shaded, with them smooth with the file's
+normals (Blender's importers' rule; STL is always flat).
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+
+import numpy as np
+import trimesh
+
+from kubric.core import camera_geometry as geo
+from kubric.core import lights, materials, objects
+from kubric.core.color import Color, linear_to_srgb, srgb_to_linear
+from kubric.renderer.base import ALL_LAYERS, Renderer
+
+_SPHERE_SEGMENTS, _SPHERE_RINGS = 128, 64  # as kubric.renderer.blender_objects
+#: glTF's y-up → Blender's z-up: (x, y, z) → (x, −z, y)
+_GLTF_TO_Z_UP = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
+MESH_FORMATS = (".obj", ".glb", ".gltf", ".ply", ".stl")
+_GREY = (0.8, 0.8, 0.8)  # base colour of a mesh whose file gives none
+
+
+@dataclass
+class Mesh:
+    """One object's geometry in its unscaled local frame (triangles)."""
+    vertices: np.ndarray            # (V, 3) float64
+    faces: np.ndarray               # (F, 3) int64
+    normals: np.ndarray | None      # (V, 3) vertex normals of a smooth mesh; None = flat
+    corner_uv: np.ndarray | None    # (F, 3, 2) texture coordinates per triangle corner
+    texture: np.ndarray | None = None  # (h, w, 3) linear base-colour image (file materials)
+    color: tuple = _GREY            # linear base colour when there is no texture
+
+
+# ---------------------------------------------------------------------------------- geometry
+def _quads_to_triangles(quads):
+    """Blender's fixed quad split: corners (0, 1, 2) and (0, 2, 3)."""
+    q = np.asarray(quads)
+    return np.concatenate([q[:, [0, 1, 2]], q[:, [0, 2, 3]]])
+
+
+def cube_mesh() -> Mesh:
+    """The Blender backend's cube: vertices ±1, Blender's default cube UVs, flat."""
+    corners = [(-1, -1, -1), (-1, -1, 1), (-1, 1, 1), (-1, 1, -1), (1, 1, -1), (1, 1, 1),
+               (1, -1, 1), (1, -1, -1)]
+    quads = [(0, 1, 2, 3), (3, 2, 5, 4), (4, 5, 6, 7), (7, 6, 1, 0), (3, 4, 7, 0), (5, 2, 1, 6)]
+    uvs = [[(.375, 0), (.625, 0), (.625, .25), (.375, .25)],
+           [(.375, .25), (.625, .25), (.625, .5), (.375, .5)],
+           [(.375, .5), (.625, .5), (.625, .75), (.375, .75)],
+           [(.375, .75), (.625, .75), (.625, 1), (.375, 1)],
+           [(.125, .5), (.375, .5), (.375, .75), (.125, .75)],
+           [(.625, .5), (.875, .5), (.875, .75), (.625, .75)]]
+    corner_ids = np.arange(24).reshape(6, 4)
+    tri = _quads_to_triangles(corner_ids)
+    quad_vertices = np.asarray(quads).reshape(-1)
+    return Mesh(np.asarray(corners, np.float64), quad_vertices[tri], None,
+                np.asarray(uvs, np.float64).reshape(24, 2)[tri])
+
+
+def sphere_mesh(segments: int = _SPHERE_SEGMENTS, rings: int = _SPHERE_RINGS) -> Mesh:
+    """The Blender backend's UV sphere (radius 1): ring i at polar angle π·i/rings, segment j at
+    azimuth 2π·j/segments − π; UV u = j / segments, v = 1 − i / rings (pole corners at the
+    segment's middle u); smooth, with angle-weighted vertex normals."""
+    theta = np.pi * np.arange(1, rings) / rings
+    phi = 2 * np.pi * np.arange(segments) / segments - np.pi
+    ring = np.stack([np.sin(theta)[:, None] * np.cos(phi), np.sin(theta)[:, None] * np.sin(phi),
+                     np.broadcast_to(np.cos(theta)[:, None], (rings - 1, segments))], axis=-1)
+    vertices = np.concatenate([[[0.0, 0.0, 1.0]], ring.reshape(-1, 3), [[0.0, 0.0, -1.0]]])
+    bottom = len(vertices) - 1
+
+    def vid(i, j):  # ring i in 1 .. rings−1, segment j (wraps)
+        return 1 + (i - 1) * segments + j % segments
+
+    faces, uvs = [], []
+    j = np.arange(segments)
+    u0, u1, um = j / segments, (j + 1) / segments, (j + 0.5) / segments
+    for i in range(rings):
+        v0, v1 = 1 - i / rings, 1 - (i + 1) / rings
+        if i == 0:
+            faces.append(np.stack([np.zeros_like(j), vid(1, j), vid(1, j + 1)], -1))
+            uvs.append(np.stack([np.stack([um, np.full_like(um, v0)], -1),
+                                 np.stack([u0, np.full_like(u0, v1)], -1),
+                                 np.stack([u1, np.full_like(u1, v1)], -1)], 1))
+        elif i == rings - 1:
+            faces.append(np.stack([vid(i, j), np.full_like(j, bottom), vid(i, j + 1)], -1))
+            uvs.append(np.stack([np.stack([u0, np.full_like(u0, v0)], -1),
+                                 np.stack([um, np.full_like(um, v1)], -1),
+                                 np.stack([u1, np.full_like(u1, v0)], -1)], 1))
+        else:
+            quads = np.stack([vid(i, j), vid(i + 1, j), vid(i + 1, j + 1), vid(i, j + 1)], -1)
+            quv = np.stack([np.stack([u0, np.full_like(u0, v0)], -1),
+                            np.stack([u0, np.full_like(u0, v1)], -1),
+                            np.stack([u1, np.full_like(u1, v1)], -1),
+                            np.stack([u1, np.full_like(u1, v0)], -1)], 1)
+            faces.append(_quads_to_triangles(quads))
+            uvs.append(np.concatenate([quv[:, [0, 1, 2]], quv[:, [0, 2, 3]]]))
+    faces = np.concatenate(faces)
+    uv = np.concatenate(uvs)
+    tri = vertices[faces]
+    outward = np.einsum("ij,ij->i", np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]),
+                        tri.mean(axis=1)) > 0
+    faces = np.where(outward[:, None], faces, faces[:, ::-1])
+    uv = np.where(outward[:, None, None], uv, uv[:, ::-1])
+    normals = trimesh.Trimesh(vertices, faces, process=False).vertex_normals
+    return Mesh(vertices, faces, np.asarray(normals, np.float64), uv)
+
+
+def _file_has_normals(path: str, ext: str, loaded) -> bool:
+    if ext == ".obj":
+        with open(path, encoding="utf-8", errors="replace") as f:
+            return any(line.startswith("vn ") for line in f)
+    # glTF NORMAL / PLY nx ny nz: trimesh's loaders hand the file's normals to the mesh, which
+    # caches them; without them (and for STL) Blender's importers shade flat
+    return ext != ".stl" and "vertex_normals" in loaded._cache
+
+
+def _axis(name: str) -> np.ndarray:
+    vec = np.zeros(3)
+    vec["XYZ".index(name[-1])] = -1.0 if name.startswith("NEGATIVE_") else 1.0
+    return vec
+
+
+def _import_axes(asset, ext) -> np.ndarray:
+    """(3, 3) file → local frame rotation: glTF's y-up → z-up; OBJ / PLY / STL by their
+    ``render_import_kwargs`` ``forward_axis`` / ``up_axis`` (Blender's importer options: the
+    file's forward axis becomes +y, its up axis +z; default Y / Z, unchanged)."""
+    kwargs = dict(asset.render_import_kwargs)
+    allowed = {"forward_axis", "up_axis"} if ext in (".obj", ".ply", ".stl") else set()
+    names = ("X", "Y", "Z", "NEGATIVE_X", "NEGATIVE_Y", "NEGATIVE_Z")
+    bad = sorted(set(kwargs) - allowed)
+    if bad or any(v not in names for v in kwargs.values()):
+        raise ValueError(f"{asset.uid}: the raycast renderer reads render_import_kwargs "
+                         f"{sorted(allowed) or 'none'} for {ext} files (values {list(names)}), "
+                         f"got {kwargs}")
+    if ext in (".glb", ".gltf"):
+        return _GLTF_TO_Z_UP
+    forward, up = _axis(kwargs.get("forward_axis", "Y")), _axis(kwargs.get("up_axis", "Z"))
+    if abs(forward @ up) > 0:
+        raise ValueError(f"{asset.uid}: render_import_kwargs forward_axis and up_axis must be "
+                         f"different axes, got {kwargs}")
+    return np.stack([np.cross(forward, up), forward, up])
+
+
+def file_mesh(asset) -> Mesh:
+    """The geometry of a FileBasedObject's ``render_filename`` (see module doc)."""
+    path = asset.render_filename
+    if not path:
+        raise ValueError(f"{asset.uid}: FileBasedObject.render_filename is not set; the raycast "
+                         f"renderer needs a mesh file ({', '.join(MESH_FORMATS)})")
+    ext = os.path.splitext(path)[1].lower()
+    if ext not in MESH_FORMATS:
+        raise ValueError(f"{asset.uid}: the raycast renderer cannot read render_filename {path!r}: "
+                         f"extension {ext!r} is not one of {list(MESH_FORMATS)}")
+    axes = _import_axes(asset, ext)
+    if not os.path.isfile(path):
+        raise FileNotFoundError(f"{asset.uid}: render_filename {path!r} does not exist")
+    loaded = trimesh.load(path, force="mesh", process=False)
+    if not isinstance(loaded, trimesh.Trimesh) or len(loaded.faces) == 0:
+        raise ValueError(f"{asset.uid}: {path!r} contains no triangle mesh")
+    vertices = np.asarray(loaded.vertices, np.float64)
+    normals = np.asarray(loaded.vertex_normals, np.float64) \
+        if _file_has_normals(path, ext, loaded) else None
+    vertices = vertices @ axes.T
+    normals = None if normals is None else normals @ axes.T
+    faces = np.asarray(loaded.faces, np.int64)
+    visual = loaded.visual
+    uv = getattr(visual, "uv", None)
+    corner_uv = np.asarray(uv, np.float64)[faces] if uv is not None and len(uv) == len(
+        vertices) else None
+    texture, color = _file_appearance(visual)
+    return Mesh(vertices, faces, normals, corner_uv, texture if corner_uv is not None else None,
+                color)
+
+
+def _file_appearance(visual):
+    """(linear texture image × base colour factor or None, linear base colour) of a trimesh
+    visual."""
+    material = getattr(visual, "material", None)
+    image = getattr(material, "baseColorTexture", None) or getattr(material, "image", None)
+    factor = getattr(material, "baseColorFactor", None)
+    color = _GREY if factor is None else tuple(srgb_to_linear(np.asarray(factor[:3]) / 255.0))
+    if image is not None:  # the factor multiplies the texture, as in glTF and Blender
+        pixels = np.asarray(image.convert("RGB"), np.float64) / 255.0
+        return srgb_to_linear(pixels) * (1.0 if factor is None else np.asarray(color)), color
+    return None, color
+
+
+# ---------------------------------------------------------------------------------- ray casting
+def _intersect(origins, dirs, tri):
+    """Möller–Trumbore in float64: (t, barycentric (b1, b2)) of rays (N, 3) with triangles
+    (N, 3, 3) known to be hit (embree found them)."""
+    e1, e2 = tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]
+    p = np.cross(dirs, e2)
+    det = np.einsum("ij,ij->i", e1, p)
+    det = np.where(np.abs(det) > 1e-300, det, 1e-300)
+    s = origins - tri[:, 0]
+    b1 = np.einsum("ij,ij->i", s, p) / det
+    q = np.cross(s, e1)
+    b2 = np.einsum("ij,ij->i", dirs, q) / det
+    t = np.einsum("ij,ij->i", e2, q) / det
+    return t, b1, b2
+
+
+class _Geometry:
+    """Every physical object's mesh joined in local coordinates (one render's worth): per vertex
+    and per face the owning object ``k`` (its position in ``entries``)."""
+
+    def __init__(self, entries):
+        self.entries = entries  # [(label, asset, Mesh)]
+        meshes = [e[2] for e in entries]
+        counts = [len(m.vertices) for m in meshes]
+        starts = np.cumsum([0] + counts)[:-1]
+        self.labels = np.asarray([e[0] for e in entries], np.uint32)
+        self.bounds = np.asarray([e[1].bounds for e in entries], np.float64).reshape(-1, 2, 3)
+        self.vertex_owner = np.repeat(np.arange(len(meshes)), counts)
+        self.vertices = _join([m.vertices for m in meshes], (0, 3))
+        self.faces = _join([m.faces + s for m, s in zip(meshes, starts, strict=True)],
+                           (0, 3)).astype(np.int64)
+        self.face_owner = np.repeat(np.arange(len(meshes)), [len(m.faces) for m in meshes])
+        self.smooth = np.asarray([m.normals is not None for m in meshes], bool)
+        self.normals = _join([m.vertices * 0 if m.normals is None else m.normals
+                              for m in meshes], (0, 3))
+        self.corner_uv = _join([np.zeros((len(m.faces), 3, 2)) if m.corner_uv is None
+                                else m.corner_uv for m in meshes], (0, 3, 2))
+
+    def poses(self, frame):
+        """(K, 3, 3) rotations, (K, 3) translations and (K, 3) scales of the objects at
+        ``frame`` (the model's keyframes, held outside them)."""
+        rot, trans, scale = [], [], []
+        for _, asset, _ in self.entries:
+            with asset.at_frame(frame):
+                m = asset.matrix_world
+                rot.append(m[:3, :3])
+                trans.append(m[:3, 3])
+                scale.append(np.asarray(asset.scale, np.float64))
+        if not rot:
+            return np.zeros((0, 3, 3)), np.zeros((0, 3)), np.zeros((0, 3))
+        return np.stack(rot), np.stack(trans), np.stack(scale)
+
+    def to_world(self, points, owner, poses):
+        """Local points (N, 3) of objects ``owner`` (N,) → world, with ``poses``."""
+        rot, trans, scale = poses
+        return np.einsum("nij,nj->ni", rot[owner], points * scale[owner]) + trans[owner]
+
+
+def _join(arrays, empty_shape):
+    return np.concatenate(arrays) if len(arrays) else np.zeros(empty_shape)
+
+
+class _PosedScene:
+    """The joined meshes posed at one frame, searchable by Embree."""
+
+    def __init__(self, geometry: _Geometry, frame):
+        self.poses = geometry.poses(frame)
+        world = geometry.to_world(geometry.vertices, geometry.vertex_owner, self.poses)
+        self.mesh = trimesh.Trimesh(world, geometry.faces, process=False)
+        self.triangles = world[geometry.faces]
+        self._ray = None
+
+    def first_hits(self, origins, dirs):
+        """Index of the first triangle hit by each ray (−1: none)."""
+        if len(self.triangles) == 0:
+            return np.full(len(origins), -1)
+        if self._ray is None:
+            from trimesh.ray.ray_pyembree import RayMeshIntersector
+            self._ray = RayMeshIntersector(self.mesh)
+        return np.asarray(self._ray.intersects_first(origins, dirs), np.int64)
+
+
+class Raycast(Renderer):
+    """Embree ray-casting backend of the renderer protocol (see module doc).
+
+    Settings: ``background_transparency`` (bool: rgba alpha 0 where no surface is hit; default
+    False, the background colour is opaque); ``motion_blur`` only 0 / False (a recipe passes its
+    shutter; this backend renders none). ``scratch_dir`` is accepted for the protocol and unused
+    (nothing is written).
+    """
+
+    def __init__(self, scene, scratch_dir=None, *, background_transparency=False,
+                 motion_blur=0.0):
+        if not isinstance(background_transparency, (bool, np.bool_)):
+            raise TypeError("Raycast option background_transparency must be True or False, got "
+                            f"{background_transparency!r}")
+        if motion_blur:
+            raise ValueError(f"Raycast option motion_blur must be 0 or False (the raycast "
+                             f"renderer renders no motion blur), got {motion_blur!r}")
+        self.scene = scene
+        self.scratch_dir = scratch_dir
+        self.background_transparency = bool(background_transparency)
+        self._meshes: dict = {}  # asset → Mesh, read once per renderer
+        self._textures: dict = {}  # path → linear image, read once per renderer
+
+    def settings(self) -> dict:
+        return {"engine": "RAYCAST", "view_transform": "Standard",
+                "rgba": "base colour x (ambient + Lambert direct light, hard shadows) / pi; "
+                        "not photoreal"}
+
+    # ------------------------------------------------------------------ scene → meshes
+    def _mesh_of(self, asset) -> Mesh:
+        if asset not in self._meshes:
+            if isinstance(asset, objects.Cube):
+                mesh = cube_mesh()
+            elif isinstance(asset, objects.Sphere):
+                mesh = sphere_mesh()
+            elif isinstance(asset, objects.FileBasedObject):
+                mesh = file_mesh(asset)
+            else:
+                raise ValueError(f"{asset.uid}: the raycast renderer has no geometry for "
+                                 f"{type(asset).__name__} (Cube, Sphere, FileBasedObject)")
+            self._meshes[asset] = mesh
+        return self._meshes[asset]
+
+    def geometry(self) -> _Geometry:
+        """Every physical object's mesh, labelled as the Blender backend labels them
+        (segmentation_id, else position in scene.assets + 1)."""
+        entries = []
+        for i, asset in enumerate(self.scene.assets, start=1):
+            if isinstance(asset, objects.PhysicalObject):
+                seg = asset.segmentation_id
+                entries.append((i if seg is None else int(seg), asset, self._mesh_of(asset)))
+        return _Geometry(entries)
+
+    # ------------------------------------------------------------------ rendering
+    def render(self, frames=None, return_layers=ALL_LAYERS) -> dict[str, np.ndarray]:
+        """Render ``frames`` → {layer: (T, H, W, C) array} (see module doc)."""
+        frames, wanted = self.check_request(frames, return_layers)
+        camera = self.scene.camera
+        if camera is None:
+            raise ValueError("the scene has no camera: add a PerspectiveCamera or "
+                             "OrthographicCamera before rendering")
+        geometry = self.geometry()
+        out: dict[str, np.ndarray] = {}
+        for i, frame in enumerate(frames):
+            layers = self.render_frame(camera, geometry, frame, wanted)
+            for name in wanted:
+                if name not in out:
+                    out[name] = np.empty((len(frames),) + layers[name].shape, layers[name].dtype)
+                out[name][i] = layers[name]
+        return out
+
+    def render_frame(self, camera, geometry, frame, wanted) -> dict[str, np.ndarray]:
+        """One frame's layers ``wanted`` → {layer: (H, W, C)}."""
+        w, h = self.scene.resolution
+        cols, rows = np.meshgrid(np.arange(w) + 0.5, np.arange(h) + 0.5)
+        centres = np.stack([cols, rows], -1).reshape(-1, 2)
+        origins, dirs = geo.pixel_rays(camera, centres, frame=frame, resolution=(w, h))
+        posed = _PosedScene(geometry, frame)
+        tri_id = posed.first_hits(origins, dirs)
+        hit = tri_id >= 0
+        idx = np.flatnonzero(hit)
+        tid = tri_id[idx]
+        t, b1, b2 = _intersect(origins[idx], dirs[idx], posed.triangles[tid])
+        owner = geometry.face_owner[tid]
+        bary = np.stack([1 - b1 - b2, b1, b2], -1)
+        corners = geometry.faces[tid]
+        local = np.einsum("nk,nkj->nj", bary, geometry.vertices[corners])
+        uv = np.einsum("nk,nkj->nj", bary, geometry.corner_uv[tid])
+        res: dict[str, np.ndarray] = {}
+
+        def image(values, channels, dtype=np.float32, fill=0.0):
+            img = np.full((h * w, channels), fill, dtype)
+            img[idx] = np.asarray(values).reshape(len(idx), channels)
+            return img.reshape(h, w, channels)
+
+        depth = image(t, 1, np.float64, geo.BACKGROUND_DEPTH)
+        res["depth"] = depth.astype(np.float32)
+        mask = hit.reshape(h, w, 1)
+        res["z"] = np.where(mask, geo.depth_to_z(camera, np.where(mask, depth, 0.0)),
+                            geo.BACKGROUND_DEPTH).astype(np.float32)
+        res["segmentation"] = image(geometry.labels[owner], 1, np.uint32, 0)
+        normals = self._normals(geometry, posed, tid, owner, bary, dirs[idx])
+        res["normal"] = image(normals, 3)
+        lo, hi = geometry.bounds[owner, 0], geometry.bounds[owner, 1]
+        extent = np.where(hi - lo > 0, hi - lo, 1.0)
+        res["object_coordinates"] = image(np.clip((local - lo) / extent, 0, 1), 3)
+        res["uv"] = image(np.concatenate([np.mod(uv, 1.0), np.zeros((len(idx), 1))], 1), 3)
+        for name, step in (("forward_flow", 1), ("backward_flow", -1)):
+            if name in wanted:
+                world = geometry.to_world(local, owner, geometry.poses(frame + step))
+                xy, _ = geo.project_to_pixels(camera, world, frame=frame + step,
+                                              resolution=(w, h))
+                res[name] = image(xy[:, ::-1] - centres[idx, ::-1], 2)  # (Δrow, Δcol)
+        if "rgba" in wanted:
+            points = origins[idx] + dirs[idx] * t[:, None]
+            res["rgba"] = self._shade(geometry, posed, owner, uv, points, normals, frame, hit,
+                                      (h, w))
+        return {k: res[k] for k in wanted}
+
+    @staticmethod
+    def _normals(geometry, posed, tid, owner, bary, dirs):
+        """World unit normals at the hits, facing the camera."""
+        tri = posed.triangles[tid]
+        geometric = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+        rot, _, scale = posed.poses
+        smooth_local = np.einsum("nk,nkj->nj", bary, geometry.normals[geometry.faces[tid]])
+        # normals transform with the inverse scale
+        smooth = np.einsum("nij,nj->ni", rot[owner], smooth_local / scale[owner])
+        normals = np.where(geometry.smooth[owner][:, None], smooth, geometric)
+        normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+        back = np.einsum("ij,ij->i", geometric, dirs) > 0
+        return np.where(back[:, None], -normals, normals)
+
+    # ------------------------------------------------------------------ rgba
+    def _albedo(self, asset, mesh, uv):
+        """Linear base colour (N, 3) of ``asset``'s hits with texture coordinates ``uv``."""
+        material = asset.material
+        color = getattr(material, "color", None)
+        if isinstance(material, materials.UndefinedMaterial):
+            if mesh.texture is not None:
+                return _sample(mesh.texture, uv)
+            return np.broadcast_to(np.asarray(mesh.color[:3], np.float64), (len(uv), 3))
+        if isinstance(color, Color):
+            return np.broadcast_to(np.asarray(color.rgb, np.float64), (len(uv), 3))
+        if isinstance(color, materials.Texture) and color.mapping == "uv" and color.filename:
+            return _sample(_load_texture(color.filename, self._textures), uv) * color.strength
+        if isinstance(color, materials.Texture) and color.filename:  # environment-mapped
+            return np.broadcast_to(_ambient_radiance(color, self._textures), (len(uv), 3))
+        return np.broadcast_to(np.asarray(_GREY), (len(uv), 3))
+
+    def _shade(self, geometry, posed, owner, uv, points, normals, frame, hit, hw):
+        h, w = hw
+        ambient = _ambient_radiance(self.scene.ambient_illumination, self._textures)
+        irradiance = np.broadcast_to(np.pi * ambient, (len(points), 3)).copy()
+        eps = 1e-4 * max(1.0, float(np.abs(posed.triangles).max())) if len(points) else 0.0
+        start = points + normals * eps
+        for light in self.scene.assets:
+            if isinstance(light, lights.Light) and not isinstance(light, lights.UndefinedLight):
+                irradiance += _irradiance(light, posed, start, normals, frame)
+        radiance = np.zeros((len(points), 3))
+        for k, (_, asset, mesh) in enumerate(geometry.entries):
+            sel = np.flatnonzero(owner == k)
+            if len(sel):
+                albedo = self._albedo(asset, mesh, uv[sel])
+                unlit = isinstance(asset.material, materials.FlatMaterial)
+                radiance[sel] = albedo if unlit else albedo * irradiance[sel] / np.pi
+        rgba = np.zeros((h * w, 4), np.uint8)
+        background = self.scene.background
+        if isinstance(background, Color) and not self.background_transparency:
+            rgba[:, :3] = np.round(linear_to_srgb(background.rgb) * 255)
+            rgba[:, 3] = 255
+        rgba[hit, :3] = np.round(linear_to_srgb(radiance) * 255)
+        rgba[hit, 3] = 255
+        return rgba.reshape(h, w, 4)
+
+
+def _irradiance(light, posed, start, normals, frame):
+    """Irradiance (N, 3) at ``start`` from one lamp, with a hard shadow ray per point."""
+    with light.at_frame(frame):
+        m = light.matrix_world
+        color = np.asarray(light.color.rgb) * float(light.intensity)
+        axis = -m[:3, 2]  # lights shine along local −z
+        if isinstance(light, lights.DirectionalLight):
+            to_light = np.broadcast_to(-axis, start.shape)
+            dist = np.full(len(start), np.inf)
+            falloff = np.ones(len(start))
+        else:
+            vec = m[:3, 3] - start
+            dist = np.linalg.norm(vec, axis=1)
+            to_light = vec / np.maximum(dist, 1e-12)[:, None]
+            falloff = 1.0 / (4 * np.pi * np.maximum(dist, 1e-6) ** 2)
+            if isinstance(light, lights.SpotLight):
+                cos = np.einsum("ij,j->i", -to_light, axis)
+                half = np.cos(float(light.spot_size) / 2)
+                blend = max(float(light.spot_blend) * (1 - half), 1e-9)
+                falloff = falloff * np.clip((cos - half) / blend, 0, 1)
+            elif isinstance(light, lights.RectAreaLight):
+                falloff = falloff * 4 * np.clip(np.einsum("ij,j->i", -to_light, axis), 0, 1)
+    cos = np.clip(np.einsum("ij,ij->i", normals, to_light), 0, None)
+    lit = np.flatnonzero(cos * falloff > 0)
+    if len(lit):
+        blocker = posed.first_hits(start[lit], np.ascontiguousarray(to_light[lit]))
+        blocked = blocker >= 0
+        if blocked.any():
+            b = lit[blocked]
+            t, _, _ = _intersect(start[b], to_light[b], posed.triangles[blocker[blocked]])
+            cos[b[(t > 0) & (t < dist[b])]] = 0.0
+    return (cos * falloff)[:, None] * color
+
+
+def _ambient_radiance(ambient, cache) -> np.ndarray:
+    """(3,) radiance of the light from all directions: a Color, or an environment Texture's mean
+    over the sphere (equirectangular rows weighted by cos(latitude)) × its strength."""
+    if isinstance(ambient, Color):
+        return np.asarray(ambient.rgb, np.float64)
+    image = _load_texture(ambient.filename, cache)
+    rows = image.shape[0]
+    weight = np.cos((np.arange(rows) + 0.5) / rows * np.pi - np.pi / 2)
+    mean = np.einsum("r,rc->c", weight, image.mean(axis=1)) / weight.sum()
+    return mean * float(ambient.strength)
+
+
+def _load_texture(path: str, cache: dict) -> np.ndarray:
+    """A texture file as a linear (h, w, 3) float image (kept in ``cache`` by path): OpenEXR
+    files as stored (linear), other images through PIL, sRGB-decoded."""
+    if path not in cache:
+        if path.lower().endswith(".exr"):
+            import OpenEXR
+            with OpenEXR.File(path) as f:
+                channels = f.channels()
+                rgb = channels["RGB"].pixels if "RGB" in channels else np.stack(
+                    [channels[c].pixels for c in "RGB"], -1)
+            cache[path] = np.asarray(rgb, np.float64)[..., :3]
+        else:
+            from PIL import Image
+            with Image.open(path) as im:
+                pixels = np.asarray(im.convert("RGB"), np.float64) / 255.0
+            cache[path] = srgb_to_linear(pixels)
+    return cache[path]
+
+
+def _sample(image, uv):
+    """Nearest-texel lookup of (N, 2) texture coordinates (repeating; v up, as Blender)."""
+    th, tw = image.shape[:2]
+    u, v = np.mod(uv[:, 0], 1.0), np.mod(uv[:, 1], 1.0)
+    cols = np.minimum((u * tw).astype(int), tw - 1)
+    rows = np.minimum(((1 - v) * th).astype(int), th - 1)
+    return image[rows, cols]
