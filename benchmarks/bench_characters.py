@@ -1,9 +1,10 @@
 """Time what characters add to a scene (skinning, keypoints, tracks, colliders) against the render
 of the same scene, all in the same run.
 
-Scene: a floor, 4 falling cubes and ``--people`` walking procedural people (``tube_person`` made
-with ``--segments`` × rings every ``--spacing`` m, so the vertex count can match a MakeHuman body's
-~19k), ``--frames`` frames at ``--size``², RGB at ``--samples`` spp plus the exact annotation pass.
+Scene: a floor, 4 falling cubes and ``--people`` walking people: procedural ones (``tube_person``
+made with ``--segments`` × rings every ``--spacing`` m, so the vertex count can match a MakeHuman
+body's) or, with ``--character humans``, MakeHuman bodies from the humans source walking CMU clip
+01_01; ``--frames`` frames at ``--size``², RGB at ``--samples`` spp plus the exact annotation pass.
 Costs measured (CPU seconds): skinning every frame (``deformed_vertices``), keypoints
 (``annotate_keypoints``: regressor, projection, visibility), ``--tracks`` point tracks on the
 scene (sampled over all objects, the characters' through their skinned meshes), and the
@@ -43,12 +44,19 @@ def make_scene(args, with_people: bool):
     people = []
     if with_people:
         for i in range(args.people):
-            person = tube_person(name=f"person{i}", segments=args.segments,
-                                 spacing=args.spacing,
-                                 position=(-1.2 + 2.4 * i / max(1, args.people - 1), 1.0, 0),
-                                 material=kb.PrincipledBSDFMaterial(color="tan"))
+            where = dict(name=f"person{i}",
+                         position=(-1.2 + 2.4 * i / max(1, args.people - 1), 1.0, 0),
+                         material=kb.PrincipledBSDFMaterial(color="tan"))
+            if args.character == "humans":
+                from kubric import assets
+                characters, motions = assets.ensure_humans()
+                person, clip = characters.create("average", **where), motions.create("cmu_01_01")
+                start = 2.0 + 0.3 * i
+            else:
+                person = tube_person(segments=args.segments, spacing=args.spacing, **where)
+                clip, start = walk_clip(seconds=args.frames / 12 + 0.5), 0.3 * i
             scene += person
-            person.play(walk_clip(seconds=args.frames / 12 + 0.5), clip_start=0.3 * i)
+            person.play(clip, clip_start=start)
             people.append(person)
     return scene, people
 
@@ -62,6 +70,7 @@ def main(argv=None) -> int:
     parser.add_argument("--segments", type=int, default=48)
     parser.add_argument("--spacing", type=float, default=0.012)
     parser.add_argument("--tracks", type=int, default=1024)
+    parser.add_argument("--character", choices=("procedural", "humans"), default="procedural")
     args = parser.parse_args(argv)
 
     # colliders: the same simulation with and without the people
