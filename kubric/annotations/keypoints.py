@@ -57,11 +57,12 @@ def skin_depth(character) -> np.ndarray:
 
 def character_keypoints(camera, frames: Sequence[int], depth, segmentation, assets: Sequence,
                         character, *, names: Sequence[str] = COCO_KEYPOINTS,
-                        depth_tolerance: float = DEPTH_TOLERANCE) -> dict:
+                        depth_tolerance: float = DEPTH_TOLERANCE, slope=None) -> dict:
     """Keypoint fields (module doc) of ``character`` over ``frames`` for the keypoints ``names``
     (default: the 17 COCO ones, in COCO's order; a regressor's other points, e.g. MakeHuman's
     foot points, are left out); ``depth`` / ``segmentation`` (T, H, W[, 1]) are the rendered
-    layers labelled for ``assets`` (usually ``scene.assets``)."""
+    layers labelled for ``assets`` (usually ``scene.assets``); ``slope``: their
+    :func:`~kubric.annotations.tracks.depth_slope` when already computed."""
     if not isinstance(character, Character) or character.keypoint_regressor is None:
         raise InputError(f"{getattr(character, 'uid', character)!r} is not a Character with a "
                          "keypoint_regressor")
@@ -84,7 +85,8 @@ def character_keypoints(camera, frames: Sequence[int], depth, segmentation, asse
         cam[t] = world[t] @ m[:3, :3].T + m[:3, 3]
     skin = skin_depth(character)[pick] * float(np.max(character.scale))
     reason = occlusion_reasons(xy.transpose(1, 0, 2), cam[..., 2].T, dist.T - skin[:, None],
-                               labels, depth, depth_slope(depth, labels), np.full(k, label),
+                               labels, depth, depth_slope(depth, labels) if slope is None
+                               else slope, np.full(k, label),
                                depth_tolerance).T
     vis = np.where((reason & (BEHIND_CAMERA | OUTSIDE_IMAGE)) != 0, 0,
                    np.where(reason != 0, 1, 2)).astype(np.uint8)
@@ -113,8 +115,12 @@ def annotate_keypoints(scene, layers: dict, characters: Sequence | None = None, 
         characters = [a for a in scene.assets if isinstance(a, Character)
                       and a.keypoint_regressor is not None]
     frames = list(range(scene.frame_start, scene.frame_end + 1))
+    if not characters:
+        return []
+    depth, labels, frames = frame_layers(layers["depth"], layers["segmentation"], frames)
+    slope = depth_slope(depth, labels)  # once for every character
     for c in characters:
-        c.metadata.update(character_keypoints(scene.camera, frames, layers["depth"],
-                                              layers["segmentation"], scene.assets, c,
-                                              names=names, depth_tolerance=depth_tolerance))
+        c.metadata.update(character_keypoints(scene.camera, frames, depth, labels, scene.assets,
+                                              c, names=names, depth_tolerance=depth_tolerance,
+                                              slope=slope))
     return list(characters)
