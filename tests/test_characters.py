@@ -160,3 +160,11 @@ def test_keypoints_follow_the_walk():
                       for f in scene.frames])
     assert np.abs(kp[:, ankle] - heads).max() < 0.005   # ring centroid vs joint
     assert np.ptp(kp[:, ankle, 1]) > 0.2                  # the person walks along −y
+
+
+def test_coco_keypoints_use_pixel_index_coordinates():
+    from kubric.annotations.keypoints import coco_keypoints
+    flat, n = coco_keypoints([[10.5, 20.5], [3.25, 4.0], [-5.0, 2.0]], [2, 1, 0])
+    assert flat == [10.0, 20.0, 2, 2.75, 3.5, 1, 0.0, 0.0, 0] and n == 2
+    with pytest.raises(ValueError, match="needs"):
+        coco_keypoints([[1, 2, 3]], [2])

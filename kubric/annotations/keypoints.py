@@ -21,6 +21,7 @@ source's and the procedural person's regressors provide):
 
 :func:`annotate_keypoints` stores these in each character's ``metadata``, so
 ``get_instance_info`` writes them with the instance into ``metadata.json`` (docs/scene-format.md).
+:func:`coco_keypoints` turns one frame of them into COCO's annotation form (for a COCO export).
 """
 
 from __future__ import annotations
@@ -124,3 +125,22 @@ def annotate_keypoints(scene, layers: dict, characters: Sequence | None = None, 
                                               c, names=names, depth_tolerance=depth_tolerance,
                                               slope=slope))
     return list(characters)
+
+
+def coco_keypoints(keypoints_2d, visibility) -> tuple[list[float], int]:
+    """One frame of a person's keypoints in COCO's annotation form: (``keypoints`` = [x1, y1, v1,
+    x2, y2, v2, ...], ``num_keypoints`` = how many have v > 0).
+
+    COCO's keypoint coordinates are pixel indices (the centre of the top-left pixel is (0, 0)),
+    ours put pixel centres at +0.5, so x, y = ours − 0.5; v is our ``keypoints_visibility`` (0:
+    outside the image, written as x = y = v = 0 as COCO's unlabelled points; 1 occluded; 2 visible).
+    """
+    xy = np.asarray(keypoints_2d, np.float64)
+    vis = np.asarray(visibility).astype(np.int64)
+    if xy.ndim != 2 or xy.shape[1] != 2 or vis.shape != xy.shape[:1]:
+        raise InputError(f"coco_keypoints needs (K, 2) positions and (K,) flags, got {xy.shape} "
+                         f"and {vis.shape}")
+    out = []
+    for (x, y), v in zip(xy - 0.5, vis, strict=True):
+        out += [0.0, 0.0, 0] if v == 0 else [round(float(x), 3), round(float(y), 3), int(v)]
+    return out, int(np.sum(vis > 0))
