@@ -168,3 +168,16 @@ def test_coco_keypoints_use_pixel_index_coordinates():
     assert flat == [10.0, 20.0, 2, 2.75, 3.5, 1, 0.0, 0.0, 0] and n == 2
     with pytest.raises(ValueError, match="needs"):
         coco_keypoints([[1, 2, 3]], [2])
+
+
+def test_batched_bone_transforms_equal_frame_by_frame():
+    scene = kb.Scene(frame_start=0, frame_end=6, frame_rate=12)
+    person = tube_person(position=(1, 0, 0))
+    scene += person
+    person.play(walk_clip())
+    person.position = (1, 2, 0)
+    person.keyframe_insert("position", 6)
+    frames = [0, 0.25, 1.5, 3.1, 6]
+    batch = person.bone_transforms_at(frames)
+    for f, b in zip(frames, batch, strict=True):
+        np.testing.assert_allclose(b, person.bone_transforms(f), atol=1e-12)

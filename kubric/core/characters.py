@@ -251,6 +251,18 @@ class Character(PhysicalObject):
         """(J, 4, 4) posed bone → world transforms at ``frame`` (heads at ``[:, :3, 3]``)."""
         return self.model_to_world(frame) @ self.posed_bones(frame)
 
+    def bone_transforms_at(self, frames) -> np.ndarray:
+        """(N, J, 4, 4) posed bone → world transforms at N (fractional) ``frames``, computed in
+        one batch (what :meth:`bone_transforms` gives frame by frame)."""
+        frames = list(frames)
+        rot = np.stack([self.get_value_at("bone_rotations", f) for f in frames]).astype(float)
+        off = np.stack([self.get_value_at("root_offset", f) for f in frames]).astype(float)
+        posed = sk.posed_bones(self._rest_local, self.bone_parents, rot, off)
+        worlds = np.stack([sk.object_matrix(self.get_value_at("position", f),
+                                            self.get_value_at("quaternion", f),
+                                            self.get_value_at("scale", f)) for f in frames])
+        return worlds[:, None] @ posed
+
     def _world(self, model_points, frame):
         m = self.model_to_world(frame)
         return model_points @ m[:3, :3].T + m[:3, 3]

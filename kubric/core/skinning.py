@@ -44,17 +44,20 @@ def rest_locals(bone_rest: np.ndarray, parents: np.ndarray) -> np.ndarray:
 
 def posed_bones(rest_local: np.ndarray, parents: np.ndarray, rotations: np.ndarray,
                 root_offset: np.ndarray) -> np.ndarray:
-    """(J, 4, 4) posed bone → model transforms ``G`` (module doc)."""
-    local = rest_local.copy()
-    local[:, :3, :3] = local[:, :3, :3] @ quaternions_to_matrices(rotations)
+    """(..., J, 4, 4) posed bone → model transforms ``G`` (module doc) for rotations
+    (..., J, 4) and root offsets (..., 3): any leading batch shape (e.g. several frames)."""
+    rotations = np.asarray(rotations, np.float64)
+    batch = rotations.shape[:-2]
+    local = np.broadcast_to(rest_local, batch + rest_local.shape).copy()
+    local[..., :3, :3] = local[..., :3, :3] @ quaternions_to_matrices(rotations)
     out = np.empty_like(local)
     for j, p in enumerate(parents):
         if p < 0:
-            m = local[j].copy()
-            m[:3, 3] += root_offset
-            out[j] = m
+            m = local[..., j, :, :].copy()
+            m[..., :3, 3] += root_offset
+            out[..., j, :, :] = m
         else:
-            out[j] = out[p] @ local[j]
+            out[..., j, :, :] = out[..., p, :, :] @ local[..., j, :, :]
     return out
 
 

@@ -4,10 +4,11 @@ A :class:`~kubric.core.characters.Character` becomes one fixed (mass 0) PyBullet
 the convex hull of the rest vertices whose largest skin weight is on that bone, expressed in the
 bone's rest frame (bones that dominate fewer than 4 vertices get no collider). Before every physics
 step, each collider is moved to its bone's pose at that step's time (the model's keyframes at the
-fractional frame: :meth:`Character.bone_transforms`), so thrown objects are pushed away by the
-moving limbs and bounce off them; contacts with any collider are reported as contacts with the
-character (``events.json``). The colliders never receive forces and the simulator never writes
-keyframes of a character: its motion comes from its own keys only.
+fractional frame: :meth:`Character.bone_transforms_at`, every step of a run in one batch), so
+thrown objects are pushed away by the moving limbs and bounce off them; contacts with any
+collider are reported as contacts with the character (``events.json``). The colliders never
+receive forces and the simulator never writes keyframes of a character: its motion comes from its
+own keys only.
 
 Limits: a convex hull per bone over-covers concave parts (the hull of a hand is a box-like blob);
 the skin between two bones is covered by both hulls at rest and stretches between them when a
@@ -73,9 +74,20 @@ def build_character_bodies(character, client: int) -> CharacterBodies:
 
 def pose_character(character, bodies: CharacterBodies, client: int, frame) -> None:
     """Move every collider to its bone's world pose at ``frame`` (None: the current values)."""
+    if bodies.uids:
+        place(bodies, client, character.bone_transforms(frame)[bodies.bones])
+
+
+def schedule(character, bodies: CharacterBodies, frames) -> np.ndarray:
+    """(N, B, 4, 4) the colliders' poses at N (fractional) ``frames``, computed in one batch;
+    :func:`place` applies one of them."""
     if not bodies.uids:
-        return
-    transforms = character.bone_transforms(frame)[bodies.bones]
+        return np.zeros((len(frames), 0, 4, 4))
+    return character.bone_transforms_at(frames)[:, bodies.bones]
+
+
+def place(bodies: CharacterBodies, client: int, transforms: np.ndarray) -> None:
+    """Move the colliders to ``transforms`` (B, 4, 4) (bone → world, scale included)."""
     quats = matrices_to_quaternions(transforms[:, :3, :3] / bodies.scale)[:, [1, 2, 3, 0]]
     for uid, m, q in zip(bodies.uids, transforms, quats, strict=True):
         pb.resetBasePositionAndOrientation(uid, m[:3, 3].tolist(), q.tolist(),

@@ -217,12 +217,15 @@ class PyBullet(TableView):
                 self._assets_by_body.pop(uid, None)
             kb_characters.remove_character_bodies(obj, self.client)
 
-    def _pose_characters(self, frame) -> None:
-        """Move every character's colliders to its pose at (fractional) ``frame``."""
-        for asset in self.scene.assets:
-            bodies = asset.linked_objects.get(self)
-            if isinstance(bodies, kb_characters.CharacterBodies):
-                kb_characters.pose_character(asset, bodies, self.client, frame)
+    def _characters(self) -> list:
+        """[(character, its colliders)] of the scene."""
+        return [(a, a.linked_objects[self]) for a in self.scene.assets
+                if isinstance(a.linked_objects.get(self), kb_characters.CharacterBodies)]
+
+    def _character_schedule(self, times) -> list:
+        """[(colliders, (N, B, 4, 4) poses at ``times``)] for every character."""
+        return [(bodies, kb_characters.schedule(c, bodies, times))
+                for c, bodies in self._characters()]
 
     def _apply_state(self, obj, body: Body) -> None:
         """Set the engine pose and velocities from the model (the model is the truth)."""
@@ -367,14 +370,18 @@ class PyBullet(TableView):
         simulated = self._simulated()
         for obj, body in simulated:  # the model is the truth at the start of a run
             self._apply_state(obj, body)
-        self._pose_characters(frame_start)
+        n_steps = (frame_end - frame_start) * steps_per_frame
+        # kinematic colliders: every step's pose, computed at once (step 0 = frame_start)
+        poses = self._character_schedule(frame_start + np.arange(n_steps + 1) / steps_per_frame)
+        for bodies, schedule in poses:
+            kb_characters.place(bodies, self.client, schedule[0])
 
         states: dict = {}
         self._read_all(simulated, states)
         events: list[dict] = []
-        n_steps = (frame_end - frame_start) * steps_per_frame
         for step in range(1, n_steps + 1):
-            self._pose_characters(frame_start + step / steps_per_frame)  # kinematic colliders
+            for bodies, schedule in poses:  # kinematic colliders at this step's time
+                kb_characters.place(bodies, self.client, schedule[step])
             pb.stepSimulation(physicsClientId=self.client)
             points = pb.getContactPoints(physicsClientId=self.client)
             if points:
