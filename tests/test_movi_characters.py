@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from collection_fixtures import run_worker
 
-from kubric.pipeline import get_recipe
+from kubric.pipeline import OptionError, get_recipe
 
 OPTIONS = ("resolution=64", "frame_end=3", "samples=2", "denoise=false", "min_num_objects=2",
            "max_num_objects=3", "collection_limit=8", "characters=1",
@@ -49,3 +49,10 @@ def test_zero_characters_leaves_flags_unchanged():
     assert not {"characters", "character_source", "motion_source"} & set(flags)
     flags = movi_c(characters=2, character_source="procedural").flags(0)
     assert flags["characters"] == 2 and flags["character_source"] == "procedural"
+
+
+def test_characters_need_the_blender_renderer():
+    with pytest.raises(OptionError, match="renderer=raycast has no skinned characters"):
+        get_recipe("movi_c")(characters=1, renderer="raycast").check()
+    with pytest.raises(OptionError, match="renderer=raycast has no skinned characters"):
+        get_recipe("pose_estimation")(renderer="raycast").check()

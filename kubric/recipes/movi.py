@@ -230,6 +230,12 @@ class MoviC(MoviBase, name="movi_c"):
                 out.pop(name)
         return out
 
+    def check_renderer(self) -> None:
+        super().check_renderer()
+        if self.characters and self.renderer != "blender":
+            raise OptionError(f"{self.name}: renderer={self.renderer} has no skinned characters "
+                              f"(characters={self.characters}); these need renderer=blender")
+
     def open_sources(self):
         from kubric import assets
         sources = super().open_sources()

@@ -66,6 +66,12 @@ class PoseEstimation(MoviBase, name="pose_estimation"):
                            "(the built-in walk); default: the humans source's clips",
                            type=character_location)
 
+    def check_renderer(self) -> None:
+        super().check_renderer()
+        if self.renderer != "blender":
+            raise OptionError(f"{self.name}: renderer={self.renderer} has no skinned characters; "
+                              "this recipe needs renderer=blender")
+
     def open_sources(self) -> dict:
         sources = super().open_sources()
         sources.update(open_people_sources(self.character_source, self.motion_source))
