@@ -58,3 +58,22 @@ def test_non_uniform_scale_is_refused():
     scene += tube_person(name="wide", scale=(1.0, 2.0, 1.0))
     with pytest.raises(ValueError, match="wide: PyBullet simulates characters with a uniform"):
         PyBullet(scene)
+
+
+def test_colliders_follow_scale_and_dynamics_changes():
+    import pybullet as pb
+
+    from kubric.simulator.pybullet import PyBullet
+    scene, person = _scene()
+    sim = PyBullet(scene)
+    bodies = person.linked_objects[sim]
+    first = list(bodies.uids)
+    assert len(first) >= 10                     # one hull per bone that dominates vertices
+    person.friction = 0.8                        # no rebuild: the same bodies, new friction
+    assert bodies.uids == first
+    assert pb.getDynamicsInfo(first[0], -1, physicsClientId=sim.client)[1] == pytest.approx(0.8)
+    person.scale = 1.5                           # new hulls at the new size
+    assert bodies.uids != first and bodies.scale == 1.5
+    top = max(pb.getAABB(u, physicsClientId=sim.client)[1][2] for u in bodies.uids)
+    assert top == pytest.approx(1.5 * person.rest_bounds[1, 2], abs=0.05)
+    sim.close()

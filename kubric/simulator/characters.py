@@ -37,7 +37,7 @@ class CharacterBodies:
     scale: float = 1.0
 
 
-def _uniform_scale(character) -> float:
+def uniform_scale(character) -> float:
     s = np.asarray(character.scale, np.float64)
     if np.ptp(s) > 1e-6 * np.abs(s).max():
         raise InputError(f"{character.uid}: PyBullet simulates characters with a uniform scale "
@@ -45,9 +45,18 @@ def _uniform_scale(character) -> float:
     return float(s[0])
 
 
+def _hull_vertices(points: np.ndarray) -> np.ndarray:
+    """Indices of the points on the convex hull (all of them when they span no volume)."""
+    from scipy.spatial import ConvexHull, QhullError
+    try:
+        return ConvexHull(points).vertices
+    except (QhullError, ValueError):
+        return np.arange(len(points))
+
+
 def build_character_bodies(character, client: int) -> CharacterBodies:
     """One fixed convex-hull body per bone (module doc), posed at the current model pose."""
-    scale = _uniform_scale(character)
+    scale = uniform_scale(character)
     main = np.argmax(character.skin_weights, axis=1)
     owner = character.skin_indices[np.arange(len(main)), main]
     used = np.zeros(len(character.vertices), bool)
@@ -59,17 +68,24 @@ def build_character_bodies(character, client: int) -> CharacterBodies:
         if len(pts) < MIN_HULL_VERTICES:
             continue
         local = (pts @ inv_rest[j, :3, :3].T + inv_rest[j, :3, 3]) * scale
+        local = local[_hull_vertices(local)]  # Bullet's hull tests every point it is given
         shape = pb.createCollisionShape(pb.GEOM_MESH, vertices=local.tolist(),
                                         physicsClientId=client)
         uid = pb.createMultiBody(baseMass=0.0, baseCollisionShapeIndex=shape,
                                  physicsClientId=client)
+        out.bones.append(j)
+        out.uids.append(uid)
+    set_dynamics(character, out, client)
+    pose_character(character, out, client, None)
+    return out
+
+
+def set_dynamics(character, bodies: CharacterBodies, client: int) -> None:
+    """The character's friction and restitution on every collider."""
+    for uid in bodies.uids:
         pb.changeDynamics(uid, -1, lateralFriction=float(character.friction),
                           restitution=float(character.restitution),
                           contactProcessingThreshold=0.0, physicsClientId=client)
-        out.bones.append(j)
-        out.uids.append(uid)
-    pose_character(character, out, client, None)
-    return out
 
 
 def pose_character(character, bodies: CharacterBodies, client: int, frame) -> None:

@@ -103,12 +103,19 @@ def _repose_character(view, character, bodies, value):
     kb_characters.pose_character(character, bodies, view.client, None)
 
 
-def _rebuild_character(view, character, bodies, value):
+def _rescale_character(view, character, bodies, value):
+    """A new scale needs new hulls (the add replays every setter: unchanged scale, no work)."""
+    if kb_characters.uniform_scale(character) == bodies.scale:
+        return
     for uid in bodies.uids:
         view._assets_by_body.pop(uid, None)
     kb_characters.remove_character_bodies(bodies, view.client)
     new = _build_character(view, character)
     bodies.bones, bodies.uids, bodies.scale = new.bones, new.uids, new.scale
+
+
+def _character_dynamics(view, character, bodies, value):
+    kb_characters.set_dynamics(character, bodies, view.client)
 
 
 def _ignore(view, obj, body, value):
@@ -143,8 +150,8 @@ class PyBullet(TableView):
         FileBasedObject: {"simulation_filename": _set_shape},
         Character: {"position": _repose_character, "quaternion": _repose_character,
                     "bone_rotations": _repose_character, "root_offset": _repose_character,
-                    "scale": _rebuild_character, "friction": _rebuild_character,
-                    "restitution": _rebuild_character, "velocity": _ignore,
+                    "scale": _rescale_character, "friction": _character_dynamics,
+                    "restitution": _character_dynamics, "velocity": _ignore,
                     "angular_velocity": _ignore, "static": _ignore, "mass": _ignore},
     }
     keyframers = {}
