@@ -1,11 +1,16 @@
 # The two commands a newcomer needs: `make demo` and `make test`.
-# Every target creates .venv (python3.11) and installs the project when missing or stale.
+# `make demo` installs the core package only (no extras) into .venv-demo; every other target
+# installs everything the tests need into .venv. Each is created when missing and reinstalled
+# when pyproject.toml is newer, so running both, in either order, leaves both correct.
 PYTHON ?= python3.11
 VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
+DEMO_VENV  := .venv-demo
+DEMO_BIN   := $(DEMO_VENV)/bin
+DEMO_STAMP := $(DEMO_VENV)/.installed
 
-.PHONY: install test test-fast demo bench lint docs clean slurm browser
+.PHONY: install test test-fast demo bench lint docs clean slurm browser testmodels
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -23,7 +28,7 @@ $(STAMP): pyproject.toml | $(BIN)/python
 
 install: $(STAMP)
 
-test: $(STAMP) browser
+test: $(STAMP) browser testmodels
 	$(BIN)/python -m pytest -q
 
 browser:  # Debian's chromium + chromedriver for the `kubric view` browser tests (skipped when present)
@@ -32,14 +37,30 @@ browser:  # Debian's chromium + chromedriver for the `kubric view` browser tests
 	  $$SUDO apt-get update && $$SUDO apt-get install -y chromium chromium-driver; \
 	fi
 
+testmodels:  # Debian's assimp-testmodels: CMU BVH clips + skinned FBX/glTF files (character tests)
+	@if [ ! -f /usr/share/assimp/models/BVH/01_01.bvh ]; then \
+	  SUDO=$$( [ "$$(id -u)" = 0 ] || echo sudo ); \
+	  $$SUDO apt-get update && $$SUDO apt-get install -y assimp-testmodels; \
+	fi
+
 # Everything but the tests marked `blender` (renders) or `slow` (servers, clusters, fault runs);
 # bpy is blocked so a render test without the marker fails. `make test` runs them all.
 test-fast: $(STAMP)
 	@start=$$(date +%s); $(BIN)/python -m pytest -q --no-blender -m "not slow"; rc=$$?; \
 	echo "make test-fast: $$(( $$(date +%s) - start )) s wall"; exit $$rc
 
-demo: $(STAMP)
-	$(BIN)/python -m kubric.demo
+# The demo needs the core dependencies only (bpy, pybullet, numpy, ...): no torch, jax, Dask or
+# TFDS. Editable, so the demo runs this checkout's code.
+$(DEMO_BIN)/python:
+	$(PYTHON) -m venv $(DEMO_VENV)
+	$(DEMO_BIN)/python -m pip install --quiet --upgrade pip
+
+$(DEMO_STAMP): pyproject.toml | $(DEMO_BIN)/python
+	$(DEMO_BIN)/python -m pip install --quiet -e .
+	touch $(DEMO_STAMP)
+
+demo: $(DEMO_STAMP)
+	$(DEMO_BIN)/python -m kubric.demo
 
 bench: $(STAMP)
 	$(BIN)/python -m pip install --quiet -e '.[$(EXTRAS),coacd,bench]'  # V-HACD vs CoACD, codecs vs libraries
@@ -57,4 +78,4 @@ lint: $(STAMP)
 	$(BIN)/ruff check kubric tests
 
 clean:
-	rm -rf $(VENV) build site *.egg-info
+	rm -rf $(VENV) $(DEMO_VENV) build site *.egg-info

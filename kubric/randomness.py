@@ -124,7 +124,7 @@ def _unseeded_rng(where: str) -> np.random.RandomState:
     return _unseeded
 
 
-def _require_rng(rng, where: str):
+def require_rng(rng, where: str):
     if rng is None:
         _check_unseeded_allowed(where)
         bound = worker_rng()
@@ -153,13 +153,13 @@ def _choice_index(rng, n: int) -> int:
 
 def random_hue_color(saturation: float = 1.0, value: float = 1.0, rng=None) -> Color:
     """A colour of uniformly random hue with the given HSV saturation and value."""
-    rng = _require_rng(rng, "random_hue_color")
+    rng = require_rng(rng, "random_hue_color")
     return Color.from_hsv(float(_uniform(rng)), saturation, value)
 
 
 def random_clevr_color(rng=None) -> tuple[str, Color]:
     """(name, Color) of a uniformly chosen CLEVR colour (:data:`kubric.assets.clevr.COLORS`)."""
-    rng = _require_rng(rng, "random_clevr_color")
+    rng = require_rng(rng, "random_clevr_color")
     names = sorted(clevr.COLORS)
     name = names[_choice_index(rng, len(names))]
     return name, clevr.COLORS[name]
@@ -168,7 +168,7 @@ def random_clevr_color(rng=None) -> tuple[str, Color]:
 def random_rotation(axis: str | Sequence[float] | None = None, rng=None) -> tuple[float, ...]:
     """A uniformly random rotation (WXYZ tuple): about ``axis`` ("X", "Y", "Z" or a vector) by a
     uniform angle, or uniform over SO(3) when ``axis`` is None."""
-    rng = _require_rng(rng, "random_rotation")
+    rng = require_rng(rng, "random_rotation")
     if axis is None:
         # Shoemake's method: uniform over SO(3).
         u1, u2, u3 = (float(v) for v in _uniform(rng, size=3))
@@ -236,7 +236,7 @@ def resample_while(asset, samplers: Sequence[Callable], condition: Callable[[Any
     ``RuntimeError`` naming the asset after ``max_trials``. If no trial succeeded, the asset keeps
     its last sampled pose.
     """
-    rng = _require_rng(rng, "resample_while")
+    rng = require_rng(rng, "resample_while")
     if max_trials < 1:
         raise ValueError(f"max_trials must be ≥ 1, got {max_trials}")
     too_big = 0
@@ -260,7 +260,7 @@ def move_until_no_overlap(asset, simulator, spawn_region=((-1, -1, -1), (1, 1, 1
     ``spawn_region`` until it overlaps nothing in ``simulator`` (which must offer
     ``check_overlap(asset)``). Rotations too large for the region are rejected trials. Returns the
     trials used; ``RuntimeError`` naming the asset after ``max_trials``."""
-    rng = _require_rng(rng, "move_until_no_overlap")
+    rng = require_rng(rng, "move_until_no_overlap")
     return resample_while(asset, samplers=[rotation_sampler(), position_sampler(spawn_region)],
                           condition=simulator.check_overlap, max_trials=max_trials, rng=rng)
 
@@ -269,7 +269,7 @@ def sample_point_in_half_sphere_shell(inner_radius: float, outer_radius: float,
                                       offset: float = 0.0, rng=None) -> np.ndarray:
     """A point (3,) uniformly distributed in the upper half of a spherical shell
     (inner_radius ≤ |p| ≤ outer_radius, z ≥ offset)."""
-    rng = _require_rng(rng, "sample_point_in_half_sphere_shell")
+    rng = require_rng(rng, "sample_point_in_half_sphere_shell")
     if not 0 <= inner_radius <= outer_radius:
         raise ValueError(f"need 0 ≤ inner_radius ≤ outer_radius, got {inner_radius}, "
                          f"{outer_radius}")
@@ -285,7 +285,7 @@ def sample_point_in_half_sphere_shell(inner_radius: float, outer_radius: float,
 def sample_color(strategy: str, rng=None) -> tuple[str | None, Color]:
     """(label, colour) by strategy: ``"clevr"`` (a CLEVR colour and its name), ``"uniform_hue"``
     (random hue, label None) or ``"gray"``."""
-    rng = _require_rng(rng, "sample_color")
+    rng = require_rng(rng, "sample_color")
     if strategy == "clevr":
         return random_clevr_color(rng=rng)
     if strategy == "uniform_hue":
@@ -298,7 +298,7 @@ def sample_color(strategy: str, rng=None) -> tuple[str | None, Color]:
 def sample_sizes(strategy: str, rng=None) -> tuple[str | None, float]:
     """(label, scale) by strategy: ``"clevr"`` (:data:`kubric.assets.clevr.SIZES`: small 0.7 /
     large 1.4), ``"uniform"`` (U(small, large), label None) or ``"const"`` (1)."""
-    rng = _require_rng(rng, "sample_sizes")
+    rng = require_rng(rng, "sample_sizes")
     if strategy == "clevr":
         labels = list(clevr.SIZES)
         label = labels[_choice_index(rng, len(labels))]

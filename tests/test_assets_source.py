@@ -125,7 +125,8 @@ def test_test_split_is_deterministic_and_disjoint(tmp_path):
     (lambda m: m["assets"]["alpha"].pop("kwargs"), "asset 'alpha': missing required field "
                                                    "'kwargs'"),
     (lambda m: m["assets"]["alpha"].update(asset_type="Mesh"),
-     "unknown asset_type 'Mesh'; allowed: \\['FileBasedObject', 'Texture'\\]"),
+     "unknown asset_type 'Mesh'; allowed: \\['FileBasedObject', 'Texture', 'Character', "
+     "'MotionClip'\\]"),
     (lambda m: m["assets"]["alpha"].update(id="other"), "must equal its key"),
 ])
 def test_bad_manifest_is_a_clear_error(tmp_path, breakage, message):

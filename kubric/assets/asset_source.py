@@ -5,7 +5,8 @@ Manifest (compatible with upstream Kubric's)::
     {"name": str, "version": str, "data_dir": str (optional, default: the manifest's folder),
      "assets": {asset_id: {"id", "asset_type", "license", "kwargs", "metadata", "path"?}}}
 
-``asset_type`` is ``"FileBasedObject"`` or ``"Texture"``; ``path`` (default ``<id>.tar.gz``) is
+``asset_type`` is ``"FileBasedObject"``, ``"Texture"``, ``"Character"`` or ``"MotionClip"``
+(the last two: :mod:`kubric.assets.characters`); ``path`` (default ``<id>.tar.gz``) is
 relative to ``data_dir``. String values of ``kwargs`` that start with ``{asset_dir}/`` point into
 the extracted archive. Archives are extracted lazily, once, with :func:`safe_extract`, into a
 per-source folder of the cache (see :func:`cache_dir`).
@@ -254,7 +255,7 @@ class AssetSource:
         return _resolve(entry["kwargs"], self.fetch(asset_id))
 
     def create(self, asset_id: str, add_metadata: bool = True, **kwargs):
-        """A new asset (``FileBasedObject`` or ``Texture``) for ``asset_id``.
+        """A new asset (``FileBasedObject``, ``Texture``, ``kb.Character`` or ``kb.MotionClip``).
 
         ``kwargs`` override the manifest's (e.g. ``material=``, ``scale=``, ``position=``).
         With ``add_metadata`` (default) the asset's ``metadata`` holds the entry's metadata with
@@ -274,6 +275,13 @@ class AssetSource:
             metadata.update(entry["metadata"])
             metadata.update({"asset_id": asset_id, "license": entry["license"]})
         metadata.update(merged.pop("metadata", {}) or {})
+        if entry["asset_type"] in ("Character", "MotionClip"):
+            from kubric.assets import characters
+            files = self.get_asset_kwargs(asset_id)
+            make = (characters.create_character if entry["asset_type"] == "Character"
+                    else characters.create_motion)
+            return make(entry, files, metadata, {k: v for k, v in merged.items()
+                                                 if k not in files})
         merged.setdefault("name", _safe_name(asset_id))
         if entry["asset_type"] == "FileBasedObject":
             return core.FileBasedObject(asset_id=asset_id, metadata=metadata, **merged)

@@ -15,7 +15,7 @@ from pathlib import Path
 
 from kubric.errors import KubricError
 
-ASSET_TYPES = ("FileBasedObject", "Texture")
+ASSET_TYPES = ("FileBasedObject", "Texture", "Character", "MotionClip")
 ENTRY_FIELDS = ("id", "asset_type", "license", "kwargs", "metadata")
 MANIFEST_FIELDS = ("name", "assets")
 ASSET_DIR = "{asset_dir}"

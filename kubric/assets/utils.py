@@ -12,7 +12,7 @@ import numpy as np
 
 from kubric.assets import clevr
 from kubric.core import lights as core_lights
-from kubric.randomness import _require_rng
+from kubric.randomness import require_rng
 
 
 def _unit_cube_sample(rng) -> np.ndarray:
@@ -36,7 +36,7 @@ def get_clevr_lights(light_jitter: float = 1.0, rng=None) -> list:
       ``[sun (DirectionalLight), lamp_back, lamp_key, lamp_fill (RectAreaLight)]``, not yet
       added to any scene (``scene += get_clevr_lights(rng=rng)`` adds them all).
     """
-    rng = _require_rng(rng, "kb.assets.utils.get_clevr_lights")
+    rng = require_rng(rng, "kb.assets.utils.get_clevr_lights")
     jitter = float(light_jitter)
     if not np.isfinite(jitter) or jitter < 0:
         raise ValueError(f"get_clevr_lights: light_jitter must be a finite number >= 0 (metres), "

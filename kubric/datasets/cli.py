@@ -22,8 +22,8 @@ def cmd_pack(args) -> int:
     if storage.is_url(args.out):
         return _error("pack", f"--out {args.out!r}: the dataset is written to a directory (on a "
                       "filesystem the workers share, with --cluster), not a URL")
-    from kubric.pipeline.cli import _misplaced_flag
-    misplaced = _misplaced_flag(args)
+    from kubric.pipeline.cli import misplaced_flag
+    misplaced = misplaced_flag(args)
     if misplaced:
         return _error("pack", misplaced)
     try:
@@ -47,9 +47,9 @@ def _pack_on_cluster(args, common: dict) -> int:
     from kubric.datasets.dask_pack import DaskExecutor, pack_sharded
     from kubric.datasets.layout import DatasetError
     from kubric.io.schema import SchemaError
-    from kubric.pipeline.cli import _cluster_options
+    from kubric.pipeline.cli import cluster_options
     from kubric.pipeline.dask_runner import ClusterError, open_cluster, slurm_job_script
-    options = _cluster_options(args)
+    options = cluster_options(args)
     try:
         options.validate()
     except ClusterError as err:

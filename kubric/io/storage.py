@@ -195,10 +195,10 @@ def download_dir(location, local_dir) -> pathlib.Path:
     return local_dir
 
 
-def complete_scenes(root, success: str = "_SUCCESS") -> list[str]:
+def complete_scenes(root, success: str = "_SUCCESS") -> list[str]:  # scene_dir.SUCCESS_FILE
     """Names of the ``scene_*`` directories under ``root`` that hold ``success`` — the only ones
     a reader (pack, inspect, resume) may treat as data."""
-    names = [n for n in listdir(root) if n.startswith("scene_")]
+    names = [n for n in listdir(root) if n.startswith("scene_")]  # kubric.io.scene_dir naming
     if not is_url(root):
         return [n for n in names if os.path.isfile(os.path.join(root, n, success))]
     fs, path = _fs(root)

@@ -79,7 +79,7 @@ def _flag(name: str) -> str:
     return "--" + name.replace("_", "-")
 
 
-def _misplaced_flag(args) -> str | None:
+def misplaced_flag(args) -> str | None:
     """A one-line complaint about a flag given where it means nothing, or None."""
     given = [n for n in (*CLUSTER_FLAGS, *SLURM_FLAGS) if getattr(args, n) not in (None, False)]
     if args.cluster is None:
@@ -97,7 +97,7 @@ def _misplaced_flag(args) -> str | None:
     return None
 
 
-def _cluster_options(args):
+def cluster_options(args):
     from kubric.pipeline.dask_runner import ClusterOptions
     value = {n: d if getattr(args, n) is None else getattr(args, n)
              for n, d in {**CLUSTER_FLAGS, **SLURM_FLAGS}.items()}
@@ -128,19 +128,19 @@ def cmd_generate(args) -> int:
         return _error("generate", f"--retries must be ≥ 0, got {args.retries}")
     if args.timeout is not None and not (math.isfinite(args.timeout) and args.timeout > 0):
         return _error("generate", f"--timeout must be a finite number of seconds > 0, got {args.timeout}")
-    misplaced = _misplaced_flag(args)
+    misplaced = misplaced_flag(args)
     if misplaced:
         return _error("generate", misplaced)
-    cluster_options = None
+    cluster_opts = None
     if args.cluster is not None:
         from kubric.pipeline.dask_runner import ClusterError, slurm_job_script
-        cluster_options = _cluster_options(args)
+        cluster_opts = cluster_options(args)
         try:
-            cluster_options.validate()
+            cluster_opts.validate()
         except ClusterError as err:
             return _error("generate", err)
         if args.print_job_script:
-            print(slurm_job_script(cluster_options))
+            print(slurm_job_script(cluster_opts))
             return 0
     from kubric.pipeline.cleanup import handle_termination, private_tmpdir
     handle_termination()  # until the runner installs its own (stop, end the workers, clean up)
@@ -163,17 +163,17 @@ def cmd_generate(args) -> int:
     common = dict(assignments=args.set, retries=args.retries, timeout=args.timeout,
                   progress=not args.no_progress)
     client = cluster = None
-    if cluster_options is None:
+    if cluster_opts is None:
         runner = LocalRunner(recipe_spec(cls), out, seeds, workers=args.workers, **common)
     else:
         from kubric.pipeline.dask_runner import DaskRunner, open_cluster
         try:
-            client, cluster = open_cluster(cluster_options)
+            client, cluster = open_cluster(cluster_opts)
         except ClusterError as err:
             return _error("generate", err)
         print(f"Dask dashboard: {client.dashboard_link}", flush=True)
         runner = DaskRunner(recipe_spec(cls), out, seeds, client,
-                            threads_per_scene=cluster_options.threads_per_scene, **common)
+                            threads_per_scene=cluster_opts.threads_per_scene, **common)
     try:
         summary = runner.run()
     finally:

@@ -98,9 +98,9 @@ class MoviBase(RenderQuality, Recipe):
                             type=source_location)
     save_state = Option(False, "also write scene.blend (animated) and scene.bullet (initial "
                         "physics state)")
-    renderer = Option("blender", "rendering backend (docs/renderers.md): blender = Cycles; "
-                      "raycast = embree, exact layers without bpy, RGB not photoreal",
-                      choices=tuple(BACKENDS))
+    renderer = Option("blender", "rendering backend, one of kubric.renderer.BACKENDS "
+                      "(docs/renderers.md: blender = Cycles; raycast = embree, exact layers "
+                      "without bpy, RGB not photoreal)", choices=tuple(BACKENDS))
     tracks = Option(0, "point tracks to sample and write to tracks.npz (0 = none; docs/tracks.md)",
                     low=0)
     track_queries = Option(None, "file of given track queries, rows (t, y, x) in pixels (.npy, "

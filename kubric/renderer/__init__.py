@@ -11,7 +11,8 @@ import importlib
 from kubric.renderer.base import ALL_LAYERS, ANNOTATION_LAYERS, BACKENDS, Renderer, create
 
 __all__ = ["ALL_LAYERS", "ANNOTATION_LAYERS", "BACKENDS", "Renderer", "create"]
-_LAZY = {"Blender": "kubric.renderer.blender", "Raycast": "kubric.renderer.raycast"}
+#: backend class name → its module, for ``kubric.renderer.Blender`` etc. (derived from BACKENDS)
+_LAZY = {spec.split(":")[1]: spec.split(":")[0] for spec in BACKENDS.values()}
 
 
 def __getattr__(name):

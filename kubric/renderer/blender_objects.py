@@ -197,21 +197,21 @@ def build_orthographic_camera(view, asset):
     return obj
 
 
-def _data_setter(attr, convert=float):
+def data_setter(attr, convert=float):
     def setter(view, asset, obj, value):
         setattr(obj.data, attr, convert(value))
     return setter
 
 
-def _set_dof(view, asset, obj, value):
+def set_dof(view, asset, obj, value):
     obj.data.dof.use_dof = bool(value)
 
 
-def _set_focus_distance(view, asset, obj, value):
+def set_focus_distance(view, asset, obj, value):
     obj.data.dof.focus_distance = float(value)
 
 
-def _set_fstop(view, asset, obj, value):
+def set_fstop(view, asset, obj, value):
     obj.data.dof.aperture_fstop = float(value)
 
 

@@ -1,0 +1,171 @@
+"""``kubric export coco SCENES --out FILE.json``: instance annotations in COCO's format.
+
+One COCO image per frame (per view of a multi-view scene) whose ``file_name`` is the frame's RGB
+file relative to SCENES (``scene_00000007/rgba_00003.png``); one annotation per instance visible
+in that frame, derived from the segmentation layer:
+
+* ``segmentation``: the instance's pixels (label ``k`` = ``metadata["instances"][k − 1]``) as a
+  COCO RLE (:mod:`kubric.datasets.exports.rle`; compressed by default);
+* ``bbox``: ``[x, y, w, h]`` in pixels, ``x, y`` the top-left corner of the box in pixel-edge
+  coordinates: ``[col_min, row_min, col_max + 1 − col_min, row_max + 1 − row_min]`` (= our
+  metadata's normalised ``(ymin, xmin, ymax, xmax)`` times the image size);
+* ``area``: the number of pixels (= ``metadata["instances"][k − 1]["visibility"][i]``);
+* ``iscrowd`` 0, ``category_id`` from the recipe's labels (:mod:`.categories`);
+* additions: ``instance`` (k − 1) and ``asset_id``; images add ``scene``, ``seed``, ``frame``
+  and, for multi-view scenes, ``split``.
+
+Ids: :mod:`kubric.datasets.exports.scenes`. The file is written as it goes (one scene in memory;
+annotations go to a hidden side file and are appended at the end) and renamed into place when
+complete, so a partial file never carries the final name.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+import pathlib
+import shutil
+import sys
+
+import numpy as np
+
+from kubric.datasets.exports import rle
+from kubric.datasets.exports.categories import scheme_for
+from kubric.datasets.exports.scenes import (
+    ExportError,
+    Scene,
+    annotation_id,
+    find_scenes,
+    image_id,
+    load_scene,
+)
+from kubric.io.paths import temp_name_for
+
+
+@dataclasses.dataclass
+class CocoSummary:
+    path: pathlib.Path
+    scenes: int
+    images: int
+    annotations: int
+    categories: list[str]
+    category_kind: str
+    skipped_incomplete: int
+
+    def format(self) -> str:
+        skipped = f", {self.skipped_incomplete} incomplete scene(s) skipped" \
+            if self.skipped_incomplete else ""
+        return (f"wrote {self.path}: {self.scenes} scene(s), {self.images} images, "
+                f"{self.annotations} annotations, {len(self.categories)} categories "
+                f"({self.category_kind}){skipped}")
+
+
+def mask_bbox(mask: np.ndarray) -> list[int]:
+    """COCO ``[x, y, w, h]`` (pixels, pixel-edge coordinates) of a non-empty (H, W) mask."""
+    rows = np.flatnonzero(mask.any(axis=1))
+    cols = np.flatnonzero(mask.any(axis=0))
+    return [int(cols[0]), int(rows[0]), int(cols[-1] + 1 - cols[0]), int(rows[-1] + 1 - rows[0])]
+
+
+def scene_records(scene: Scene, scheme, compressed: bool = True):
+    """(images, annotations) of one scene, as lists of dicts."""
+    from kubric.io.layers import read_layer
+    w, h = scene.resolution
+    try:
+        seg = read_layer(scene.path, "segmentation")[..., 0]
+    except FileNotFoundError as err:
+        raise ExportError(str(err)) from None
+    if seg.shape != (scene.num_frames, h, w):
+        raise ExportError(f"{scene.path.name}: segmentation has shape {seg.shape[:3]}, metadata "
+                          f"says {scene.num_frames} frames of {w}×{h}")
+    instances = scene.metadata.get("instances", [])
+    if seg.max(initial=0) > len(instances):
+        raise ExportError(f"{scene.path.name}: segmentation label {int(seg.max())} but only "
+                          f"{len(instances)} instances in metadata.json")
+    views = scene.metadata["metadata"].get("views")
+    images, annotations = [], []
+    for i in range(scene.num_frames):
+        rgb = f"rgba_{i:05d}.png"
+        if not (scene.path / rgb).is_file():
+            raise ExportError(f"{scene.path.name}: frame {i} has no {rgb}")
+        img = {"id": image_id(scene.seed, i), "file_name": scene.file(rgb), "width": w,
+               "height": h, "scene": scene.path.name, "seed": scene.seed, "frame": i}
+        if views:
+            img["split"] = views[i].get("split")
+        images.append(img)
+        for label in np.unique(seg[i]):
+            label = int(label)
+            if label == 0:
+                continue
+            mask = seg[i] == label
+            ann = {"id": annotation_id(img["id"], label), "image_id": img["id"],
+                   "category_id": scheme.category_id(scene, label - 1),
+                   "segmentation": rle.encode(mask, compressed), "area": int(mask.sum()),
+                   "bbox": mask_bbox(mask), "iscrowd": 0, "instance": label - 1,
+                   "asset_id": instances[label - 1].get("asset_id")}
+            ann.update(scheme.annotation_extras(scene, label - 1, i))
+            annotations.append(ann)
+    return images, annotations
+
+
+def _dump(item) -> str:
+    return json.dumps(item, separators=(",", ":"), allow_nan=False)
+
+
+def export_coco(root, out, progress: bool = True, compressed: bool = True,
+                sources=()) -> CocoSummary:
+    """Write every complete scene under ``root`` (or the scene ``root``) as one COCO file."""
+    from tqdm import tqdm
+
+    root = pathlib.Path(root)
+    out = pathlib.Path(out)
+    if out.is_dir():
+        raise ExportError(f"--out {str(out)!r} is a directory; give a file name (.json)")
+    if not out.parent.is_dir():
+        raise ExportError(f"--out {str(out)!r}: folder {str(out.parent)!r} does not exist")
+    paths, skipped = find_scenes(root)
+    scheme = scheme_for(load_scene(root, paths[0]), sources)
+    info = {"description": f"Kubric scenes exported from {root.resolve().name}",
+            "version": "1.0", "categories_from": scheme.kind,
+            "id_scheme": "image_id = seed * 10000 + frame; id = image_id * 10000 + label"}
+    tmp, side = temp_name_for(out), temp_name_for(out.with_name(out.name + ".annotations"))
+    n_images = n_annotations = 0
+    try:
+        with open(tmp, "w", encoding="utf-8") as main, open(side, "w+", encoding="utf-8") as anns:
+            main.write('{"info":' + _dump(info) + ',"licenses":[],"categories":'
+                       + _dump(scheme.categories) + ',"images":[')
+            first_scene = None
+            with tqdm(total=len(paths), unit="scene", desc="export coco", file=sys.stderr,
+                      disable=not progress) as bar:
+                for path in paths:
+                    scene = load_scene(root, path)
+                    if first_scene is None:
+                        first_scene = scene.recipe
+                    elif scene.recipe != first_scene:
+                        raise ExportError(f"{path.name}: recipe {scene.recipe!r} differs from "
+                                          f"the first scene's {first_scene!r}; export each "
+                                          "recipe's scenes separately")
+                    scheme.check(scene)
+                    images, annotations = scene_records(scene, scheme, compressed)
+                    for item in images:
+                        main.write(("," if n_images else "") + _dump(item))
+                        n_images += 1
+                    for item in annotations:
+                        anns.write(("," if n_annotations else "") + _dump(item))
+                        n_annotations += 1
+                    bar.update(1)
+            main.write('],"annotations":[')
+            anns.seek(0)
+            shutil.copyfileobj(anns, main, 1 << 16)
+            main.write("]}\n")
+        os.replace(tmp, out)
+    finally:
+        for p in (tmp, side):
+            if p.exists():
+                p.unlink()
+    return CocoSummary(out, len(paths), n_images, n_annotations, scheme.names, scheme.kind,
+                       skipped)
+
+
+__all__ = ["CocoSummary", "export_coco", "mask_bbox", "scene_records"]

@@ -1,0 +1,132 @@
+"""What every export reads: the complete scene directories of a dataset folder, their metadata,
+the stable id scheme, the asset sources that hold their meshes, and the errors they raise.
+
+Ids (stable across shards: a scene's ids depend on its seed alone, never on what else is
+exported with it, so COCO files exported from disjoint sets of scenes merge without clashes):
+
+* ``image_id`` = ``seed · 10⁴ + i`` for frame (view) ``i`` of the scene (0-based file index);
+* annotation ``id`` = ``image_id · 10⁴ + k`` for segmentation label ``k`` (instance ``k − 1``).
+
+Frames and labels must therefore stay below 10⁴ (the recipes' default bounds); the largest id,
+for seed 2³² − 1, is about 4.3·10¹⁷ (< 2⁶³).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import pathlib
+
+from kubric.errors import InputError
+from kubric.io import scene_dir
+from kubric.io.json_io import read_json
+
+ID_BASE = 10_000
+
+
+class ExportError(InputError):
+    """Bad input to an export (one line naming the bad value)."""
+
+
+@dataclasses.dataclass
+class Scene:
+    path: pathlib.Path
+    relative: str          # the scene folder relative to the export's root ("" for the root)
+    metadata: dict
+
+    @property
+    def seed(self) -> int:
+        return int(self.metadata["metadata"]["seed"])
+
+    @property
+    def recipe(self) -> str:
+        return str(self.metadata.get("flags", {}).get("recipe", ""))
+
+    @property
+    def num_frames(self) -> int:
+        return int(self.metadata["metadata"]["num_frames"])
+
+    @property
+    def resolution(self) -> tuple[int, int]:
+        w, h = self.metadata["metadata"]["resolution"]
+        return int(w), int(h)
+
+    def file(self, name: str) -> str:
+        """``name`` (a file of the scene) relative to the export's root, with ``/``."""
+        return f"{self.relative}/{name}" if self.relative else name
+
+
+def image_id(seed: int, frame: int) -> int:
+    if not 0 <= frame < ID_BASE:
+        raise ExportError(f"frame index {frame} does not fit the id scheme (0 ≤ frame < {ID_BASE})")
+    return int(seed) * ID_BASE + int(frame)
+
+
+def annotation_id(image: int, label: int) -> int:
+    if not 0 < label < ID_BASE:
+        raise ExportError(f"segmentation label {label} does not fit the id scheme (1 ≤ label < "
+                          f"{ID_BASE})")
+    return int(image) * ID_BASE + int(label)
+
+
+def find_scenes(root) -> tuple[list[pathlib.Path], int]:
+    """(complete scene directories under ``root``, or ``root`` itself; number of incomplete
+    ones skipped). One-line ExportError when ``root`` is not a folder or holds no scene."""
+    root = pathlib.Path(root)
+    if not root.is_dir():
+        raise ExportError(f"{str(root)!r} is not a directory (expected a folder of scene_* "
+                          "directories, or one scene directory)")
+    if scene_dir.is_complete(root):
+        return [root], 0
+    complete, incomplete = scene_dir.survey(root)
+    if not complete:
+        raise ExportError(f"{str(root)!r} holds no complete scene directory (scene_* with "
+                          f"{scene_dir.SUCCESS_FILE})")
+    return complete, incomplete
+
+
+def load_scene(root: pathlib.Path, path: pathlib.Path) -> Scene:
+    meta_file = path / scene_dir.METADATA_FILE
+    try:
+        metadata = read_json(meta_file)
+    except FileNotFoundError:
+        raise ExportError(f"scene {str(path)!r} has no {scene_dir.METADATA_FILE}") from None
+    for section, key in (("metadata", "seed"), ("metadata", "num_frames"),
+                         ("metadata", "resolution"), ("camera", "matrices_world")):
+        if key not in metadata.get(section, {}):
+            raise ExportError(f"{str(meta_file)!r} lacks {section}.{key}")
+    relative = "" if path == root else path.relative_to(root).as_posix()
+    return Scene(path, relative, metadata)
+
+
+def objects_sources(flags: dict, extra=()) -> list:
+    """The asset sources a scene's objects came from (not KuBasic): the ``extra`` ones given
+    (paths), then those the scene's options name (``objects_source``, ``objects``), else the
+    converted ``pybullet_data`` collection for the recipes that default to it (those with the
+    option ``collection_limit``)."""
+    import kubric as kb
+    from kubric import assets
+
+    out = [kb.AssetSource(p) for p in extra]
+    for key in ("objects_source", "objects"):
+        value = flags.get(key)
+        if isinstance(value, str) and value:
+            out.append(kb.AssetSource(value))
+    if "collection_limit" in flags and flags.get("objects_source") is None:
+        out.append(assets.ensure_pybullet_collection(limit=flags.get("collection_limit")))
+    return out
+
+
+def model_sources(flags: dict, extra=()) -> list:
+    """:func:`objects_sources` plus KuBasic (``kubasic_source``, else the locally built one):
+    every source whose meshes a scene's instances may use."""
+    import kubric as kb
+    from kubric import assets
+
+    kubasic = flags.get("kubasic_source")
+    return objects_sources(flags, extra) + [kb.AssetSource(kubasic) if kubasic
+                                            else assets.ensure_kubasic()]
+
+
+__all__ = ["ExportError", "ID_BASE", "Scene", "annotation_id", "find_scenes", "image_id",
+           "load_scene", "model_sources",
+           "objects_sources"]
