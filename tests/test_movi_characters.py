@@ -56,3 +56,22 @@ def test_characters_need_the_blender_renderer():
         get_recipe("movi_c")(characters=1, renderer="raycast").check()
     with pytest.raises(OptionError, match="renderer=raycast has no skinned characters"):
         get_recipe("pose_estimation")(renderer="raycast").check()
+
+
+@pytest.mark.blender
+def test_coco_export_adds_the_person_category(scene, tmp_path):
+    import subprocess
+    import sys
+    out = tmp_path / "movi_people.json"
+    proc = subprocess.run([sys.executable, "-m", "kubric", "export", "coco", str(scene),
+                           "--out", str(out), "--no-progress"], capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    data = json.loads(out.read_text())
+    cats = data["categories"]
+    assert cats[-1]["name"] == "person" and len(cats[-1]["keypoints"]) == 17
+    assert len(cats) > 1 and data["info"]["categories_from"] == "asset category + person"
+    meta = json.loads((scene / "metadata.json").read_text())
+    for ann in data["annotations"]:
+        is_person = "keypoints_2d" in meta["instances"][ann["instance"]]
+        assert (ann["category_id"] == cats[-1]["id"]) == is_person
+        assert ("keypoints" in ann) == is_person

@@ -83,3 +83,38 @@ def test_the_scene_packs_with_keypoints(scene_dir, tmp_path):
     assert "every example equals its scene directory" in proc.stdout + proc.stderr
     features = json.loads((tmp_path / "ds" / "features.json").read_text())
     assert '"keypoints_2d"' in json.dumps(features) and '"keypoints_visibility"' in json.dumps(features)
+
+
+@pytest.mark.blender
+def test_coco_export_has_person_keypoints(scene_dir, tmp_path):
+    """pycocotools reads the export; masks, boxes and keypoints agree with the scene."""
+    pytest.importorskip("pycocotools")
+    from pycocotools.coco import COCO
+    out = tmp_path / "people.json"
+    proc = subprocess.run([sys.executable, "-m", "kubric", "export", "coco", str(scene_dir),
+                           "--out", str(out), "--no-progress"], capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    coco = COCO(str(out))
+    (person_cat,) = coco.dataset["categories"]
+    assert person_cat["name"] == "person" and len(person_cat["keypoints"]) == 17
+    assert person_cat["keypoints"][0] == "nose" and len(person_cat["skeleton"]) == 19
+    meta = json.loads((scene_dir / "metadata.json").read_text())
+    w, h = meta["metadata"]["resolution"]
+    checked = 0
+    for img in coco.dataset["images"]:
+        t = img["frame"]
+        seg = read_palette_png(scene_dir / f"segmentation_{t:05d}.png")[..., 0]
+        for ann in coco.loadAnns(coco.getAnnIds(imgIds=[img["id"]])):
+            inst = meta["instances"][ann["instance"]]
+            assert (coco.annToMask(ann).astype(bool) == (seg == ann["instance"] + 1)).all()
+            ymin, xmin, ymax, xmax = inst["bboxes"][inst["bbox_frames"].index(t)]
+            np.testing.assert_allclose(ann["bbox"], [xmin * w, ymin * h, (xmax - xmin) * w,
+                                                     (ymax - ymin) * h], atol=1e-4)
+            kp = np.asarray(ann["keypoints"], np.float64).reshape(17, 3)
+            vis = np.asarray(inst["keypoints_visibility"][t])
+            ours = np.asarray(inst["keypoints_2d"][t]) - 0.5   # COCO: pixel-index coordinates
+            assert (kp[:, 2] == vis).all() and ann["num_keypoints"] == int((vis > 0).sum())
+            np.testing.assert_allclose(kp[vis > 0, :2], ours[vis > 0], atol=1e-3)
+            assert (kp[vis == 0] == 0).all()
+            checked += 1
+    assert checked >= 3
