@@ -118,3 +118,21 @@ def test_coco_export_has_person_keypoints(scene_dir, tmp_path):
             assert (kp[vis == 0] == 0).all()
             checked += 1
     assert checked >= 3
+
+
+@pytest.mark.blender
+def test_person_keypoints_task_reads_the_metadata(scene_dir, tmp_path):
+    from kubric.datasets import load
+    proc = subprocess.run([sys.executable, "-m", "kubric", "pack", str(scene_dir.parent),
+                           "--out", str(tmp_path / "ds"), "--splits", "train=1", "--no-progress"],
+                          capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    item = load(tmp_path / "ds", "train", task="person_keypoints")[0]
+    meta = json.loads((scene_dir / "metadata.json").read_text())
+    people = meta["instances"]
+    assert item["keypoints_2d"].shape == (len(people), 3, 17, 2)
+    for k, person in enumerate(people):
+        np.testing.assert_allclose(item["keypoints_2d"][k], person["keypoints_2d"], atol=1e-4)
+        np.testing.assert_allclose(item["keypoints_3d"][k], person["keypoints_3d"], atol=1e-5)
+        assert (item["keypoints_visibility"][k] == np.asarray(person["keypoints_visibility"])).all()
+    assert item["video"].shape == (3, 64, 64, 3)
