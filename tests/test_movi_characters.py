@@ -11,7 +11,7 @@ from collection_fixtures import run_worker
 
 from kubric.pipeline import OptionError, get_recipe
 
-OPTIONS = ("resolution=64", "frame_end=3", "samples=2", "denoise=false", "min_num_objects=2",
+OPTIONS = ("resolution=64", "frame_end=8", "samples=2", "denoise=false", "min_num_objects=2",
            "max_num_objects=3", "collection_limit=8", "characters=1",
            "character_source=procedural", "motion_source=procedural")
 
@@ -41,6 +41,12 @@ def test_the_person_is_an_instance_with_keypoints(scene):
         np.testing.assert_allclose(p[:, :2] / p[:, 2:], kp2[t], atol=1e-3)
     # the person walks: its keypoints move between frames
     assert np.abs(kp3[-1] - kp3[0]).max() > 0.05
+    # the object dropped above the person hits it (collisions with the person's instance)
+    k = meta["instances"].index(person)
+    dropped = [i for i, inst in enumerate(meta["instances"]) if inst.get("dropped_on")]
+    assert len(dropped) == 1
+    events = json.loads((scene / "events.json").read_text())["collisions"]
+    assert any(sorted(e["instances"]) == sorted([k, dropped[0]]) for e in events), events
 
 
 def test_zero_characters_leaves_flags_unchanged():

@@ -20,13 +20,14 @@
   the base ``urdf`` / ``articulated_links``). At 0 the scene is byte for byte what it was
   without the option (no random draw, no flag). Not in A / B: their schemas label every
   instance with a CLEVR / KuBasic shape.
-* C–F, ``characters=N`` (default 0): N people (``character_source``, default the MakeHuman
-  humans source; ``procedural`` = the built-in tube person) perform clips from
-  ``motion_source``, starting at free spots within ±3 m of the centre; they are added first, so
-  the objects are placed around them and fall onto them, bouncing off their kinematic colliders
-  (collisions in ``events.json``). Each person is an instance with its keypoints in the metadata
-  (docs/characters.md); tracks follow their skinned surfaces. At 0 the scene is byte for byte
-  what it was without the option.
+* C–F, ``characters=N`` (default 0): N people (``character_source``, default the MakeHuman humans
+  source; ``procedural`` = the built-in tube person) perform clips from ``motion_source``,
+  starting at free spots within ±3 m of the centre; they are added first, so the objects are
+  placed around them and fall onto them, bouncing off their kinematic colliders (collisions in
+  ``events.json``); one extra dynamic object per person starts 0.3–1 m above where its head is 0.4
+  s later, with no horizontal velocity (instance metadata ``dropped_on``: the person's uid). Each
+  person is an instance with its keypoints in the metadata (docs/characters.md); tracks follow
+  their skinned surfaces. At 0 the scene is byte for byte what it was without the option.
 
 Materials (A, B): CLEVR's metal and rubber (BSDF, friction μ, restitution e, density); mass =
 the asset's mass (volume × density 1 at scale 1) × density × size³. The CLEVR values (shapes,
@@ -275,6 +276,8 @@ class MoviC(MoviBase, name="movi_c"):
         return hdri_id
 
     def new_object(self, scene, simulator, rng, sources, region, dynamic: bool):
+        """A new object of the source, sized, placed without overlap with its bounding box in
+        ``region`` (or in ``region(obj)`` when that is a function of the sized object)."""
         asset_id = _choice(rng, sources["objects_ids"])
         obj = sources["objects"].create(asset_id, friction=0.5, restitution=0.5)
         size = float(rng.uniform(*self.size_range))
@@ -282,6 +285,8 @@ class MoviC(MoviBase, name="movi_c"):
         obj.scale = size / extent
         obj.metadata = {**obj.metadata, "scale": size, "is_dynamic": dynamic}
         scene.add(obj)
+        if callable(region):
+            region = region(obj)
         if not place_without_overlap(obj, simulator, region, rng):
             return None
         if dynamic:
@@ -289,23 +294,48 @@ class MoviC(MoviBase, name="movi_c"):
         return obj
 
     def add_objects(self, scene, simulator, rng, sources):
-        self.add_characters(scene, rng, sources)
+        people = self.add_characters(scene, rng, sources)
+        self.drop_on_people(scene, simulator, rng, sources, people)
         for _ in range(rng.randint(self.min_num_objects, self.max_num_objects + 1)):
             self.new_object(scene, simulator, rng, sources, DYNAMIC_SPAWN_REGION, True)
         self.add_articulated_objects(scene, simulator, rng)
 
-    def add_characters(self, scene, rng, sources) -> None:
+    def add_characters(self, scene, rng, sources) -> list:
         """``characters`` people (no random draw when 0), added before the objects so that the
         objects are placed around them (their colliders count as overlaps) and fall onto them:
         spots in [−CHARACTER_REGION, CHARACTER_REGION]² at least 1 m apart
         (:func:`kubric.recipes.people.add_person`); a person with no free spot is counted in
-        ``dropped_objects``."""
+        ``dropped_objects``. Returns the people."""
         if not self.characters:
-            return
+            return []
         spots = free_spots(rng, self.characters, CHARACTER_REGION, 1.0)
         scene.metadata["dropped_objects"] += self.characters - len(spots)
-        for k, spot in enumerate(spots):
-            add_person(scene, sources, rng, spot, f"person_{k}")
+        return [add_person(scene, sources, rng, spot, f"person_{k}")
+                for k, spot in enumerate(spots)]
+
+    def drop_on_people(self, scene, simulator, rng, sources, people) -> None:
+        """One extra dynamic object per person, placed without overlap above where the person
+        is 0.4 s into the clip (its centre within about ±0.3 m of the person's box centre at that
+        frame in x and y, its bottom 0.3–1 m above the person's top; the region is widened by
+        the object's bounding radius) and dropped with no horizontal velocity, so that it falls
+        onto the moving body."""
+        def above(x, y, top):
+            def region(obj):  # room for the object's box in any orientation around the centre
+                b = np.asarray(obj.bounds, np.float64) * np.asarray(obj.scale, np.float64)
+                r = 0.5 * float(np.linalg.norm(b[1] - b[0]))
+                return ((x - 0.3 - r, y - 0.3 - r, top + 0.3), (x + 0.3 + r, y + 0.3 + r,
+                                                                 top + 1.0 + 2 * r))
+            return region
+
+        aim = int(round(0.4 * scene.frame_rate))  # about when it reaches the person
+        for person in people:
+            box = person.aabb(aim)
+            x, y = box.mean(axis=0)[:2]
+            obj = self.new_object(scene, simulator, rng, sources, above(x, y, float(box[1, 2])),
+                                  True)
+            if obj is not None:
+                obj.velocity = (0.0, 0.0, 0.0)
+                obj.metadata = {**obj.metadata, "dropped_on": person.uid}
 
     def write_outputs(self, scene, layers, collisions, seed, out_dir, background,
                       render_settings) -> list:
@@ -349,7 +379,7 @@ class MoviD(MoviC, name="movi_d"):
     settle_frames = Option(100, "frames the static objects settle for", low=0, limit=10000)
 
     def add_objects(self, scene, simulator, rng, sources):
-        self.add_characters(scene, rng, sources)
+        people = self.add_characters(scene, rng, sources)
         static = []
         for _ in range(rng.randint(self.min_num_objects, self.max_num_objects + 1)):
             obj = self.new_object(scene, simulator, rng, sources, STATIC_SPAWN_REGION, False)
@@ -362,6 +392,7 @@ class MoviD(MoviC, name="movi_d"):
             obj.velocity = (0.0, 0.0, 0.0)
             obj.angular_velocity = (0.0, 0.0, 0.0)
             obj.friction, obj.restitution = 0.5, 0.5
+        self.drop_on_people(scene, simulator, rng, sources, people)
         for _ in range(rng.randint(self.min_num_dynamic, self.max_num_dynamic + 1)):
             self.new_object(scene, simulator, rng, sources, DYNAMIC_SPAWN_REGION, True)
         self.add_articulated_objects(scene, simulator, rng)
