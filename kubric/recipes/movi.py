@@ -57,7 +57,7 @@ from kubric.recipes.movi_base import (
     new_camera,
     place_without_overlap,
 )
-from kubric.recipes.people import add_person, character_location, free_spots, open_people_sources
+from kubric.recipes.people import add_person, free_spots, open_people_sources, source_options
 
 #: C–F: height (m) above the floor of the viewpoint from which the dome looks up the HDRI (about
 #: an HDRI's capture height): the floor shows the HDRI's ground, the backdrop its horizon and sky.
@@ -208,12 +208,7 @@ class MoviC(MoviBase, name="movi_c"):
     characters = Option(0, "people performing motion clips among the objects, which fall and "
                         "bounce off them (0 = none: the scene is as without this option)",
                         low=0, high=10)
-    character_source = Option(None, "with characters: character asset source (folder or URL), "
-                              "or 'procedural' (the built-in tube person); default: the "
-                              "MakeHuman humans source", type=character_location)
-    motion_source = Option(None, "with characters: motion-clip asset source, or 'procedural' "
-                           "(the built-in walk); default: the humans source's clips",
-                           type=character_location)
+    character_source, motion_source = source_options("with characters: ")
 
     #: left out of ``flags`` while ``articulated_objects`` is 0, so that a scene made without
     #: articulated objects is byte for byte the scene made before these options existed

@@ -70,6 +70,18 @@ def asset_ids(source) -> list[str]:
     return sorted(ids)
 
 
+def source_options(when: str = "") -> tuple:
+    """The ``character_source`` and ``motion_source`` options of a recipe with people (``when``
+    prefixes their help, e.g. "with characters: ")."""
+    from kubric.pipeline import Option
+    return (Option(None, f"{when}character asset source (folder or URL), or 'procedural' (the "
+                   "built-in tube person); default: the MakeHuman humans source",
+                   type=character_location),
+            Option(None, f"{when}motion-clip asset source (folder or URL), or 'procedural' (the "
+                   "built-in walk); default: the humans source's clips",
+                   type=character_location))
+
+
 def add_person(scene, sources, rng, spot, name: str):
     """Add a character drawn from ``sources["characters"]`` performing a clip drawn from
     ``sources["motions"]`` over frames 0 .. frame_end + 1: random heading, random start time in

@@ -39,9 +39,9 @@ from kubric.recipes.movi_base import MoviBase, new_camera
 from kubric.recipes.people import (
     add_person,
     asset_ids,
-    character_location,
     free_spots,
     open_people_sources,
+    source_options,
 )
 from kubric.recipes.pose_estimation_schema import SCHEMA, TRACKS_SCHEMA
 
@@ -59,12 +59,7 @@ class PoseEstimation(MoviBase, name="pose_estimation"):
     min_num_clutter = Option(2, "fewest clutter objects (KuBasic shapes) along the walls",
                              low=0, high=50)
     max_num_clutter = Option(6, "most clutter objects", low=0, high=50)
-    character_source = Option(None, "character asset source (folder or URL), or 'procedural' "
-                              "(the built-in tube person); default: the MakeHuman humans source",
-                              type=character_location)
-    motion_source = Option(None, "motion-clip asset source (folder or URL), or 'procedural' "
-                           "(the built-in walk); default: the humans source's clips",
-                           type=character_location)
+    character_source, motion_source = source_options("")
 
     def check_renderer(self) -> None:
         super().check_renderer()

@@ -58,7 +58,7 @@ from kubric.recipes.common import (
 from kubric.recipes.complex_brdf import SHAPES
 from kubric.recipes.movi import add_clevr_lights
 from kubric.recipes.movi_base import new_camera
-from kubric.recipes.people import add_person, character_location, open_people_sources
+from kubric.recipes.people import add_person, open_people_sources, source_options
 from kubric.recipes.render_quality import RenderQuality
 
 ELEVATION_DEG = (10.0, 50.0)
@@ -142,12 +142,7 @@ class Vbr(RenderQuality, Recipe, name="vbr"):
                     "at the object's centre", choices=("static", "follow"))
     kubasic_source = Option(None, "KuBasic asset source folder (default: built locally)",
                             type=pathlib.Path, must_exist=True)
-    character_source = Option(None, "character: character asset source (folder or URL), or "
-                              "'procedural' (the built-in tube person); default: the MakeHuman "
-                              "humans source", type=character_location)
-    motion_source = Option(None, "character: motion-clip asset source, or 'procedural' (the "
-                           "built-in walk); default: the humans source's clips",
-                           type=character_location)
+    character_source, motion_source = source_options("character: ")
     lasr_export = Option(True, "also write the LASR sequence into lasr/ "
                          "(kubric.annotations.lasr_export)")
 
