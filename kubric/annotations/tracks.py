@@ -13,6 +13,10 @@ How a track is made (:func:`compute_tracks`):
    point seen there (to float32 depth precision). Off a pixel centre the depth is interpolated
    bilinearly over the neighbouring pixel centres showing the same object (second-order error;
    the track still passes exactly through the query position at the query frame).
+   On a skinned character the point is instead the mesh's surface point hit by the query's
+   pixel ray at the query frame, as (triangle, barycentric), followed through every frame's
+   skinned mesh (:mod:`kubric.annotations.character_tracks`; ``points_object`` is then its
+   rest-pose position in the model frame).
 2. The point is expressed **in its object's own frame** (the unscaled local frame of the mesh,
    using the object's position, quaternion and scale at the query frame). Points on the
    background (floor / dome: assets with ``background=True``) stay in world coordinates: the
@@ -81,8 +85,10 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from kubric.annotations.character_tracks import follow_character
 from kubric.annotations.segmentation import instance_labels
 from kubric.core import camera_geometry as geo
+from kubric.core.characters import Character
 from kubric.errors import InputError
 
 #: Relative depth tolerance of the self-occlusion test (see module doc).
@@ -247,6 +253,39 @@ def _visible_at(rows, cols, labels, depth, slope, want_label, point_depth, reach
     return inside, same, not_closer
 
 
+def frame_layers(depth, segmentation, frames) -> tuple[np.ndarray, np.ndarray, list[int]]:
+    """(depth (T, H, W) float32, labels (T, H, W) int64, frames as ints), checked to agree."""
+    depth = _image_stack(depth, "depth").astype(np.float32)
+    labels = _image_stack(segmentation, "segmentation").astype(np.int64)
+    frames = [int(f) for f in frames]
+    if len(frames) != depth.shape[0] or labels.shape != depth.shape:
+        raise ValueError(f"frames ({len(frames)}), depth {depth.shape} and segmentation "
+                         f"{labels.shape} must agree")
+    return depth, labels, frames
+
+
+def occlusion_reasons(xy, cam_z, point_depth, labels, depth, slope, want_label,
+                      depth_tolerance: float) -> np.ndarray:
+    """(N, T) uint8 occlusion bits (module doc) of points at pixel positions ``xy`` (N, T, 2)
+    with camera-frame z ``cam_z`` (N, T) and distances ``point_depth`` (N, T), which should lie
+    on instance label ``want_label`` (N,)."""
+    h, w = depth.shape[1:]
+    reason = np.zeros(cam_z.shape, dtype=np.uint8)
+    reason[cam_z >= 0] |= BEHIND_CAMERA
+    x, y = xy[..., 0], xy[..., 1]
+    with np.errstate(invalid="ignore"):
+        outside = ~((x >= 0) & (x < w) & (y >= 0) & (y < h))
+    reason[outside] |= OUTSIDE_IMAGE
+    rows = np.floor(np.clip(np.nan_to_num(y, nan=-1.0), -1.0, h + 1.0)).astype(np.int64)
+    cols = np.floor(np.clip(np.nan_to_num(x, nan=-1.0), -1.0, w + 1.0)).astype(np.int64)
+    inside, same, not_closer = _visible_at(rows, cols, labels, depth, slope, want_label,
+                                           point_depth, 1.0, depth_tolerance, h, w)
+    inside &= (reason & BEHIND_CAMERA) == 0  # the pixel tests mean nothing behind the camera
+    reason[inside & ~same] |= OTHER_INSTANCE
+    reason[inside & same & ~not_closer] |= DEPTH_CLOSER
+    return reason
+
+
 def compute_tracks(camera, frames: Sequence[int], depth, segmentation, assets: Sequence,
                    queries, *, instances: Sequence | None = None,
                    depth_tolerance: float = DEPTH_TOLERANCE) -> dict[str, np.ndarray]:
@@ -264,13 +303,8 @@ def compute_tracks(camera, frames: Sequence[int], depth, segmentation, assets: S
         ``instances[k-1]``); default: the foreground assets hit by a query, in ``assets`` order.
         Assets with ``background=True`` are the background (instance 0).
     """
-    depth = _image_stack(depth, "depth").astype(np.float32)
-    labels = _image_stack(segmentation, "segmentation").astype(np.int64)
+    depth, labels, frames = frame_layers(depth, segmentation, frames)
     num_frames, h, w = depth.shape
-    frames = [int(f) for f in frames]
-    if len(frames) != num_frames or labels.shape != depth.shape:
-        raise ValueError(f"frames ({len(frames)}), depth {depth.shape} and segmentation "
-                         f"{labels.shape} must agree")
     q = check_queries(queries, num_frames, w, h)
     by_label = dict(zip(instance_labels(assets).tolist(), assets, strict=False))
     n = len(q)
@@ -307,6 +341,10 @@ def compute_tracks(camera, frames: Sequence[int], depth, segmentation, assets: S
     for uid in {a.uid for a, fg in zip(qassets, is_fg, strict=False) if fg}:
         sel = np.array([a.uid == uid for a in qassets]) & is_fg
         asset = qassets[int(np.flatnonzero(sel)[0])]
+        if isinstance(asset, Character):  # a deforming surface: kubric.annotations.character_tracks
+            points_object[sel], points_world[sel] = follow_character(
+                asset, camera, frames, tq[sel], q[sel][:, [2, 1]], world_q[sel], (w, h))
+            continue
         mats, scales = _poses(asset, frames)
         for t in np.unique(tq[sel]):
             s = sel & (tq == t)
@@ -327,20 +365,10 @@ def compute_tracks(camera, frames: Sequence[int], depth, segmentation, assets: S
 
     # occlusion
     slope = depth_slope(depth, labels)
-    reason = np.zeros((n, num_frames), dtype=np.uint8)
-    reason[cam[..., 2] >= 0] |= BEHIND_CAMERA
-    x, y = xy[..., 0], xy[..., 1]
-    with np.errstate(invalid="ignore"):
-        outside = ~((x >= 0) & (x < w) & (y >= 0) & (y < h))
-    reason[outside] |= OUTSIDE_IMAGE
-    rows = np.floor(np.clip(np.nan_to_num(y, nan=-1.0), -1.0, h + 1.0)).astype(np.int64)
-    cols = np.floor(np.clip(np.nan_to_num(x, nan=-1.0), -1.0, w + 1.0)).astype(np.int64)
-    inside, same, not_closer = _visible_at(rows, cols, labels, depth, slope, qlabel, dist, 1.0,
-                                           depth_tolerance, h, w)
-    inside &= (reason & BEHIND_CAMERA) == 0  # the pixel tests mean nothing behind the camera
-    reason[inside & ~same] |= OTHER_INSTANCE
-    reason[inside & same & ~not_closer] |= DEPTH_CLOSER
+    reason = occlusion_reasons(xy, cam[..., 2], dist, labels, depth, slope, qlabel,
+                               depth_tolerance)
     occluded = reason != 0
+    x, y = xy[..., 0], xy[..., 1]
 
     visible = np.zeros((n, num_frames))
     fy = np.clip(np.nan_to_num(y, nan=-2.0), -2.0, h + 2.0) - PIXEL_OFFSET

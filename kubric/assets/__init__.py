@@ -13,6 +13,8 @@
   :func:`~kubric.assets.utils.get_clevr_lights`; :mod:`~kubric.assets.clevr` — the CLEVR facts
   (shapes, colours, sizes, materials, lamps, camera) and KuBasic's shape ids, as plain data.
 - :mod:`~kubric.assets.articulated` — multi-link URDFs added to a scene, every link rendered.
+- :mod:`~kubric.assets.procedural_character` — a procedural 15-bone tube person
+  (``tube_person``) and its walk (``walk_clip``), built in numpy (docs/characters.md).
 - :mod:`~kubric.assets.characters` — Character / MotionClip archives → ``kb.Character`` /
   ``kb.MotionClip`` keyword arguments (``AssetSource.create`` uses it).
 

@@ -3,6 +3,7 @@
 from kubric.core import camera_geometry
 from kubric.core.assets import Asset, UndefinedAsset
 from kubric.core.cameras import Camera, OrthographicCamera, PerspectiveCamera, UndefinedCamera
+from kubric.core.characters import Character, MotionClip
 from kubric.core.color import Color, get_color
 from kubric.core.lights import (
     DirectionalLight,
@@ -30,5 +31,5 @@ __all__ = [
     "PointLight", "RectAreaLight", "SpotLight", "UndefinedLight", "FlatMaterial", "Material",
     "PrincipledBSDFMaterial", "Texture", "UndefinedMaterial", "Cube", "FileBasedObject",
     "Object3D", "PhysicalObject", "Sphere", "Quaternion", "Scene", "TableView", "View",
-    "camera_geometry",
+    "camera_geometry", "Character", "MotionClip",
 ]

@@ -20,6 +20,7 @@ import numpy as np
 from kubric.core import skinning as sk
 from kubric.core import traits as kt
 from kubric.core.objects import PhysicalObject
+from kubric.errors import InputError
 
 #: The 17 COCO person keypoints, in COCO's order.
 COCO_KEYPOINTS = ("nose", "left_eye", "right_eye", "left_ear", "right_ear", "left_shoulder",
@@ -37,13 +38,14 @@ def _array(where, name, value, dtype, shape) -> np.ndarray:
     try:
         arr = np.array(value, dtype=dtype)
     except (TypeError, ValueError):
-        raise ValueError(f"{where}: {name} must be a numeric array of shape "
+        raise InputError(f"{where}: {name} must be a numeric array of shape "
                          f"{_shape_text(shape)}, got {type(value).__name__}") from None
-    if arr.ndim != len(shape) or any(s is not None and a != s for a, s in zip(arr.shape, shape)):
-        raise ValueError(f"{where}: {name} must have shape {_shape_text(shape)}, got {arr.shape}")
+    if arr.ndim != len(shape) or any(s is not None and a != s
+                                     for a, s in zip(arr.shape, shape, strict=True)):
+        raise InputError(f"{where}: {name} must have shape {_shape_text(shape)}, got {arr.shape}")
     if arr.dtype.kind == "f" and not np.all(np.isfinite(arr)):
         bad = np.argwhere(~np.isfinite(arr))[0].tolist()
-        raise ValueError(f"{where}: {name} holds NaN or inf (first at index {bad})")
+        raise InputError(f"{where}: {name} holds NaN or inf (first at index {bad})")
     return arr
 
 
@@ -54,11 +56,11 @@ def _shape_text(shape) -> str:
 def _integers(where, name, value, shape, low, high) -> np.ndarray:
     arr = np.asarray(value)
     if arr.size and arr.dtype.kind not in "iu":
-        raise ValueError(f"{where}: {name} must be integers, got dtype {arr.dtype}")
+        raise InputError(f"{where}: {name} must be integers, got dtype {arr.dtype}")
     arr = _array(where, name, arr, np.int64, shape)
     if arr.size and (arr.min() < low or arr.max() >= high):
         bad = arr[(arr < low) | (arr >= high)][0]
-        raise ValueError(f"{where}: {name} holds {int(bad)}; allowed: [{low}, {high - 1}]")
+        raise InputError(f"{where}: {name} holds {int(bad)}; allowed: [{low}, {high - 1}]")
     return arr
 
 
@@ -91,24 +93,24 @@ class Character(PhysicalObject):
     def _set_rig(self, where, vertices, faces, uv, names, parents, rest, tails, idx, wts, reg):
         v = _array(where, "vertices", vertices, np.float64, (None, 3))
         if not len(v):
-            raise ValueError(f"{where}: vertices is empty")
+            raise InputError(f"{where}: vertices is empty")
         f = _integers(where, "faces", faces, (None, 3), 0, len(v))
         if not len(f):
-            raise ValueError(f"{where}: faces is empty (a character needs a triangulated mesh)")
+            raise InputError(f"{where}: faces is empty (a character needs a triangulated mesh)")
         if uv is not None:
             uv = _array(where, "uv", uv, np.float32, (len(f), 3, 2))
         if isinstance(names, str) or not all(isinstance(n, str) and n for n in names):
-            raise ValueError(f"{where}: bone_names must be a list of non-empty strings")
+            raise InputError(f"{where}: bone_names must be a list of non-empty strings")
         names = list(names)
         if not names:
-            raise ValueError(f"{where}: the rig has no bones")
+            raise InputError(f"{where}: the rig has no bones")
         if len(set(names)) != len(names):
             dup = sorted({n for n in names if names.count(n) > 1})
-            raise ValueError(f"{where}: bone_names repeats {dup}")
+            raise InputError(f"{where}: bone_names repeats {dup}")
         j = len(names)
         par = _integers(where, "bone_parents", parents, (j,), -1, j)
         if par[0] != -1 or np.any(par[1:] < 0) or np.any(par[1:] >= np.arange(1, j)):
-            raise ValueError(f"{where}: bone_parents must be -1 for bone 0 (the root) and a "
+            raise InputError(f"{where}: bone_parents must be -1 for bone 0 (the root) and a "
                              f"smaller index for every other bone, got {par.tolist()}")
         rst = _array(where, "bone_rest", rest, np.float64, (j, 4, 4))
         rot = rst[:, :3, :3]
@@ -116,7 +118,7 @@ class Character(PhysicalObject):
         bad = np.flatnonzero((err > 1e-5) | (np.linalg.det(rot) < 0)
                              | np.any(np.abs(rst[:, 3] - [0, 0, 0, 1]) > 1e-9, axis=1))
         if len(bad):
-            raise ValueError(f"{where}: bone_rest of bone {names[bad[0]]!r} is not a rigid "
+            raise InputError(f"{where}: bone_rest of bone {names[bad[0]]!r} is not a rigid "
                              "transform (orthonormal rotation, det +1, last row 0 0 0 1)")
         tl = _array(where, "bone_tails", tails, np.float64, (j, 3))
         axis = tl - rst[:, :3, 3]
@@ -124,15 +126,15 @@ class Character(PhysicalObject):
         cos = np.einsum("ji,ji->j", axis, rot[:, :, 1]) / np.maximum(length, 1e-12)
         bad = np.flatnonzero((length < 1e-6) | (cos < 1 - 1e-6))
         if len(bad):
-            raise ValueError(f"{where}: bone {names[bad[0]]!r}: its tail must lie on the bone's "
+            raise InputError(f"{where}: bone {names[bad[0]]!r}: its tail must lie on the bone's "
                              "local +Y axis at a positive distance from its head (bone_rest)")
         if np.ndim(idx) != 2 or np.shape(idx)[1] > MAX_INFLUENCES or np.shape(idx)[0] != len(v):
-            raise ValueError(f"{where}: skin_indices must have shape (V={len(v)}, K ≤ "
+            raise InputError(f"{where}: skin_indices must have shape (V={len(v)}, K ≤ "
                              f"{MAX_INFLUENCES}), got {np.shape(idx)}")
         si = _integers(where, "skin_indices", idx, (len(v), None), 0, j)
         sw = _array(where, "skin_weights", wts, np.float64, si.shape)
         if np.any(sw < 0):
-            raise ValueError(f"{where}: skin_weights must be ≥ 0, got {sw.min():g}")
+            raise InputError(f"{where}: skin_weights must be ≥ 0, got {sw.min():g}")
         total = sw.sum(axis=1)
         rendered = np.zeros(len(v), bool)
         rendered[f.ravel()] = True
@@ -140,13 +142,15 @@ class Character(PhysicalObject):
             n = int(np.sum(rendered & (total <= 0)))
             what = "has no skin weights" if not np.any(total > 0) else \
                 f"leaves {n} rendered vertices without weight"
-            raise ValueError(f"{where}: the rig {what} (every vertex of a face needs weights)")
+            raise InputError(f"{where}: the rig {what} (every vertex of a face needs weights)")
         sw = np.where(total[:, None] > 0, sw / np.where(total > 0, total, 1)[:, None], 0.0)
         self.vertices, self.faces, self.uv = v, f.astype(np.int32), uv
         self.bone_names, self.bone_parents, self.bone_rest, self.bone_tails = names, par, rst, tl
         self.skin_indices, self.skin_weights = si.astype(np.int32), sw
         self.rendered_vertices = np.flatnonzero(rendered)
         self.keypoint_regressor = self._check_regressor(where, reg, len(v))
+        self._weights = sk.weight_matrix(self.skin_indices, sw, j)
+        self._weights.setflags(write=False)
         self._rest_local = sk.rest_locals(rst, par)
         self._inv_rest = np.linalg.inv(rst)
         for arr in (v, self.faces, rst, tl, self.skin_indices, sw, par):
@@ -157,19 +161,19 @@ class Character(PhysicalObject):
         if reg is None:
             return None
         if not isinstance(reg, dict) or not reg:
-            raise ValueError(f"{where}: keypoint_regressor must be a non-empty dict "
+            raise InputError(f"{where}: keypoint_regressor must be a non-empty dict "
                              "{name: (vertex indices, weights)} or None")
         out = {}
         for name, pair in reg.items():
             if not isinstance(pair, (tuple, list)) or len(pair) != 2:
-                raise ValueError(f"{where}: keypoint_regressor[{name!r}] must be "
+                raise InputError(f"{where}: keypoint_regressor[{name!r}] must be "
                                  "(vertex indices, weights)")
             idx = _integers(where, f"keypoint_regressor[{name!r}] indices", pair[0], (None,), 0,
                             num_vertices)
             w = _array(where, f"keypoint_regressor[{name!r}] weights", pair[1], np.float64,
                        (len(idx),))
             if not len(idx):
-                raise ValueError(f"{where}: keypoint_regressor[{name!r}] names no vertex")
+                raise InputError(f"{where}: keypoint_regressor[{name!r}] names no vertex")
             out[str(name)] = (idx, w)
         return out
 
@@ -181,7 +185,7 @@ class Character(PhysicalObject):
         norm = np.linalg.norm(arr, axis=1)
         if np.any(norm < 1e-8):
             bad = self.bone_names[int(np.flatnonzero(norm < 1e-8)[0])]
-            raise ValueError(f"Character {self.name!r}: bone_rotations of bone {bad!r} is the "
+            raise InputError(f"Character {self.name!r}: bone_rotations of bone {bad!r} is the "
                              "zero quaternion (need a non-zero WXYZ quaternion per bone)")
         out = (arr / norm[:, None]).astype(np.float32)
         out.setflags(write=False)
@@ -247,6 +251,18 @@ class Character(PhysicalObject):
         """(J, 4, 4) posed bone → world transforms at ``frame`` (heads at ``[:, :3, 3]``)."""
         return self.model_to_world(frame) @ self.posed_bones(frame)
 
+    def bone_transforms_at(self, frames) -> np.ndarray:
+        """(N, J, 4, 4) posed bone → world transforms at N (fractional) ``frames``, computed in
+        one batch (what :meth:`bone_transforms` gives frame by frame)."""
+        frames = list(frames)
+        rot = np.stack([self.get_value_at("bone_rotations", f) for f in frames]).astype(float)
+        off = np.stack([self.get_value_at("root_offset", f) for f in frames]).astype(float)
+        posed = sk.posed_bones(self._rest_local, self.bone_parents, rot, off)
+        worlds = np.stack([sk.object_matrix(self.get_value_at("position", f),
+                                            self.get_value_at("quaternion", f),
+                                            self.get_value_at("scale", f)) for f in frames])
+        return worlds[:, None] @ posed
+
     def _world(self, model_points, frame):
         m = self.model_to_world(frame)
         return model_points @ m[:3, :3].T + m[:3, 3]
@@ -255,10 +271,9 @@ class Character(PhysicalObject):
         """(V, 3) skinned vertices at ``frame`` (or only ``indices``), ``space`` "world" or
         "model"."""
         if space not in ("world", "model"):
-            raise ValueError(f"space must be 'world' or 'model', got {space!r}")
+            raise InputError(f"space must be 'world' or 'model', got {space!r}")
         sel = slice(None) if indices is None else np.asarray(indices)
-        pts = sk.skin(self.vertices[sel], self.skin_indices[sel], self.skin_weights[sel],
-                      self.skinning_matrices(frame))
+        pts = sk.skin(self.vertices[sel], self._weights[sel], self.skinning_matrices(frame))
         return pts if space == "model" else self._world(pts, frame)
 
     def surface_points(self, triangles, barycentrics, frame=None, space: str = "world"):
@@ -268,9 +283,9 @@ class Character(PhysicalObject):
         tri = np.asarray(triangles, np.int64)
         bary = np.asarray(barycentrics, np.float64)
         if bary.shape != tri.shape + (3,):
-            raise ValueError(f"barycentrics must have shape {tri.shape + (3,)}, got {bary.shape}")
+            raise InputError(f"barycentrics must have shape {tri.shape + (3,)}, got {bary.shape}")
         if tri.size and (tri.min() < 0 or tri.max() >= len(self.faces)):
-            raise ValueError(f"triangles must be in [0, {len(self.faces) - 1}]")
+            raise InputError(f"triangles must be in [0, {len(self.faces) - 1}]")
         corners = self.faces[tri]                                      # (N, 3)
         if space == "rest":
             pts = self.vertices[corners]
@@ -282,7 +297,7 @@ class Character(PhysicalObject):
     def keypoints(self, frame=None, space: str = "world") -> np.ndarray:
         """(K, 3) keypoints (``keypoint_names`` order) from the regressor on the deformed mesh."""
         if self.keypoint_regressor is None:
-            raise ValueError(f"Character {self.name!r} has no keypoint_regressor")
+            raise InputError(f"Character {self.name!r} has no keypoint_regressor")
         idx = np.concatenate([i for i, _ in self.keypoint_regressor.values()])
         used, inverse = np.unique(idx, return_inverse=True)
         pts = self.deformed_vertices(frame, used, space)[inverse]
@@ -328,18 +343,18 @@ class Character(PhysicalObject):
             raise TypeError(f"Character.play needs a MotionClip, got {type(clip).__name__}")
         unknown = [n for n in clip.bone_names if n not in self.bone_names]
         if unknown:
-            raise ValueError(f"MotionClip {clip.name!r}: joints {unknown} match no bone of "
+            raise InputError(f"MotionClip {clip.name!r}: joints {unknown} match no bone of "
                              f"character {self.name!r} (bones: {self.bone_names})")
         scene = self.active_scene
         if start_frame is None or end_frame is None or frame_rate is None:
             if scene is None:
-                raise ValueError("Character.play: the character is in no scene; pass "
+                raise InputError("Character.play: the character is in no scene; pass "
                                  "start_frame, end_frame and frame_rate")
             start_frame = scene.frame_start if start_frame is None else start_frame
             end_frame = scene.frame_end if end_frame is None else end_frame
             frame_rate = scene.frame_rate if frame_rate is None else frame_rate
         if frame_rate <= 0 or end_frame < start_frame:
-            raise ValueError(f"Character.play: need frame_rate > 0 and end_frame ≥ start_frame, "
+            raise InputError(f"Character.play: need frame_rate > 0 and end_frame ≥ start_frame, "
                              f"got {frame_rate}, {start_frame}..{end_frame}")
         cols = [self.bone_names.index(n) for n in clip.bone_names]
         frames = np.arange(start_frame, end_frame + 1)
@@ -374,24 +389,24 @@ class MotionClip:
         where = f"MotionClip {name!r}"
         if isinstance(bone_names, str) or not bone_names or not all(
                 isinstance(n, str) and n for n in bone_names):
-            raise ValueError(f"{where}: bone_names must be a non-empty list of strings")
+            raise InputError(f"{where}: bone_names must be a non-empty list of strings")
         if isinstance(fps, bool) or not isinstance(fps, (int, float, np.number)) or \
                 not np.isfinite(fps) or fps <= 0:
-            raise ValueError(f"{where}: fps must be a positive number, got {fps!r}")
+            raise InputError(f"{where}: fps must be a positive number, got {fps!r}")
         j = len(bone_names)
         rot = np.asarray(rotations, dtype=np.float64)
         if rot.ndim != 3 or rot.shape[1:] != (j, 4) or not len(rot):
-            raise ValueError(f"{where}: rotations must have shape (T ≥ 1, {j}, 4), got "
+            raise InputError(f"{where}: rotations must have shape (T ≥ 1, {j}, 4), got "
                              f"{rot.shape}")
         bad = ~np.isfinite(rot).all(axis=2)
         if bad.any():
             t, b = np.argwhere(bad)[0]
-            raise ValueError(f"{where}: rotations hold NaN or inf at sample {t}, joint "
+            raise InputError(f"{where}: rotations hold NaN or inf at sample {t}, joint "
                              f"{bone_names[b]!r}")
         norm = np.linalg.norm(rot, axis=2)
         if np.any(norm < 1e-8):
             t, b = np.argwhere(norm < 1e-8)[0]
-            raise ValueError(f"{where}: zero quaternion at sample {t}, joint {bone_names[b]!r}")
+            raise InputError(f"{where}: zero quaternion at sample {t}, joint {bone_names[b]!r}")
         off = _array(where, "root_offsets", root_offsets, np.float64, (len(rot), 3))
         self.bone_names = list(bone_names)
         self.fps = float(fps)

@@ -10,8 +10,9 @@ Pure numpy, float64. Conventions (docs/characters.md):
 * ``L_j = rest_local_j @ R(q_j)`` with ``rest_local_j = inv(bone_rest[parent]) @ bone_rest[j]``;
   the root's ``rest_local`` is ``bone_rest[root]`` translated by ``root_offset``.
   ``G_j = G_parent @ L_j`` (bone → model, posed); ``S_j = G_j @ inv(bone_rest[j])`` (skinning).
-* Linear-blend skinning: ``v' = Σ_k w_k S_{idx_k} v``; vertices with zero total weight keep their
-  rest position (Blender's armature modifier leaves unweighted vertices in place).
+* Linear-blend skinning: ``v' = Σ_k w_k S_{idx_k} v`` (as a dense (V, J) weight matrix);
+  vertices with zero total weight keep their rest position (Blender's armature modifier leaves
+  unweighted vertices in place).
 """
 
 from __future__ import annotations
@@ -43,17 +44,20 @@ def rest_locals(bone_rest: np.ndarray, parents: np.ndarray) -> np.ndarray:
 
 def posed_bones(rest_local: np.ndarray, parents: np.ndarray, rotations: np.ndarray,
                 root_offset: np.ndarray) -> np.ndarray:
-    """(J, 4, 4) posed bone → model transforms ``G`` (module doc)."""
-    local = rest_local.copy()
-    local[:, :3, :3] = local[:, :3, :3] @ quaternions_to_matrices(rotations)
+    """(..., J, 4, 4) posed bone → model transforms ``G`` (module doc) for rotations
+    (..., J, 4) and root offsets (..., 3): any leading batch shape (e.g. several frames)."""
+    rotations = np.asarray(rotations, np.float64)
+    batch = rotations.shape[:-2]
+    local = np.broadcast_to(rest_local, batch + rest_local.shape).copy()
+    local[..., :3, :3] = local[..., :3, :3] @ quaternions_to_matrices(rotations)
     out = np.empty_like(local)
     for j, p in enumerate(parents):
         if p < 0:
-            m = local[j].copy()
-            m[:3, 3] += root_offset
-            out[j] = m
+            m = local[..., j, :, :].copy()
+            m[..., :3, 3] += root_offset
+            out[..., j, :, :] = m
         else:
-            out[j] = out[p] @ local[j]
+            out[..., j, :, :] = out[..., p, :, :] @ local[..., j, :, :]
     return out
 
 
@@ -62,13 +66,22 @@ def skinning_matrices(posed: np.ndarray, inv_rest: np.ndarray) -> np.ndarray:
     return posed @ inv_rest
 
 
-def skin(vertices: np.ndarray, indices: np.ndarray, weights: np.ndarray,
-         skinning: np.ndarray) -> np.ndarray:
+def weight_matrix(indices: np.ndarray, weights: np.ndarray, num_bones: int) -> np.ndarray:
+    """(V, J) dense skin weights from (V, K) indices / weights (repeated indices add up)."""
+    out = np.zeros((len(indices), num_bones))
+    np.add.at(out, (np.repeat(np.arange(len(indices)), indices.shape[1]), indices.ravel()),
+              weights.ravel().astype(np.float64))
+    return out
+
+
+def skin(vertices: np.ndarray, weights: np.ndarray, skinning: np.ndarray) -> np.ndarray:
     """Linear-blend skinning of (V, 3) rest vertices in the model frame → (V, 3).
 
-    ``indices`` / ``weights`` (V, K) (weights normalised per row, or all zero = unweighted).
+    ``weights`` (V, J) dense per-bone weights (rows normalised, or all zero = unweighted: the
+    vertex keeps its rest position); one (V, J) × (J, 12) product blends the matrices.
     """
-    blend = np.einsum("vk,vkij->vij", weights.astype(np.float64), skinning[indices, :3, :])
+    j = len(skinning)
+    blend = (weights @ skinning[:, :3, :].reshape(j, 12)).reshape(-1, 3, 4)
     out = np.einsum("vij,vj->vi", blend[:, :, :3], vertices) + blend[:, :, 3]
     unweighted = weights.sum(axis=1) == 0
     if unweighted.any():

@@ -17,7 +17,11 @@ task=NAME, **options)`` uses it. Built in:
 * ``point_tracks`` (datasets packed with a ``<recipe>_tracks`` schema, e.g. ``kubric pack DIR
   --schema movi_e_tracks``): TAP-Vid's training fields ``video`` (T, H, W, 3) uint8,
   ``query_points`` (P, 3) (t, y, x), ``target_points`` (P, T, 2) (x, y) in pixels (centres at
-  +0.5), ``occluded`` (P, T) bool, plus ``video_name``.
+  +0.5), ``occluded`` (P, T) bool, plus ``video_name``;
+* ``person_keypoints`` (``pose_estimation`` datasets): ``video`` (T, H, W, 3) uint8,
+  ``keypoints_2d`` (N, T, 17, 2) (x, y) in pixels (centres at +0.5), ``keypoints_3d``
+  (N, T, 17, 3) world metres, ``keypoints_visibility`` (N, T, 17) COCO flags (0 outside the
+  image, 1 occluded, 2 visible) for the N people (instances), plus ``video_name``.
 
 Adding a task: declare the features it needs in the recipe's schema (e.g.
 ``Feature("tracks/target_points", ..., source="npz:tracks.npz:target_points")``), then::
@@ -134,6 +138,18 @@ def point_tracks_task(example, frame):
     tracks = example["tracks"]
     return {"video": example["video"], "query_points": tracks["query_points"],
             "target_points": tracks["target_points"], "occluded": tracks["occluded"],
+            "video_name": example["metadata"]["video_name"]}
+
+
+@register_task("person_keypoints", features=("video", "instances", "metadata"),
+               requires=("video", "instances/keypoints_2d", "instances/keypoints_3d",
+                         "instances/keypoints_visibility", "metadata/video_name"))
+def person_keypoints_task(example, frame):
+    """The people's COCO keypoints from a dataset whose instances carry them (pose_estimation)."""
+    inst = example["instances"]
+    return {"video": example["video"], "keypoints_2d": inst["keypoints_2d"],
+            "keypoints_3d": inst["keypoints_3d"],
+            "keypoints_visibility": inst["keypoints_visibility"],
             "video_name": example["metadata"]["video_name"]}
 
 

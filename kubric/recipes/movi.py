@@ -20,6 +20,14 @@
   the base ``urdf`` / ``articulated_links``). At 0 the scene is byte for byte what it was
   without the option (no random draw, no flag). Not in A / B: their schemas label every
   instance with a CLEVR / KuBasic shape.
+* C–F, ``characters=N`` (default 0): N people (``character_source``, default the MakeHuman humans
+  source; ``procedural`` = the built-in tube person) perform clips from ``motion_source``,
+  starting at free spots within ±3 m of the centre; they are added first, so the objects are
+  placed around them and fall onto them, bouncing off their kinematic colliders (collisions in
+  ``events.json``); one extra dynamic object per person starts 0.3–1 m above where its head is 0.4
+  s later, with no horizontal velocity (instance metadata ``dropped_on``: the person's uid). Each
+  person is an instance with its keypoints in the metadata (docs/characters.md); tracks follow
+  their skinned surfaces. At 0 the scene is byte for byte what it was without the option.
 
 Materials (A, B): CLEVR's metal and rubber (BSDF, friction μ, restitution e, density); mass =
 the asset's mass (volume × density 1 at scale 1) × density × size³. The CLEVR values (shapes,
@@ -49,10 +57,13 @@ from kubric.recipes.movi_base import (
     new_camera,
     place_without_overlap,
 )
+from kubric.recipes.people import add_person, free_spots, open_people_sources, source_options
 
 #: C–F: height (m) above the floor of the viewpoint from which the dome looks up the HDRI (about
 #: an HDRI's capture height): the floor shows the HDRI's ground, the backdrop its horizon and sky.
 HDRI_PROJECTION_HEIGHT = 2.0
+#: C–F, ``characters=N``: people start at spots in [−CHARACTER_REGION, CHARACTER_REGION]² (m)
+CHARACTER_REGION = 3.0
 
 
 def add_clevr_lights(scene, rng, jitter: float = 1.0) -> list:
@@ -194,17 +205,32 @@ class MoviC(MoviBase, name="movi_c"):
                                  "without this option)", low=0, high=20)
     articulated_models = Option(tuple(MODELS), "the models the articulated objects are drawn "
                                 "from (comma-separated)", type=model_list)
+    characters = Option(0, "people performing motion clips among the objects, which fall and "
+                        "bounce off them (0 = none: the scene is as without this option)",
+                        low=0, high=10)
+    character_source, motion_source = source_options("with characters: ")
 
     #: left out of ``flags`` while ``articulated_objects`` is 0, so that a scene made without
     #: articulated objects is byte for byte the scene made before these options existed
     ARTICULATED_OPTIONS = ("articulated_objects", "articulated_models")
+    #: likewise while ``characters`` is 0
+    CHARACTER_OPTIONS = ("characters", "character_source", "motion_source")
 
     def flags(self, seed: int) -> dict:
         out = super().flags(seed)
         if not self.articulated_objects:
             for name in self.ARTICULATED_OPTIONS:
                 out.pop(name)
+        if not self.characters:
+            for name in self.CHARACTER_OPTIONS:
+                out.pop(name)
         return out
+
+    def check_renderer(self) -> None:
+        super().check_renderer()
+        if self.characters and self.renderer != "blender":
+            raise OptionError(f"{self.name}: renderer={self.renderer} has no skinned characters "
+                              f"(characters={self.characters}); these need renderer=blender")
 
     def open_sources(self):
         from kubric import assets
@@ -224,6 +250,8 @@ class MoviC(MoviBase, name="movi_c"):
             if not ids:
                 raise OptionError(f"{self.name}: the {key} source has no {self.split} assets")
             sources[key + "_ids"] = ids
+        if self.characters:
+            sources.update(open_people_sources(self.character_source, self.motion_source))
         return sources
 
     def build_background(self, scene, rng, sources):
@@ -243,6 +271,8 @@ class MoviC(MoviBase, name="movi_c"):
         return hdri_id
 
     def new_object(self, scene, simulator, rng, sources, region, dynamic: bool):
+        """A new object of the source, sized, placed without overlap with its bounding box in
+        ``region`` (or in ``region(obj)`` when that is a function of the sized object)."""
         asset_id = _choice(rng, sources["objects_ids"])
         obj = sources["objects"].create(asset_id, friction=0.5, restitution=0.5)
         size = float(rng.uniform(*self.size_range))
@@ -250,6 +280,8 @@ class MoviC(MoviBase, name="movi_c"):
         obj.scale = size / extent
         obj.metadata = {**obj.metadata, "scale": size, "is_dynamic": dynamic}
         scene.add(obj)
+        if callable(region):
+            region = region(obj)
         if not place_without_overlap(obj, simulator, region, rng):
             return None
         if dynamic:
@@ -257,9 +289,56 @@ class MoviC(MoviBase, name="movi_c"):
         return obj
 
     def add_objects(self, scene, simulator, rng, sources):
+        people = self.add_characters(scene, rng, sources)
+        self.drop_on_people(scene, simulator, rng, sources, people)
         for _ in range(rng.randint(self.min_num_objects, self.max_num_objects + 1)):
             self.new_object(scene, simulator, rng, sources, DYNAMIC_SPAWN_REGION, True)
         self.add_articulated_objects(scene, simulator, rng)
+
+    def add_characters(self, scene, rng, sources) -> list:
+        """``characters`` people (no random draw when 0), added before the objects so that the
+        objects are placed around them (their colliders count as overlaps) and fall onto them:
+        spots in [−CHARACTER_REGION, CHARACTER_REGION]² at least 1 m apart
+        (:func:`kubric.recipes.people.add_person`); a person with no free spot is counted in
+        ``dropped_objects``. Returns the people."""
+        if not self.characters:
+            return []
+        spots = free_spots(rng, self.characters, CHARACTER_REGION, 1.0)
+        scene.metadata["dropped_objects"] += self.characters - len(spots)
+        return [add_person(scene, sources, rng, spot, f"person_{k}")
+                for k, spot in enumerate(spots)]
+
+    def drop_on_people(self, scene, simulator, rng, sources, people) -> None:
+        """One extra dynamic object per person, placed without overlap above where the person
+        is 0.4 s into the clip (its centre within about ±0.3 m of the person's box centre at that
+        frame in x and y, its bottom 0.3–1 m above the person's top; the region is widened by
+        the object's bounding radius) and dropped with no horizontal velocity, so that it falls
+        onto the moving body."""
+        def above(x, y, top):
+            def region(obj):  # room for the object's box in any orientation around the centre
+                b = np.asarray(obj.bounds, np.float64) * np.asarray(obj.scale, np.float64)
+                r = 0.5 * float(np.linalg.norm(b[1] - b[0]))
+                return ((x - 0.3 - r, y - 0.3 - r, top + 0.3), (x + 0.3 + r, y + 0.3 + r,
+                                                                 top + 1.0 + 2 * r))
+            return region
+
+        aim = int(round(0.4 * scene.frame_rate))  # about when it reaches the person
+        for person in people:
+            box = person.aabb(aim)
+            x, y = box.mean(axis=0)[:2]
+            obj = self.new_object(scene, simulator, rng, sources, above(x, y, float(box[1, 2])),
+                                  True)
+            if obj is not None:
+                obj.velocity = (0.0, 0.0, 0.0)
+                obj.metadata = {**obj.metadata, "dropped_on": person.uid}
+
+    def write_outputs(self, scene, layers, collisions, seed, out_dir, background,
+                      render_settings) -> list:
+        if self.characters:
+            from kubric.annotations.keypoints import annotate_keypoints
+            annotate_keypoints(scene, layers)
+        return super().write_outputs(scene, layers, collisions, seed, out_dir, background,
+                                     render_settings)
 
     def add_articulated_objects(self, scene, simulator, rng) -> None:
         """``articulated_objects`` dynamic multi-link models (no random draw when 0): model,
@@ -295,6 +374,7 @@ class MoviD(MoviC, name="movi_d"):
     settle_frames = Option(100, "frames the static objects settle for", low=0, limit=10000)
 
     def add_objects(self, scene, simulator, rng, sources):
+        people = self.add_characters(scene, rng, sources)
         static = []
         for _ in range(rng.randint(self.min_num_objects, self.max_num_objects + 1)):
             obj = self.new_object(scene, simulator, rng, sources, STATIC_SPAWN_REGION, False)
@@ -307,6 +387,7 @@ class MoviD(MoviC, name="movi_d"):
             obj.velocity = (0.0, 0.0, 0.0)
             obj.angular_velocity = (0.0, 0.0, 0.0)
             obj.friction, obj.restitution = 0.5, 0.5
+        self.drop_on_people(scene, simulator, rng, sources, people)
         for _ in range(rng.randint(self.min_num_dynamic, self.max_num_dynamic + 1)):
             self.new_object(scene, simulator, rng, sources, DYNAMIC_SPAWN_REGION, True)
         self.add_articulated_objects(scene, simulator, rng)

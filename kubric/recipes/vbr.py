@@ -6,7 +6,12 @@ sequence in ``lasr/`` (:mod:`kubric.annotations.lasr_export`).
 The object floats (gravity 0, no floor): **rigid** is a KuBasic shape (or an asset of
 ``objects_source``, e.g. a ShapeNet build) with a random-hue material; **articulated** is a
 multi-link URDF of ``pybullet_data`` (:mod:`kubric.recipes.articulated_models`; or
-``urdf_file``) whose links are simulated with passive joints and rendered, one instance per link.
+``urdf_file``) whose links are simulated with passive joints and rendered, one instance per link;
+**character** (only when asked for: ``object_type=character``) is a person from
+``character_source`` performing a clip from ``motion_source`` (:func:`kubric.recipes.people.
+add_person`; default the MakeHuman humans source, ``procedural`` the built-in tube person), one
+instance with its COCO keypoints in the metadata (docs/characters.md), moved by keys that follow
+the same free flight (it is kinematic); ``object_model`` is ``<character id>/<clip id>``.
 It is scaled so that its largest extent (articulated: in the rest pose) is ``object_size``, turned
 randomly, given a speed U(``speed_range``) in a random direction and an angular velocity of
 U(``spin_range``) rad/s about a random axis, and placed so that its centre passes the origin
@@ -53,6 +58,7 @@ from kubric.recipes.common import (
 from kubric.recipes.complex_brdf import SHAPES
 from kubric.recipes.movi import add_clevr_lights
 from kubric.recipes.movi_base import new_camera
+from kubric.recipes.people import add_person, open_people_sources, source_options
 from kubric.recipes.render_quality import RenderQuality
 
 ELEVATION_DEG = (10.0, 50.0)
@@ -66,6 +72,31 @@ def unit_vector(rng) -> np.ndarray:
         if n > 1e-9:
             return v / n
 
+
+
+def key_free_flight(scene, obj) -> None:
+    """Key ``obj``'s pose at frames 0 .. frame_end + 1 as the free flight its velocity and angular
+    velocity give without gravity (what the simulator computes for a rigid object): a kinematic
+    character moves by keys only. The velocities are then zeroed (the keys carry the motion)."""
+    q0 = kb.Quaternion(obj.quaternion)
+    p0 = np.asarray(obj.position, np.float64)
+    v = np.asarray(obj.velocity, np.float64)
+    w = np.asarray(obj.angular_velocity, np.float64)
+    speed = float(np.linalg.norm(w))
+    for frame in range(0, scene.frame_end + 2):
+        t = frame / scene.frame_rate
+        turn = kb.Quaternion(axis=w / speed, angle=speed * t) if speed > 0 else kb.Quaternion()
+        obj.position = p0 + v * t
+        obj.quaternion = turn * q0
+        obj.keyframe_insert("position", frame)
+        obj.keyframe_insert("quaternion", frame)
+    obj.velocity = obj.angular_velocity = (0.0, 0.0, 0.0)
+
+
+def _base_color(obj) -> tuple:
+    """Linear RGB of an object's material colour (grey when it has none)."""
+    color = getattr(obj.material, "color", None)
+    return tuple(color.rgb) if color is not None and hasattr(color, "rgb") else (0.8, 0.8, 0.8)
 
 
 def by_visible_pixels(parts) -> list:
@@ -88,8 +119,9 @@ class Vbr(RenderQuality, Recipe, name="vbr"):
     step_rate = Option(240, "physics steps per second (a multiple of frame_rate)", low=1,
                        limit=100000)
     object_type = Option("random", "rigid (a KuBasic shape or an objects_source asset), "
-                         "articulated (a multi-link URDF), or random per seed",
-                         choices=("random", "rigid", "articulated"))
+                         "articulated (a multi-link URDF), character (a person performing a "
+                         "clip), or random per seed (rigid or articulated)",
+                         choices=("random", "rigid", "articulated", "character"))
     shape = Option("random", "rigid: the KuBasic shape, or random per seed (ignored with "
                    "objects_source)", choices=("random", *SHAPES))
     objects_source = Option(None, "rigid: mesh asset source to draw the object from (default: "
@@ -110,6 +142,7 @@ class Vbr(RenderQuality, Recipe, name="vbr"):
                     "at the object's centre", choices=("static", "follow"))
     kubasic_source = Option(None, "KuBasic asset source folder (default: built locally)",
                             type=pathlib.Path, must_exist=True)
+    character_source, motion_source = source_options("character: ")
     lasr_export = Option(True, "also write the LASR sequence into lasr/ "
                          "(kubric.annotations.lasr_export)")
 
@@ -139,6 +172,8 @@ class Vbr(RenderQuality, Recipe, name="vbr"):
         sources = kubasic_sources(self.kubasic_source)
         if self.objects_source is not None:
             sources["objects"] = open_existing_source(self.objects_source, "objects_source")
+        if self.object_type == "character":
+            sources.update(open_people_sources(self.character_source, self.motion_source))
         return sources
 
     # ------------------------------------------------------------------ steps
@@ -153,6 +188,15 @@ class Vbr(RenderQuality, Recipe, name="vbr"):
         base frame)."""
         kind = ("rigid", "articulated")[rng.randint(2)]
         kind = kind if self.object_type == "random" else self.object_type
+        if kind == "character":
+            person = add_person(scene, sources, rng, (0.0, 0.0), "object")
+            rest = np.asarray(person.rest_bounds, np.float64)
+            person.scale = self.object_size / max(float(np.max(rest[1] - rest[0])), 1e-9)
+            person.position = (0.0, 0.0, 0.0)
+            person.metadata = {**person.metadata, "size": float(self.object_size),
+                               "color": np.asarray(_base_color(person), np.float32)}
+            model = f"{person.metadata['character_id']}/{person.metadata['motion_id']}"
+            return kind, model, person, [person], person.scale * rest.mean(axis=0)
         if kind == "articulated":
             model = sorted(MODELS)[rng.randint(len(MODELS))]
             model = model if self.articulated_model == "random" else self.articulated_model
@@ -193,6 +237,8 @@ class Vbr(RenderQuality, Recipe, name="vbr"):
         t_mid = (scene.frame_start + scene.frame_end) / 2.0 / scene.frame_rate
         offset = kb.Quaternion(base.quaternion).rotate(centre)
         base.position = -np.asarray(offset) - velocity * t_mid
+        if isinstance(base, kb.Character):
+            key_free_flight(scene, base)
 
     def place_camera(self, scene, rng):
         distance = rng.uniform(*self.camera_distance)
@@ -236,6 +282,9 @@ class Vbr(RenderQuality, Recipe, name="vbr"):
                                           **self.renderer_settings())
             layers = renderer.render()
             settings = self.render_metadata(renderer)
+            if kind == "character":  # before the segmentation is relabelled
+                from kubric.annotations.keypoints import annotate_keypoints
+                annotate_keypoints(scene, layers, [base])
             order = annotate_instances(scene, layers, parts, order=by_visible_pixels)
             metadata, events = scene_documents(
                 self, scene, seed, order, collisions, background=background, renderer=settings,

@@ -14,8 +14,9 @@ tasks and code written for MOVi read vbr datasets. Differences from MOVi:
   label. ``instances/articulated_link`` names a part's URDF link and ``instances/
   articulated_base`` the ``instances/asset_id`` of its base; both are ``""`` for the base and for
   a rigid object (the scene directory writes them for link parts only).
-* The scene's choices: ``metadata/object_type`` (rigid / articulated), ``metadata/object_model``
-  (KuBasic shape, asset id or URDF model), ``metadata/background`` (the colour, ``#rrggbbaa``).
+* The scene's choices: ``metadata/object_type`` (rigid / articulated / character),
+  ``metadata/object_model`` (KuBasic shape, asset id, URDF model, or ``<character>/<clip>``),
+  ``metadata/background`` (the colour, ``#rrggbbaa``).
 
 The LASR sequence in ``lasr/`` is an export of these layers (:mod:`kubric.annotations.
 lasr_export`) and is not packed.
@@ -34,9 +35,10 @@ VBR = register_schema(MOVI_BASE.extend("vbr", (
     F("metadata/background_depth", "float32", (), "meta:background_depth", unit="m",
       doc="depth of pixels whose ray hits no surface"),
     F("metadata/object_type", "int64", (), "meta:object_type", "class_label",
-      names=("rigid", "articulated"), doc="rigid object or articulated (multi-link URDF)"),
+      names=("rigid", "articulated", "character"),
+      doc="rigid object, articulated (multi-link URDF) or character (a skinned person)"),
     F("metadata/object_model", "str", (), "meta:object_model", "text",
-      doc="KuBasic shape, asset id of objects_source, or URDF model name"),
+      doc="KuBasic shape, asset id of objects_source, URDF model name, or character/clip ids"),
     F("instances/color", "float32", (3,), "instance:color", doc="linear RGB"),
     F("instances/size", "float32", (), "instance:size", unit="m",
       doc="largest extent of the object (articulated: in its rest pose)"),

@@ -48,9 +48,10 @@ from pathlib import Path
 import bpy
 import numpy as np
 
-from kubric.core import cameras, lights, materials, objects
+from kubric.core import cameras, characters, lights, materials, objects
 from kubric.core.scene import Scene
 from kubric.core.views import TableView
+from kubric.renderer import blender_characters as bc
 from kubric.renderer import blender_materials as bm
 from kubric.renderer import blender_objects as bo
 from kubric.renderer import blender_passes as bp
@@ -169,6 +170,7 @@ class Blender(TableView, Renderer):
         objects.Cube: bo.build_cube,
         objects.Sphere: bo.build_sphere,
         objects.FileBasedObject: bo.build_file_object,
+        characters.Character: bc.build_character,
         cameras.PerspectiveCamera: bo.build_perspective_camera,
         cameras.OrthographicCamera: bo.build_orthographic_camera,
         lights.DirectionalLight: bo.build_sun,
@@ -199,6 +201,7 @@ class Blender(TableView, Renderer):
                                "height": bo.data_setter("size_y")},
         materials.PrincipledBSDFMaterial: bm.PRINCIPLED_SETTERS,
         materials.FlatMaterial: bm.FLAT_SETTERS,
+        characters.Character: bc.SETTERS,
     }
     keyframers = {
         objects.Object3D: bo.object_keyframers(),
@@ -207,6 +210,7 @@ class Blender(TableView, Renderer):
         lights.Light: bo.light_keyframers(),
         materials.PrincipledBSDFMaterial: bm.PRINCIPLED_KEYFRAMERS,
         materials.FlatMaterial: bm.FLAT_KEYFRAMERS,
+        characters.Character: bc.KEYFRAMERS,
     }
 
     def __init__(self, scene, scratch_dir=None, adaptive_sampling=False, use_denoising=True,

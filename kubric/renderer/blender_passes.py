@@ -33,7 +33,11 @@ the RGB sample count):
        F-curves hold the end values, as the model does, so flow there is from held poses.
      * normal: world-space shading normal (smooth for spheres), 0 on background.
      * object_coordinates: (p_local − bounds_min) / (bounds_max − bounds_min) per object with the
-       model's unscaled local bounds, clipped to [0, 1]; 0 on background.
+       model's unscaled local bounds, clipped to [0, 1]; 0 on background. For a skinned
+       character p_local is the **rest-pose** surface point (model frame, from the mesh's
+       ``kubric_rest_position`` attribute, interpolated over the triangle like the Generated
+       coordinate) and the bounds are its rest bounds: the value names the surface point, not
+       where the deformation moved it (docs/characters.md).
      * uv: (u, v, 0) from the UV pass (the mesh's first UV map), wrapped into [0, 1) as a
        repeating texture lookup sees them (meshes may tile textures with UV > 1); 0 on background.
 """
@@ -66,7 +70,21 @@ def override_material():
     coords = nodes.new("ShaderNodeTexCoord")
     aov = nodes.new("ShaderNodeOutputAOV")
     aov.aov_name = AOV_NAME
-    links.new(coords.outputs["Object"], aov.inputs["Color"])
+    # characters (kubric.renderer.blender_characters) carry their rest-pose vertex in a point
+    # attribute and a flag attribute = 1: their AOV is the rest-pose surface point (model frame);
+    # on every other mesh the attributes are absent (read as 0) and the AOV is the object point.
+    rest = nodes.new("ShaderNodeAttribute")
+    rest.attribute_name = "kubric_rest_position"
+    flag = nodes.new("ShaderNodeAttribute")
+    flag.attribute_name = "kubric_skinned"
+    mix = nodes.new("ShaderNodeMix")
+    mix.data_type = "VECTOR"
+    sockets = {s.identifier: s for s in mix.inputs}
+    links.new(flag.outputs["Fac"], sockets["Factor_Float"])
+    links.new(coords.outputs["Object"], sockets["A_Vector"])
+    links.new(rest.outputs["Vector"], sockets["B_Vector"])
+    out_vec = next(s for s in mix.outputs if s.identifier == "Result_Vector")
+    links.new(out_vec, aov.inputs["Color"])
     return mat
 
 

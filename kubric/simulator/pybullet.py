@@ -4,7 +4,8 @@
 several simulators in one process never share state), creates a body for every Cube, Sphere and
 URDF FileBasedObject of the scene, and from then on mirrors the model through the view tables
 (mass, friction, restitution, static, scale, pose, velocities; scene gravity and step_rate).
-Cameras, lights and materials have no physics counterpart.
+Cameras, lights and materials have no physics counterpart. Characters become kinematic per-bone
+convex colliders that follow their animation every step (:mod:`kubric.simulator.characters`).
 
 Time: the physics time step is ``1 / scene.step_rate`` seconds, with
 ``scene.step_rate // scene.frame_rate`` steps per frame.
@@ -31,10 +32,12 @@ import numpy as np
 import pybullet as pb
 
 from kubric.core.assets import Asset
+from kubric.core.characters import Character
 from kubric.core.objects import FileBasedObject, PhysicalObject
 from kubric.core.scene import Scene
 from kubric.core.views import TableView
 from kubric.simulator import bodies as kb_bodies
+from kubric.simulator import characters as kb_characters
 from kubric.simulator import contacts as kb_contacts
 from kubric.simulator.bodies import Body
 
@@ -89,6 +92,36 @@ def _set_dynamics(view, obj, body, value):
     view._apply_dynamics(obj, body)
 
 
+def _build_character(view, character):
+    bodies = kb_characters.build_character_bodies(character, view.client)
+    for uid in bodies.uids:
+        view._assets_by_body[uid] = character
+    return bodies
+
+
+def _repose_character(view, character, bodies, value):
+    kb_characters.pose_character(character, bodies, view.client, None)
+
+
+def _rescale_character(view, character, bodies, value):
+    """A new scale needs new hulls (the add replays every setter: unchanged scale, no work)."""
+    if kb_characters.uniform_scale(character) == bodies.scale:
+        return
+    for uid in bodies.uids:
+        view._assets_by_body.pop(uid, None)
+    kb_characters.remove_character_bodies(bodies, view.client)
+    new = _build_character(view, character)
+    bodies.bones, bodies.uids, bodies.scale = new.bones, new.uids, new.scale
+
+
+def _character_dynamics(view, character, bodies, value):
+    kb_characters.set_dynamics(character, bodies, view.client)
+
+
+def _ignore(view, obj, body, value):
+    """A property the kinematic character colliders do not use (they never move by physics)."""
+
+
 class PyBullet(TableView):
     """Rigid-body simulator view of ``scene`` (see the module docstring for conventions).
 
@@ -103,6 +136,7 @@ class PyBullet(TableView):
     builders = {
         Scene: _build_scene,
         PhysicalObject: _build_object,
+        Character: _build_character,
         Asset: None,  # cameras, lights, materials, plain Object3D: no physics counterpart
     }
     setters = {
@@ -114,6 +148,11 @@ class PyBullet(TableView):
             "mass": _set_mass, "friction": _set_dynamics, "restitution": _set_dynamics,
         },
         FileBasedObject: {"simulation_filename": _set_shape},
+        Character: {"position": _repose_character, "quaternion": _repose_character,
+                    "bone_rotations": _repose_character, "root_offset": _repose_character,
+                    "scale": _rescale_character, "friction": _character_dynamics,
+                    "restitution": _character_dynamics, "velocity": _ignore,
+                    "angular_velocity": _ignore, "static": _ignore, "mass": _ignore},
     }
     keyframers = {}
 
@@ -180,6 +219,20 @@ class PyBullet(TableView):
     def destroy(self, asset, obj) -> None:
         if isinstance(obj, Body):
             self._remove_body(obj)
+        elif isinstance(obj, kb_characters.CharacterBodies):
+            for uid in obj.uids:
+                self._assets_by_body.pop(uid, None)
+            kb_characters.remove_character_bodies(obj, self.client)
+
+    def _characters(self) -> list:
+        """[(character, its colliders)] of the scene."""
+        return [(a, a.linked_objects[self]) for a in self.scene.assets
+                if isinstance(a.linked_objects.get(self), kb_characters.CharacterBodies)]
+
+    def _character_schedule(self, times) -> list:
+        """[(colliders, (N, B, 4, 4) poses at ``times``)] for every character."""
+        return [(bodies, kb_characters.schedule(c, bodies, times))
+                for c, bodies in self._characters()]
 
     def _apply_state(self, obj, body: Body) -> None:
         """Set the engine pose and velocities from the model (the model is the truth)."""
@@ -324,12 +377,18 @@ class PyBullet(TableView):
         simulated = self._simulated()
         for obj, body in simulated:  # the model is the truth at the start of a run
             self._apply_state(obj, body)
+        n_steps = (frame_end - frame_start) * steps_per_frame
+        # kinematic colliders: every step's pose, computed at once (step 0 = frame_start)
+        poses = self._character_schedule(frame_start + np.arange(n_steps + 1) / steps_per_frame)
+        for bodies, schedule in poses:
+            kb_characters.place(bodies, self.client, schedule[0])
 
         states: dict = {}
         self._read_all(simulated, states)
         events: list[dict] = []
-        n_steps = (frame_end - frame_start) * steps_per_frame
         for step in range(1, n_steps + 1):
+            for bodies, schedule in poses:  # kinematic colliders at this step's time
+                kb_characters.place(bodies, self.client, schedule[step])
             pb.stepSimulation(physicsClientId=self.client)
             points = pb.getContactPoints(physicsClientId=self.client)
             if points:

@@ -17,10 +17,16 @@ recipes with an objects source             manifest (all its categories, sorted;
 anything else                              one class, ``object``
 =========================================  ====================================================
 
+People (scenes with characters: instances carrying ``keypoints_2d``, docs/characters.md) are the
+``person`` category, with COCO's ``keypoints`` names and ``skeleton`` in it, after the recipe's
+own categories (alone when every instance is a person, as in ``pose_estimation``): a
+:class:`PersonScheme` wraps the recipe's scheme and adds to each person's annotation its
+``keypoints`` [x1, y1, v1, ...] and ``num_keypoints`` in that frame
+(:func:`kubric.annotations.keypoints.coco_keypoints`: COCO's pixel-index coordinates, ours − 0.5;
+v 0 outside the image, 1 occluded, 2 visible).
+
 Extending: a scheme's :meth:`CategoryScheme.annotation_extras` returns fields added to each
-annotation. Person keypoints (scenes with characters) belong there: a scheme that adds the
-``person`` category with COCO's ``keypoints`` names and ``skeleton`` to :attr:`categories` and
-returns ``keypoints`` / ``num_keypoints`` for a character's instance.
+annotation.
 """
 
 from __future__ import annotations
@@ -74,7 +80,68 @@ class CategoryScheme:
         return {}
 
 
+def _is_person(instance: dict) -> bool:
+    return "keypoints_2d" in instance
+
+
+class PersonScheme(CategoryScheme):
+    """``base``'s categories plus ``person`` (module doc); ``base`` None: people only."""
+
+    def __init__(self, base: CategoryScheme | None, keypoint_names, skeleton):
+        names = (base.names if base else []) + ["person"]
+        super().__init__((base.kind + " + person") if base else "person", names,
+                         base.supercategory if base else "person")
+        self.base = base
+        self.keypoint_names = list(keypoint_names)
+        self.skeleton = [list(p) for p in skeleton]
+
+    @property
+    def categories(self) -> list[dict]:
+        cats = self.base.categories if self.base else []
+        return cats + [{"id": len(cats) + 1, "name": "person", "supercategory": "person",
+                        "keypoints": self.keypoint_names, "skeleton": self.skeleton}]
+
+    def category_id(self, scene: Scene, index: int) -> int:
+        instance = scene.metadata["instances"][index]
+        if _is_person(instance):
+            if list(instance.get("keypoint_names", [])) != self.keypoint_names:
+                raise ExportError(f"{scene.path.name}: instance {index} has keypoints "
+                                  f"{instance.get('keypoint_names')}, the export's person "
+                                  f"category {self.keypoint_names}")
+            return len(self.names)
+        if self.base is None:
+            raise ExportError(f"{scene.path.name}: instance {index} "
+                              f"({instance.get('asset_id')}) is not a person, and the export's "
+                              "only category is person")
+        return self.base.category_id(scene, index)
+
+    def check(self, scene: Scene) -> None:
+        if self.base is not None:
+            self.base.check(scene)
+
+    def annotation_extras(self, scene: Scene, index: int, frame: int) -> dict:
+        from kubric.annotations.keypoints import coco_keypoints
+        instance = scene.metadata["instances"][index]
+        if not _is_person(instance):
+            return self.base.annotation_extras(scene, index, frame) if self.base else {}
+        flat, count = coco_keypoints(instance["keypoints_2d"][frame],
+                                     instance["keypoints_visibility"][frame])
+        return {"keypoints": flat, "num_keypoints": count}
+
+
 def scheme_for(scene: Scene, sources=None) -> CategoryScheme:
+    """The scheme of ``scene``'s recipe (module doc), with the ``person`` category when the scene
+    has people; ``sources``: asset-source paths given on the command line, searched for
+    categories before the scene's own."""
+    instances = scene.metadata.get("instances", [])
+    people = [i for i in instances if _is_person(i)]
+    if not people:
+        return _recipe_scheme(scene, sources)
+    base = None if len(people) == len(instances) else _recipe_scheme(scene, sources)
+    return PersonScheme(base, people[0]["keypoint_names"], people[0]["keypoint_skeleton"])
+
+
+def _recipe_scheme(scene: Scene, sources=None) -> CategoryScheme:
     """The scheme of ``scene``'s recipe (module doc); ``sources``: asset-source paths given on
     the command line, searched for categories before the scene's own."""
     from kubric.assets.clevr import KUBASIC_SHAPES, SHAPES
@@ -85,7 +152,7 @@ def scheme_for(scene: Scene, sources=None) -> CategoryScheme:
                               "object")
     if scene.recipe == "movi_a":
         return CategoryScheme("shape", SHAPES, "shape")
-    if instances and all("shape" in i for i in instances):
+    if instances and all("shape" in i for i in instances if not _is_person(i)):
         return CategoryScheme("shape", KUBASIC_SHAPES, "shape")
     if sources or any(k in flags for k in ("objects_source", "objects", "collection_limit")):
         from kubric.datasets.exports.scenes import objects_sources
@@ -97,4 +164,4 @@ def scheme_for(scene: Scene, sources=None) -> CategoryScheme:
     return CategoryScheme("object", ["object"], "object")
 
 
-__all__ = ["CategoryScheme", "scheme_for"]
+__all__ = ["CategoryScheme", "PersonScheme", "scheme_for"]

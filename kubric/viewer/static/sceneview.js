@@ -56,6 +56,7 @@ const KVScene = (function () {
         ctx.fillText(String(i), xmin * s.W * k + 2, ymin * s.H * k + 12);
       });
     }
+    if (s.showKeypoints.checked) drawKeypoints(ctx, k);
     if (s.showTracks.checked && s.tracks) {
       const tr = s.tracks, trail = 8;
       tr.target_points.forEach((points, n) => {
@@ -72,6 +73,29 @@ const KVScene = (function () {
         if (tr.occluded[n][s.frame]) ctx.stroke(); else ctx.fill();
       });
     }
+  }
+
+  // People's keypoints (docs/characters.md): COCO's skeleton between keypoints in the image
+  // (solid when both ends are visible, dashed when one is occluded), dots filled when visible.
+  function drawKeypoints(ctx, k) {
+    (s.scene.metadata.instances || []).forEach((inst, i) => {
+      if (!inst.keypoints_2d) return;
+      const kp = inst.keypoints_2d[s.frame], vis = inst.keypoints_visibility[s.frame];
+      ctx.strokeStyle = ctx.fillStyle = KV.rgb(s.scene.palette[i + 1]);
+      ctx.lineWidth = s.selected === i ? 3 : 2;
+      (inst.keypoint_skeleton || []).forEach(([a, b]) => {
+        if (!vis[a - 1] || !vis[b - 1]) return;
+        ctx.setLineDash(vis[a - 1] === 2 && vis[b - 1] === 2 ? [] : [4, 3]);
+        ctx.beginPath(); ctx.moveTo(kp[a - 1][0] * k, kp[a - 1][1] * k);
+        ctx.lineTo(kp[b - 1][0] * k, kp[b - 1][1] * k); ctx.stroke();
+      });
+      ctx.setLineDash([]);
+      kp.forEach(([x, y], j) => {
+        if (!vis[j]) return;
+        ctx.beginPath(); ctx.arc(x * k, y * k, Math.max(3, k / 3), 0, 2 * Math.PI);
+        if (vis[j] === 2) ctx.fill(); else ctx.stroke();
+      });
+    });
   }
 
   async function probe(col, row) {
@@ -173,7 +197,10 @@ const KVScene = (function () {
     const [outlineBox, outlineLabel] = check("overlay-outline", "segmentation outlines", !scene.summary.layers.includes("segmentation"));
     const [boxesBox, boxesLabel] = check("overlay-boxes", "2D boxes", false);
     const [tracksBox, tracksLabel] = check("overlay-tracks", "point tracks", !scene.summary.has_tracks);
+    const hasKeypoints = (scene.metadata.instances || []).some((inst) => inst.keypoints_2d);
+    const [keypointsBox, keypointsLabel] = check("overlay-keypoints", "keypoints", !hasKeypoints);
     s.showOutline = outlineBox; s.showBoxes = boxesBox; s.showTracks = tracksBox;
+    s.showKeypoints = keypointsBox;
     s.opacity = KV.el("input", { type: "range", min: 0, max: 100, value: 90, id: "overlay-opacity", oninput: drawOverlay });
     s.slider = KV.el("input", { type: "range", min: 0, max: s.T - 1, value: 0, id: "frame-slider",
       oninput: (e) => setFrame(Number(e.target.value)) });
@@ -187,7 +214,7 @@ const KVScene = (function () {
     return [
       KV.el("div", { class: "toolbar" }, "layer ", select, s.depthBox),
       KV.el("div", { class: "toolbar" }, "overlays ", outlineBox, outlineLabel, boxesBox, boxesLabel,
-        tracksBox, tracksLabel, " opacity ", s.opacity),
+        tracksBox, tracksLabel, keypointsBox, keypointsLabel, " opacity ", s.opacity),
       KV.el("div", { class: "toolbar" }, play, s.slider, s.frameLabel),
     ];
   }
