@@ -15,8 +15,10 @@ import time
 
 import numpy as np
 
+from kubric.io.json_io import read_json
+from kubric.io.layers import read_frame
 from kubric.io.scene_dir import METADATA_FILE, is_complete, scene_name
-from kubric.pipeline.inspect import inspect_scene
+from kubric.pipeline.inspect import colourise, inspect_scene
 from kubric.pipeline.recipe import get_recipe, recipe_spec
 from kubric.pipeline.runner import LocalRunner
 
@@ -39,10 +41,6 @@ def write_figure(out: pathlib.Path, path: pathlib.Path, frame: int = FIGURE_FRAM
     """One row per demo recipe (its first scene, ``frame``): RGB and its layers, with
     a caption strip on top (colours as in ``kubric inspect``'s contact sheet)."""
     from PIL import Image, ImageDraw
-
-    from kubric.io.json_io import read_json
-    from kubric.io.layers import read_frame
-    from kubric.pipeline.inspect import colourise
 
     rows = []
     for name, _, _ in DEMO_DATASETS:

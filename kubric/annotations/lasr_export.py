@@ -52,6 +52,9 @@ import numpy as np
 from kubric.core import camera_geometry as geo
 from kubric.core.quaternion import Quaternion
 from kubric.errors import InputError
+from kubric.io import json_io, png_io
+from kubric.io.paths import atomic_write_bytes
+from kubric.io.pfm_io import encode_pfm
 from kubric.io.scene_dir import METADATA_FILE
 
 FULL = "Full-Resolution"
@@ -183,10 +186,7 @@ def export_lasr(scene_dir, out_dir, sequence: str | None = None,
 
     Returns the content of ``export.json``.
     """
-    from kubric.io import json_io, png_io
     from kubric.io import layers as layer_io
-    from kubric.io.paths import atomic_write_bytes
-    from kubric.io.pfm_io import encode_pfm
 
     scene_dir, out_dir = pathlib.Path(scene_dir), pathlib.Path(out_dir)
     if out_dir.exists():

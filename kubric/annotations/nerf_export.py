@@ -34,6 +34,7 @@ import numpy as np
 
 from kubric.core import camera_geometry as geo
 from kubric.errors import InputError
+from kubric.io import png_io, tiff_io
 from kubric.io.schema import VIEW_SPLITS
 
 SPLITS = VIEW_SPLITS  # declared with the schema conversion that indexes them
@@ -146,8 +147,6 @@ def iter_views(scene_dir, split: str = "train"):
     ``transform_matrix`` (4, 4) — what a NeRF data loader needs, from the files alone."""
     import json
     import pathlib
-
-    from kubric.io import png_io, tiff_io
 
     if split not in SPLITS:
         raise InputError(f"iter_views: unknown split {split!r}; allowed: {list(SPLITS)}")

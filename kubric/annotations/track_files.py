@@ -36,6 +36,7 @@ import numpy as np
 from kubric.annotations.tracks import TRACK_FIELDS
 from kubric.errors import InputError
 from kubric.io import scene_dir
+from kubric.io.layers import read_layer
 from kubric.io.paths import atomic_write_bytes
 
 FORMAT_VERSION = 1
@@ -119,7 +120,6 @@ def scene_dirs_with_tracks(root) -> list[pathlib.Path]:
 def export_tapvid(root, out) -> tuple[pathlib.Path, int]:
     """Write every complete scene under ``root`` as one TAP-Vid pickle ``out``; returns
     (path, number of scenes)."""
-    from kubric.io.layers import read_layer
     scenes = scene_dirs_with_tracks(root)
     data = {}
     for scene in scenes:

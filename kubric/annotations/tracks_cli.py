@@ -5,11 +5,12 @@ from __future__ import annotations
 
 import sys
 
+from kubric.annotations.track_files import export_tapvid
+
 FORMATS = ("tapvid",)
 
 
 def cmd_export(args) -> int:
-    from kubric.annotations.track_files import export_tapvid
     if args.format not in FORMATS:
         print(f"kubric tracks export: error: --format {args.format!r}: allowed {FORMATS}",
               file=sys.stderr)

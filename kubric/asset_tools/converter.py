@@ -48,6 +48,10 @@ from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from kubric.asset_tools import physics
+from kubric.asset_tools.physics import DECOMPOSITION_METHODS
+from kubric.asset_tools.writer import Collision, dumps, package_object, write_manifest
+from kubric.core.color import linear_to_srgb
 from kubric.errors import InputError
 
 MESH_SUFFIXES = (".obj", ".glb", ".gltf", ".ply", ".stl")
@@ -248,7 +252,6 @@ def srgb_bytes(linear):
     """Linear values in [0, 1] → 8-bit sRGB-encoded values (the inverse of an image import)."""
     import numpy as np
 
-    from kubric.core.color import linear_to_srgb
     return np.round(linear_to_srgb(linear) * 255.0).astype(np.uint8)
 
 
@@ -367,9 +370,6 @@ def _with_appearance(parts, fallback, color_from: str):
 
 def convert_one(job: ConvertJob, out_dir: str | os.PathLike) -> dict:
     """Convert one mesh into ``out_dir``; returns the manifest entry (raises on failure)."""
-    from kubric.asset_tools import physics
-    from kubric.asset_tools.writer import Collision, package_object
-
     mesh, look = load_visual(job.mesh_path, job.up, job.scale, job.color, job.color_from)
     repairs = None
     if job.repair is not None:
@@ -418,8 +418,6 @@ def convert_jobs(jobs: list[ConvertJob], out_dir: str | os.PathLike, name: str,
     "skipped": [{"id", "source", "reason"}]}`` (also written to ``conversion_report.json``).
     ``skipped``: failures found before conversion (e.g. an unsafe zip), added to the report.
     """
-    from kubric.asset_tools.writer import dumps, write_manifest
-
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     entries, todo = {}, []
@@ -471,8 +469,6 @@ def convert_collection(src_dir: str | os.PathLike, out_dir: str | os.PathLike, n
     ``decomposition``: ``"auto"`` (default; own convex parts, else V-HACD), ``"vhacd"`` or
     ``"coacd"`` (optional package).
     """
-    from kubric.asset_tools.physics import DECOMPOSITION_METHODS
-
     if decomposition not in DECOMPOSITION_METHODS:
         raise InputError(f"decomposition must be one of {list(DECOMPOSITION_METHODS)}, "
                          f"got {decomposition!r}")

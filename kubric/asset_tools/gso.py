@@ -31,6 +31,9 @@ import shutil
 import urllib.parse
 from pathlib import Path
 
+from kubric.asset_tools.converter import ConvertJob, convert_jobs
+from kubric.assets.archive import safe_extract_zip
+from kubric.assets.download import DownloadError, fetch_file, get_json
 from kubric.errors import InputError
 
 NAME = "GSO"
@@ -59,8 +62,6 @@ def model_zip_url(base_url: str, name: str, owner: str = OWNER) -> str:
 
 def download_catalogue(base_url: str, dest: str | os.PathLike, max_pages: int = 10000) -> list:
     """Fetch every listing page into one JSON list at ``dest`` (written atomically)."""
-    from kubric.assets.download import DownloadError, get_json
-
     models: list = []
     for page in range(1, max_pages + 1):
         url = listing_url(base_url, page)
@@ -86,8 +87,6 @@ def download_gso(src_dir: str | os.PathLike, base_url: str = FUEL_URL, limit: in
     Zips already there are kept; a cut transfer resumes from its ``.part`` file. Returns
     ``(catalogue, errors)`` with ``errors`` = ``[{"id", "source", "reason"}]`` per failed model.
     """
-    from kubric.assets.download import DownloadError, fetch_file
-
     src = Path(src_dir)
     src.mkdir(parents=True, exist_ok=True)
     cat_path = src / CATALOGUE_NAME
@@ -212,8 +211,6 @@ def check_texture(obj_path: Path, copy_missing: bool = True) -> None:
 
 def prepare_model(asset_id: str, path: Path, scratch: Path) -> tuple[Path, dict]:
     """Unpack (zip) and check one model; returns ``(meshes/model.obj, metadata from its files)``."""
-    from kubric.assets.archive import safe_extract_zip
-
     if path.suffix == ".zip":
         model_dir = safe_extract_zip(path, scratch / asset_id, asset_id)
         inner = [p.parent.parent for p in model_dir.rglob("meshes/model.obj")]
@@ -241,8 +238,6 @@ def build_gso(src_dir: str | os.PathLike, out_dir: str | os.PathLike,
     ``catalogue``: the saved model listing (default: ``src_dir/gso_catalogue.json`` if present).
     ``download``: first fetch the listing and the zips from ``base_url`` into ``src_dir``.
     """
-    from kubric.asset_tools.converter import ConvertJob, convert_jobs
-
     src = Path(src_dir)
     errors: list = []
     if download:

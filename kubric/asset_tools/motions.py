@@ -25,6 +25,7 @@ from kubric.asset_tools import retarget
 from kubric.asset_tools.bvh import BVHError, read_bvh
 from kubric.asset_tools.character_writer import package_motion
 from kubric.asset_tools.writer import write_manifest
+from kubric.assets.characters import hip_height
 from kubric.errors import InputError
 
 CMU_DIR = Path("/usr/share/assimp/models/BVH")
@@ -72,7 +73,6 @@ def _rig(character: dict):
 
 
 def _hip_height(names, rest) -> float:
-    from kubric.assets.characters import hip_height
     return hip_height(names, rest)
 
 

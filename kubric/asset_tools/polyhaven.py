@@ -21,6 +21,10 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+from kubric.asset_tools.converter import read_entry
+from kubric.asset_tools.hdri import image_size
+from kubric.asset_tools.writer import dumps, package_texture, write_manifest
+from kubric.assets.download import DownloadError, fetch_file, get_json
 from kubric.errors import InputError
 
 API_URL = "https://api.polyhaven.com"
@@ -48,11 +52,6 @@ def build_polyhaven(out_dir: str | os.PathLike, resolution: str = "2k", fmt: str
                     progress: bool = True, name: str = NAME) -> dict:
     """Download Poly Haven HDRIs into the source ``out_dir``; returns the report
     ``{"name", "total", "converted", "reused", "skipped": [{"id", "source", "reason"}]}``."""
-    from kubric.asset_tools.converter import read_entry
-    from kubric.asset_tools.hdri import image_size
-    from kubric.asset_tools.writer import dumps, package_texture, write_manifest
-    from kubric.assets.download import DownloadError, fetch_file, get_json
-
     if resolution not in RESOLUTIONS:
         raise InputError(f"resolution must be one of {list(RESOLUTIONS)}, got {resolution!r}")
     if fmt not in FORMATS:

@@ -18,6 +18,8 @@ import os
 import re
 from pathlib import Path
 
+from kubric.asset_tools.converter import ConvertJob, as_rgba, convert_jobs
+from kubric.assets.asset_source import AssetSource, cache_dir
 from kubric.errors import InputError
 
 NAME = "PybulletObjects"
@@ -63,8 +65,6 @@ def urdf_visual_color(urdf: Path) -> tuple[float, float, float, float] | None:
     """
     import xml.etree.ElementTree as ET
 
-    from kubric.asset_tools.converter import as_rgba
-
     try:
         robot = ET.parse(urdf).getroot()
     except ET.ParseError as err:
@@ -89,8 +89,6 @@ def urdf_visual_color(urdf: Path) -> tuple[float, float, float, float] | None:
 def pybullet_jobs(limit: int | None = None, textured: bool = True):
     """Conversion jobs: the first ``limit`` random_urdfs (all if None) + the textured models."""
     import pybullet_data
-
-    from kubric.asset_tools.converter import ConvertJob
 
     root = Path(pybullet_data.getDataPath())
     jobs = []
@@ -121,8 +119,6 @@ def build_pybullet_collection(out_dir: str | os.PathLike, limit: int | None = No
 
     ``only``: restrict to these ids (e.g. a test subset).
     """
-    from kubric.asset_tools.converter import convert_jobs
-
     jobs = pybullet_jobs(limit=limit)
     if only is not None:
         wanted = set(only)
@@ -142,8 +138,6 @@ def ensure_pybullet_collection(limit: int | None = None, cache=None, workers=Non
     (re)built: archives from an older converter are converted again, each replaced atomically,
     and the new manifest is written (atomically) last, so an interrupted rebuild is redone.
     """
-    from kubric.assets.asset_source import AssetSource, cache_dir
-
     root = Path(cache) if cache is not None else cache_dir()
     target = root / NAME
     if limit is not None:

@@ -35,6 +35,9 @@ from pathlib import Path
 
 import numpy as np
 
+from kubric.asset_tools.converter import REPORT_NAME, ConvertJob, convert_jobs
+from kubric.asset_tools.gso import check_texture
+from kubric.asset_tools.writer import dumps
 from kubric.errors import InputError
 
 NAME = "ShapeNetCore.v2"
@@ -171,10 +174,6 @@ def build_shapenet(src_dir: str | os.PathLike, out_dir: str | os.PathLike, synse
                    progress: bool = True, name: str = NAME) -> dict:
     """Convert ShapeNetCore v2 models under ``src_dir`` into the source ``out_dir``; returns the
     report (with the repair totals under ``"repairs"``)."""
-    from kubric.asset_tools.converter import REPORT_NAME, ConvertJob, convert_jobs
-    from kubric.asset_tools.gso import check_texture
-    from kubric.asset_tools.writer import dumps
-
     src = Path(src_dir)
     taxonomy_path = src / "taxonomy.json"
     if not taxonomy_path.is_file():

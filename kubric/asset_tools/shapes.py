@@ -15,6 +15,8 @@ import math
 
 import numpy as np
 
+from kubric.asset_tools.teapot_data import PATCHES, POINTS
+
 
 def _trimesh():
     import trimesh
@@ -183,7 +185,6 @@ def sponge(level: int = 2):
 
 def teapot(n: int = 10):
     """Newell's Utah teapot: 32 Bezier patches at n×n quads each, scaled to max |coordinate| 1."""
-    from kubric.asset_tools.teapot_data import PATCHES, POINTS
     trimesh = _trimesh()
     pts = np.asarray(POINTS, dtype=np.float64)
     s = np.linspace(0.0, 1.0, n + 1)

@@ -21,6 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
+from kubric.core.objects import FileBasedObject
 from kubric.errors import InputError
 
 
@@ -132,8 +133,6 @@ def add_articulated(scene, simulator, urdf: str | os.PathLike, mesh_dir: str | o
     """Add a multi-link URDF to ``scene`` (see the module docstring); returns
     ``(base, {link name: link object})``. ``base_kwargs`` (position, quaternion, scale, mass,
     ...) go to the base object; the link objects share its scale."""
-    from kubric.core.objects import FileBasedObject
-
     urdf = Path(urdf).resolve()
     meshes = export_link_meshes(urdf, mesh_dir)
     bounds = {link: mesh.bounds for link, mesh in link_visuals(urdf).items()}  # link frames

@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from kubric.assets import remote_source
-from kubric.assets.archive import safe_extract
+from kubric.assets.archive import build_staged, safe_extract
 from kubric.assets.manifest import (  # noqa: F401  (public here too: kubric.assets exports them)
     ASSET_DIR,
     ASSET_TYPES,
@@ -348,8 +348,6 @@ def build_once(target: str | os.PathLike, build) -> Path:
     The build happens in a temporary sibling folder, so a crash never leaves a half-built source
     and concurrent builders never see one; if another process finished first, its copy is kept.
     """
-    from kubric.assets.archive import build_staged
-
     target = Path(target)
     if (target / "manifest.json").is_file():
         return target

@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
+from kubric.core.characters import Character, MotionClip
 from kubric.errors import InputError
 
 
@@ -86,7 +87,6 @@ def create_character(entry: dict, kwargs: dict, metadata: dict, overrides: dict)
     """``kb.Character`` of a Character entry (``overrides``: constructor keywords, plus
     ``skin_tone=`` a palette name instead of ``material=``)."""
     import kubric.core as core
-    from kubric.core.characters import Character
 
     where = f"character asset {entry['id']!r}"
     overrides = dict(overrides)
@@ -104,8 +104,6 @@ def create_character(entry: dict, kwargs: dict, metadata: dict, overrides: dict)
 
 def create_motion(entry: dict, kwargs: dict, metadata: dict, overrides: dict):
     """``kb.MotionClip`` of a MotionClip entry."""
-    from kubric.core.characters import MotionClip
-
     built = motion_kwargs(kwargs["arrays"], kwargs["info"], f"motion asset {entry['id']!r}")
     built.update(overrides)
     built["metadata"] = metadata
@@ -127,8 +125,6 @@ def fit_clip(clip, character):
     """A copy of ``clip`` whose root offsets are scaled for ``character``'s legs: × (the
     character's hip height / the ``hip_height`` the clip was retargeted for, from its metadata).
     Rotations are unchanged. Use it when a clip made for one body drives another (a child)."""
-    from kubric.core.characters import MotionClip
-
     made_for = clip.metadata.get("hip_height")
     if not made_for:
         raise InputError(f"MotionClip {clip.name!r}: its metadata has no 'hip_height' "

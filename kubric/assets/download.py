@@ -21,6 +21,7 @@ import urllib.error
 import urllib.request
 from pathlib import Path
 
+from kubric.assets.remote_source import deadline_s
 from kubric.errors import KubricError
 
 USER_AGENT = "kubric-assets/1.0 (+https://github.com/google-research/kubric)"
@@ -136,7 +137,6 @@ def fetch_file(url: str, dest: str | os.PathLike, size: int | None = None,
         except DownloadError:
             dest.unlink()
     part = dest.with_name(dest.name + ".part")
-    from kubric.assets.remote_source import deadline_s
     deadline = time.monotonic() + deadline_s()
     for attempt in range(retries + 1):
         try:

@@ -43,6 +43,7 @@ import re
 import time
 from pathlib import Path
 
+from kubric.assets.archive import check_complete
 from kubric.assets.manifest import ManifestError, cache_dir, validate_manifest
 from kubric.errors import KubricError
 from kubric.io import storage
@@ -315,7 +316,6 @@ class RemoteSource:
         digest = hashlib.sha256(url.encode()).hexdigest()[:12]
         name = f"{digest}-{_safe(url.rsplit('/', 1)[-1])}"
         what = f"asset {asset_id!r} ({url})"
-        from kubric.assets.archive import check_complete
         return download(url, self.folder / "archives" / name,
                         {k: entry[k] for k in CHECKSUMS if k in entry}, what=what,
                         check=lambda path: check_complete(path, what))

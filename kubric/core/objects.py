@@ -13,6 +13,7 @@ import numpy as np
 
 from kubric.core import traits as kt
 from kubric.core.assets import Asset
+from kubric.core.materials import Material, UndefinedMaterial
 from kubric.core.quaternion import Quaternion, look_at_quaternion
 
 _AXIS_NAMES = ["X", "Y", "Z", "-X", "-Y", "-Z"]
@@ -124,12 +125,10 @@ class PhysicalObject(Object3D):
 
 
 def _material_cls():
-    from kubric.core.materials import Material
     return Material
 
 
 def _undefined_material():
-    from kubric.core.materials import UndefinedMaterial
     return UndefinedMaterial()
 
 

@@ -19,11 +19,17 @@ import pathlib
 
 import numpy as np
 
+from kubric import file_io
 from kubric.annotations import pictures
+from kubric.annotations.track_files import TRACKS_FILE, read_tracks
 from kubric.core.camera_geometry import BACKGROUND_DEPTH
 from kubric.errors import InputError
+from kubric.io import storage
 from kubric.io.palette import label_palette
 from kubric.io.scene_dir import EVENTS_FILE, METADATA_FILE, is_complete
+from kubric.io.scene_writer import check_scene_content
+from kubric.io.schema import SchemaError
+from kubric.pipeline.recipe import schema_of
 
 COLUMNS = ("rgba", "segmentation", "depth", "forward_flow", "normal")
 MAX_DRAWN_TRACKS = 64
@@ -152,9 +158,6 @@ def inspect_scene(scene_dir, sheet=None) -> str:
     Read-only on the scene: the sheet goes to ``sheet`` or else to
     ``./{scene name}_contact_sheet.png`` in the current directory, never into the scene directory
     unless ``sheet`` says so (datasets may be read-only; finished scenes stay as written)."""
-    from kubric import file_io
-    from kubric.annotations.track_files import TRACKS_FILE, read_tracks
-
     scene_dir = pathlib.Path(scene_dir)
     if not scene_dir.is_dir():
         raise FileNotFoundError(f"{str(scene_dir)!r} is not a directory")
@@ -185,8 +188,6 @@ def inspect_url(scene_url: str, sheet=None) -> str:
     directory. The contact sheet defaults to ``./{scene name}_contact_sheet.png``."""
     import tempfile
 
-    from kubric.io import storage
-
     scene_url = storage.normalise(scene_url)
     if not is_complete(scene_url):
         what = "does not exist" if not storage.listdir(scene_url) else \
@@ -202,8 +203,6 @@ def inspect_url(scene_url: str, sheet=None) -> str:
 
 def _schema_of(metadata: dict):
     """The recipe schema named by ``flags.recipe`` (None when unknown)."""
-    from kubric.io.schema import SchemaError
-    from kubric.pipeline.recipe import schema_of
     recipe = metadata.get("flags", {}).get("recipe")
     try:
         return schema_of(recipe) if recipe else None
@@ -213,8 +212,6 @@ def _schema_of(metadata: dict):
 
 def schema_line(schema, layers: dict, metadata: dict, events: dict) -> str:
     """One line: does the scene hold every source of its recipe schema's features?"""
-    from kubric.io.scene_writer import check_scene_content
-    from kubric.io.schema import SchemaError
     if schema is None:
         return "  schema: none known for recipe " + repr(metadata.get("flags", {}).get("recipe"))
     try:

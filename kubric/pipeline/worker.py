@@ -21,7 +21,10 @@ import shutil
 import time
 from dataclasses import dataclass
 
-from kubric import faults
+from kubric import (
+    faults,
+    randomness,  # here, not at module level: it imports the asset sources
+)
 from kubric.io.scene_dir import (
     SUCCESS_FILE,
     is_complete,
@@ -69,7 +72,6 @@ class SceneResult:
 def run_scene(recipe, seed: int, out_root) -> SceneResult:
     """Generate scene ``seed`` with ``recipe`` (a :class:`~kubric.pipeline.recipe.Recipe`
     instance) under ``out_root`` atomically (see module doc)."""
-    from kubric import randomness  # here, not at module level: it imports the asset sources
     start = time.time()
     out_root = pathlib.Path(out_root)
     final = out_root / scene_name(seed)

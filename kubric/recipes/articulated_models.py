@@ -17,6 +17,9 @@ import os
 
 import numpy as np
 
+from kubric.assets.articulated import add_articulated, link_visuals
+from kubric.core.quaternion import Quaternion
+
 #: model name → URDF path inside pybullet_data
 MODELS = {
     "r2d2": "r2d2.urdf",
@@ -52,9 +55,6 @@ def rest_pose(urdf: str) -> tuple[np.ndarray, float]:
     root link's frame (metres at scale 1), and the model's total mass (kg)."""
     import pybullet as pb
 
-    from kubric.assets.articulated import link_visuals
-    from kubric.core.quaternion import Quaternion
-
     meshes = link_visuals(urdf)
     client = pb.connect(pb.DIRECT)
     try:
@@ -85,7 +85,6 @@ def add_model(scene, simulator, name: str, size: float, color, mesh_dir, object_
     ...) go to the base. Returns ``(base, {link name: link object}, rest bounds (2, 3) in metres
     in the base frame)``."""
     import kubric as kb
-    from kubric.assets.articulated import add_articulated
 
     urdf = urdf or model_path(name)
     bounds, mass = rest_pose(urdf)

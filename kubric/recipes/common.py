@@ -2,6 +2,10 @@
 
 from __future__ import annotations
 
+from kubric import assets
+from kubric.assets.asset_source import ManifestError
+from kubric.assets.remote_source import RemoteSourceError, is_remote, local_path
+from kubric.io import storage
 from kubric.pipeline import OptionError
 
 
@@ -10,9 +14,6 @@ def source_location(value):
     which must exist) or the URL of one (a normalised ``str``: ``https://``, ``s3://``, ``gs://``,
     any fsspec URL; ``file://`` URLs become paths)."""
     import pathlib
-
-    from kubric.assets.remote_source import is_remote, local_path
-    from kubric.io import storage
 
     if not isinstance(value, (str, pathlib.Path)) or not str(value).strip():
         raise ValueError("expected a path or URL")
@@ -40,8 +41,6 @@ def open_existing_source(path, what: str):
     """The :class:`~kubric.AssetSource` at ``path`` (option ``what``, a path or URL); one line if
     it cannot be fetched, is malformed or is empty."""
     import kubric as kb
-    from kubric.assets.asset_source import ManifestError
-    from kubric.assets.remote_source import RemoteSourceError
 
     try:
         source = kb.AssetSource(path)
@@ -54,8 +53,6 @@ def open_existing_source(path, what: str):
 
 def kubasic_sources(kubasic_source) -> dict:
     """``{"kubasic": source}``: the folder given by the option, else the locally built KuBasic."""
-    from kubric import assets
-
     if kubasic_source is not None:
         return {"kubasic": open_existing_source(kubasic_source, "kubasic_source")}
     return {"kubasic": assets.ensure_kubasic()}

@@ -42,6 +42,7 @@ import abc
 import numpy as np
 
 import kubric as kb
+from kubric import assets
 from kubric.assets import clevr
 from kubric.assets.utils import get_clevr_lights
 from kubric.pipeline import Option, OptionError, float_range
@@ -233,7 +234,6 @@ class MoviC(MoviBase, name="movi_c"):
                               f"(characters={self.characters}); these need renderer=blender")
 
     def open_sources(self):
-        from kubric import assets
         sources = super().open_sources()
         sources["objects"] = open_existing_source(self.objects_source, "objects_source") \
             if self.objects_source is not None else \

@@ -29,6 +29,8 @@ import tempfile
 import numpy as np
 
 import kubric as kb
+from kubric.annotations.track_files import tracks_archive
+from kubric.annotations.tracks import scene_tracks
 from kubric.io.scene_dir import TRACKS_FILE
 from kubric.io.scene_writer import write_scene
 from kubric.pipeline import Option, OptionError, Recipe, resolution
@@ -245,8 +247,6 @@ class MoviBase(RenderQuality, Recipe):
         """The point tracks of ``tracks.npz`` (computed before the segmentation is relabelled);
         queries sampled with an rng derived from the seed, so adding tracks changes nothing else
         in the scene."""
-        from kubric.annotations.track_files import tracks_archive
-        from kubric.annotations.tracks import scene_tracks
         rng = np.random.RandomState([int(seed), 0x7472616B])
         tracks = scene_tracks(scene, layers, visible, rng, num_tracks=self.tracks,
                               queries=getattr(self, "_queries", None), stride=self.track_stride,

@@ -37,6 +37,7 @@ import tempfile
 import numpy as np
 
 import kubric as kb
+from kubric import assets
 from kubric.annotations import nerf_export
 from kubric.core import camera_geometry as geo
 from kubric.io.layers import LAYERS
@@ -51,6 +52,7 @@ from kubric.recipes.common import (
     source_location,
 )
 from kubric.recipes.common import open_existing_source as open_source
+from kubric.recipes.movi import add_clevr_lights
 from kubric.recipes.movi_base import new_camera
 from kubric.recipes.render_quality import RenderQuality
 
@@ -123,7 +125,6 @@ def sized_object(source, asset_id: str, size: float):
 
 def open_hdri_source(path):
     """The HDRI source at ``path``, or the HDRIs shipped with bpy when None."""
-    from kubric import assets
     return assets.ensure_hdri_source() if path is None else open_source(path, "hdri_source")
 
 
@@ -236,7 +237,6 @@ class MultiviewBase(RenderQuality, Recipe):
 
     def grey_background(self, scene, rng, sources, color="gray") -> str:
         """A diffuse dome of ``color`` lit by the CLEVR lamps (as MOVi-A); returns the hex."""
-        from kubric.recipes.movi import add_clevr_lights
         floor = kb.get_color(color)
         self.add_floor(scene, sources, kb.PrincipledBSDFMaterial(color=floor, roughness=1.0,
                                                                  specular=0.0))

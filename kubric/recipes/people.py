@@ -7,7 +7,8 @@ from __future__ import annotations
 import numpy as np
 
 import kubric as kb
-from kubric.pipeline import OptionError
+from kubric.assets.procedural_character import tube_person, walk_clip
+from kubric.pipeline import Option, OptionError
 from kubric.recipes.common import open_existing_source, source_location
 
 PROCEDURAL = "procedural"
@@ -34,7 +35,6 @@ class ProceduralSource:
         return ["tube_person"] if self.kind == "characters" else ["procedural_walk"]
 
     def create(self, asset_id: str, **kwargs):
-        from kubric.assets.procedural_character import tube_person, walk_clip
         if self.kind == "characters":
             kwargs.setdefault("material", kb.PrincipledBSDFMaterial(
                 color=kb.Color(0.55, 0.38, 0.28), roughness=0.6))
@@ -73,7 +73,6 @@ def asset_ids(source) -> list[str]:
 def source_options(when: str = "") -> tuple:
     """The ``character_source`` and ``motion_source`` options of a recipe with people (``when``
     prefixes their help, e.g. "with characters: ")."""
-    from kubric.pipeline import Option
     return (Option(None, f"{when}character asset source (folder or URL), or 'procedural' (the "
                    "built-in tube person); default: the MakeHuman humans source",
                    type=character_location),

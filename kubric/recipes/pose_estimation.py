@@ -34,6 +34,7 @@ from __future__ import annotations
 import numpy as np
 
 import kubric as kb
+from kubric.annotations.keypoints import annotate_keypoints
 from kubric.pipeline import Option, OptionError
 from kubric.recipes.movi_base import MoviBase, new_camera
 from kubric.recipes.people import (
@@ -148,7 +149,6 @@ class PoseEstimation(MoviBase, name="pose_estimation"):
 
     def write_outputs(self, scene, layers, collisions, seed, out_dir, background,
                       render_settings) -> list:
-        from kubric.annotations.keypoints import annotate_keypoints
         annotate_keypoints(scene, layers)
         scene.metadata.pop("room_half_width", None)
         return super().write_outputs(scene, layers, collisions, seed, out_dir, background,

@@ -4,11 +4,12 @@ from __future__ import annotations
 
 import sys
 
+from kubric.viewer.server import serve
+from kubric.viewer.service import ViewerService
+from kubric.viewer.source import DirectorySource
+
 
 def cmd_view(args) -> int:
-    from kubric.viewer.server import serve
-    from kubric.viewer.service import ViewerService
-    from kubric.viewer.source import DirectorySource
     if not 0 <= args.port <= 65535:
         print(f"kubric view: error: --port {args.port}: allowed 0..65535", file=sys.stderr)
         return 2

@@ -20,11 +20,14 @@ import time
 
 import numpy as np
 
+from kubric.annotations.track_files import read_tracks
 from kubric.errors import KubricError
 from kubric.io.json_io import read_json
 from kubric.io.layers import LAYERS, LayerFormat, frame_filename, read_frame
 from kubric.io.scene_dir import EVENTS_FILE, METADATA_FILE, SUCCESS_FILE, TRACKS_FILE
 from kubric.io.scene_dir import looks_like_scene as _looks_like_scene
+from kubric.io.schema import SchemaError
+from kubric.pipeline.recipe import schema_of
 
 #: a scene name: letters, digits, ``_ . -``, not starting with a dot (no separators, no ``..``)
 NAME_PATTERN = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.\-]{0,199}\Z")
@@ -193,7 +196,6 @@ class DirectorySource(SceneSource):
         directory = self.directory(name)
         if not (directory / TRACKS_FILE).is_file():
             return None
-        from kubric.annotations.track_files import read_tracks
         try:
             return read_tracks(directory)
         except (ValueError, OSError) as err:
@@ -204,8 +206,6 @@ class DirectorySource(SceneSource):
 def _recipe_layers(recipe: str) -> dict[str, LayerFormat]:
     """The layers the schema of ``recipe`` declares beyond the standard ones ({} when the recipe
     is unknown here: its scenes show their standard layers)."""
-    from kubric.io.schema import SchemaError
-    from kubric.pipeline.recipe import schema_of
     try:
         return dict(schema_of(recipe).layers)
     except (SchemaError, ValueError, ImportError):

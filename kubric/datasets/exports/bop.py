@@ -39,7 +39,9 @@ import numpy as np
 
 from kubric.datasets.exports import models as mdl
 from kubric.datasets.exports.coco import mask_bbox
-from kubric.datasets.exports.scenes import ExportError, Scene, find_scenes, load_scene
+from kubric.datasets.exports.scenes import ExportError, Scene, find_scenes, load_scene, model_sources
+from kubric.io.layers import read_frame
+from kubric.io.png_io import encode_png
 
 #: our camera axes (x right, y up, looking down -z) → OpenCV's
 BLENDER_TO_OPENCV = np.diag([1.0, -1.0, -1.0])
@@ -151,14 +153,12 @@ def _bbox(mask: np.ndarray) -> list[int]:
 
 
 def _png(array: np.ndarray) -> bytes:
-    from kubric.io.png_io import encode_png
     return encode_png(np.ascontiguousarray(array if array.ndim == 3 else array[..., None]))
 
 
 def export_scene(scene: Scene, out: pathlib.Path, store: ModelStore, depth_scale: float
                  ) -> tuple[int, int, int]:
     """Write one scene's BOP folder; returns (images, annotations, clipped depth pixels)."""
-    from kubric.io.layers import read_frame
     meta, camera = scene.metadata, scene.metadata["camera"]
     w, h = scene.resolution
     k = opencv_k(camera["intrinsics_pixels"])
@@ -231,7 +231,6 @@ def export_bop(root, out, split: str = "train_pbr", depth_scale: float = 1.0,
     """Write every complete scene under ``root`` (or the scene ``root``) as a BOP dataset."""
     from tqdm import tqdm
 
-    from kubric.datasets.exports.scenes import model_sources
     root, out = pathlib.Path(root), pathlib.Path(out)
     if out.exists() and not out.is_dir():
         raise ExportError(f"--out {str(out)!r} is a file; give a folder (the BOP dataset root)")

@@ -31,6 +31,8 @@ annotation.
 
 from __future__ import annotations
 
+from kubric.annotations.keypoints import coco_keypoints
+from kubric.assets.clevr import KUBASIC_SHAPES, SHAPES
 from kubric.datasets.exports.scenes import ExportError, Scene
 
 
@@ -120,7 +122,6 @@ class PersonScheme(CategoryScheme):
             self.base.check(scene)
 
     def annotation_extras(self, scene: Scene, index: int, frame: int) -> dict:
-        from kubric.annotations.keypoints import coco_keypoints
         instance = scene.metadata["instances"][index]
         if not _is_person(instance):
             return self.base.annotation_extras(scene, index, frame) if self.base else {}
@@ -144,7 +145,6 @@ def scheme_for(scene: Scene, sources=None) -> CategoryScheme:
 def _recipe_scheme(scene: Scene, sources=None) -> CategoryScheme:
     """The scheme of ``scene``'s recipe (module doc); ``sources``: asset-source paths given on
     the command line, searched for categories before the scene's own."""
-    from kubric.assets.clevr import KUBASIC_SHAPES, SHAPES
     meta, flags = scene.metadata, scene.metadata.get("flags", {})
     instances = meta.get("instances", [])
     if meta["metadata"].get("semantic_classes"):

@@ -6,6 +6,11 @@ from __future__ import annotations
 
 import sys
 
+from kubric.annotations.track_files import export_tapvid
+from kubric.datasets.exports.bop import export_bop
+from kubric.datasets.exports.coco import export_coco
+from kubric.datasets.exports.scenes import ExportError
+
 
 def _error(what: str, message) -> int:
     print(f"kubric export {what}: error: {' '.join(str(message).split())}", file=sys.stderr)
@@ -13,8 +18,6 @@ def _error(what: str, message) -> int:
 
 
 def cmd_coco(args) -> int:
-    from kubric.datasets.exports.coco import export_coco
-    from kubric.datasets.exports.scenes import ExportError
     try:
         summary = export_coco(args.scenes_dir, args.out, progress=not args.no_progress,
                               compressed=not args.uncompressed_rle, sources=args.source)
@@ -25,8 +28,6 @@ def cmd_coco(args) -> int:
 
 
 def cmd_bop(args) -> int:
-    from kubric.datasets.exports.bop import export_bop
-    from kubric.datasets.exports.scenes import ExportError
     if not args.depth_scale > 0:
         return _error("bop", f"--depth-scale must be > 0 (millimetres per depth unit), got "
                       f"{args.depth_scale}")
@@ -41,7 +42,6 @@ def cmd_bop(args) -> int:
 
 
 def cmd_tapvid(args) -> int:
-    from kubric.annotations.track_files import export_tapvid
     try:
         path, count = export_tapvid(args.scenes_dir, args.out)
     except (FileNotFoundError, ValueError) as err:

@@ -40,6 +40,7 @@ from kubric.datasets.exports.scenes import (
     image_id,
     load_scene,
 )
+from kubric.io.layers import read_layer
 from kubric.io.paths import temp_name_for
 
 
@@ -70,7 +71,6 @@ def mask_bbox(mask: np.ndarray) -> list[int]:
 
 def scene_records(scene: Scene, scheme, compressed: bool = True):
     """(images, annotations) of one scene, as lists of dicts."""
-    from kubric.io.layers import read_layer
     w, h = scene.resolution
     try:
         seg = read_layer(scene.path, "segmentation")[..., 0]

@@ -16,6 +16,7 @@ from __future__ import annotations
 import dataclasses
 import pathlib
 
+from kubric import assets
 from kubric.errors import InputError
 from kubric.io import scene_dir
 from kubric.io.json_io import read_json
@@ -104,7 +105,6 @@ def objects_sources(flags: dict, extra=()) -> list:
     converted ``pybullet_data`` collection for the recipes that default to it (those with the
     option ``collection_limit``)."""
     import kubric as kb
-    from kubric import assets
 
     out = [kb.AssetSource(p) for p in extra]
     for key in ("objects_source", "objects"):
@@ -120,7 +120,6 @@ def model_sources(flags: dict, extra=()) -> list:
     """:func:`objects_sources` plus KuBasic (``kubasic_source``, else the locally built one):
     every source whose meshes a scene's instances may use."""
     import kubric as kb
-    from kubric import assets
 
     kubasic = flags.get("kubasic_source")
     return objects_sources(flags, extra) + [kb.AssetSource(kubasic) if kubasic
