@@ -51,17 +51,19 @@ def spawn(cmd, log: pathlib.Path, env=None) -> subprocess.Popen:
                             env=env, stdin=subprocess.DEVNULL)
 
 
-def start_dask(procs: list, tmp: pathlib.Path, n_workers: int = 2, timeout: float = 90) -> str:
-    """Start a scheduler and ``n_workers`` workers (one scene slot each); returns the address
-    once every worker has joined."""
+def start_dask(procs: list, tmp: pathlib.Path, n_workers: int = 2, timeout: float = 90,
+               plain: bool = False, nthreads: int = 1) -> str:
+    """Start a scheduler and ``n_workers`` workers (one scene slot each, offering the ``scene``
+    resource; ``plain``: started with no kubric flags, ``nthreads`` threads each); returns the
+    address once every worker has joined."""
     port = free_port()
     address = f"tcp://127.0.0.1:{port}"
     procs.append(spawn([str(BIN / "dask"), "scheduler", "--host", "127.0.0.1", "--port",
                         str(port), "--no-dashboard"], tmp / "scheduler.log"))
     for k in range(n_workers):
-        procs.append(spawn([str(BIN / "dask"), "worker", address, "--nthreads", "1",
-                            "--resources", "scene=1", "--name", f"w{k}", "--no-dashboard",
-                            "--host", "127.0.0.1", "--death-timeout", "60"],
+        flags = ["--nthreads", str(nthreads)] + ([] if plain else ["--resources", "scene=1"])
+        procs.append(spawn([str(BIN / "dask"), "worker", address, *flags, "--name", f"w{k}",
+                            "--no-dashboard", "--host", "127.0.0.1", "--death-timeout", "60"],
                            tmp / f"worker{k}.log"))
     from distributed import Client
     with Client(address, timeout=timeout) as client:

@@ -142,14 +142,16 @@ class _LocalExecutor:
 
 
 class DaskExecutor:
-    """Tasks on a Dask client; each asks for one ``scene`` slot (as a scene render does)."""
+    """Tasks on a Dask client; each asks for one ``scene`` slot (as a scene render does) where
+    workers offer that resource, else takes one worker thread (a cluster of plain workers)."""
 
     def __init__(self, client):
+        from kubric.pipeline.dask_slots import RESOURCE, uses_resource
         self.client = client
+        self.resources = {RESOURCE: 1} if uses_resource(client) else None
 
     def submit(self, fn, *args):
-        from kubric.pipeline.dask_runner import RESOURCE
-        return self.client.submit(fn, *args, resources={RESOURCE: 1}, pure=False)
+        return self.client.submit(fn, *args, resources=self.resources, pure=False)
 
     def as_completed(self, futures):
         from distributed import as_completed

@@ -262,7 +262,8 @@ def layer_channels(arg: str, what: str = "source") -> tuple[str, slice]:
 #: schemas by recipe name
 REGISTRY: dict[str, Schema] = {}
 #: modules that declare the built-in recipes' schemas (imported on first lookup)
-BUILTIN_SCHEMA_MODULES = ("kubric.recipes.movi_schema", "kubric.recipes.multiview_schema",
+BUILTIN_SCHEMA_MODULES = ("kubric.recipes.bench", "kubric.recipes.movi_schema",
+                          "kubric.recipes.multiview_schema",
                           "kubric.recipes.vbr_schema")
 
 

@@ -131,9 +131,10 @@ def cmd_generate(args) -> int:
     misplaced = _misplaced_flag(args)
     if misplaced:
         return _error("generate", misplaced)
+    from kubric.pipeline.dask_runner import ClusterError  # no Dask import
     cluster_options = None
     if args.cluster is not None:
-        from kubric.pipeline.dask_runner import ClusterError, slurm_job_script
+        from kubric.pipeline.dask_runner import slurm_job_script
         cluster_options = _cluster_options(args)
         try:
             cluster_options.validate()
@@ -176,6 +177,8 @@ def cmd_generate(args) -> int:
                             threads_per_scene=cluster_options.threads_per_scene, **common)
     try:
         summary = runner.run()
+    except ClusterError as err:  # the scheduler went away mid-run
+        return _error("generate", err)
     finally:
         if client is not None:
             client.close()
