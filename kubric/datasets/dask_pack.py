@@ -59,7 +59,7 @@ def _require_work(work: str) -> None:
         return
     if not (pathlib.Path(work) / PLAN_FILE).is_file():
         raise DatasetError(f"the pack worker on {socket.gethostname()} cannot see {work!r}: "
-                           "--out must be on a filesystem shared with the workers (or a URL)")
+                           "--out must be on a filesystem shared with the workers")
 
 
 @contextlib.contextmanager
