@@ -19,6 +19,9 @@ subprocesses or the Dask workers). Sections:
   ``Runner.run()`` to the first submission (listing, ``_SUCCESS`` checks, the to-do list).
 * **pack** — N ``bench`` scenes packed locally (``kubric.datasets.pack``) and to ``s3://``
   (:mod:`kubric.datasets.store_commit`), one encoding process: scenes per second, peak memory.
+* **load** — the train split of the N = 1000 dataset read in full (open + decode every example)
+  from the local directory (twice, before and after: the baseline) and from its ``s3://`` URL with
+  a cold and then a warm cache (:mod:`kubric.datasets.dataset_cache`).
 
 Run: ``python benchmarks/bench_scale.py [--sizes 100,1000,10000] [--bench-sizes 100,1000]
 [--slots 4]``; ``make bench`` runs the defaults below (about 25 min on an idle 2-core machine).
@@ -142,8 +145,22 @@ def child_pack(spec: dict) -> dict:
             **_usage()}
 
 
+def child_load(spec: dict) -> dict:
+    """Open a split (a directory or a URL: fetched into the local cache unless already there)
+    and decode every example."""
+    from kubric.datasets import load
+    start = time.perf_counter()
+    source = load(spec["dataset"], "train")
+    opened = time.perf_counter() - start
+    for i in range(len(source)):
+        source[i]
+    return {"open": opened, "wall": time.perf_counter() - start, "examples": len(source),
+            **_usage()}
+
+
 def child(spec: dict) -> None:
-    result = {"generate": child_generate, "resume": child_resume, "pack": child_pack}[
+    result = {"generate": child_generate, "resume": child_resume, "pack": child_pack,
+              "load": child_load}[
         spec["what"]](spec)
     print("RESULT " + json.dumps(result), flush=True)
 
@@ -211,7 +228,7 @@ def main(argv=None) -> int:
                         help="N for the runs with the real `kubric worker bench` process")
     parser.add_argument("--slots", type=int, default=4, help="pool workers = Dask workers")
     parser.add_argument("--arms", default="pool,dask-resource,dask-plain")
-    parser.add_argument("--sections", default="generate,resume,pack")
+    parser.add_argument("--sections", default="generate,resume,pack,load")
     parser.add_argument("--child", default=None, help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.child:
@@ -292,6 +309,15 @@ def main(argv=None) -> int:
                         print(f"  pack {where:5} N={n:>6}: {r['wall']:6.1f} s, "
                               f"{r['packed'] / r['wall']:6.1f} scenes/s, "
                               f"{r['maxrss_mb']:.0f} MB", flush=True)
+                    if "load" in sections and n == 1000:
+                        for arm, dataset in (("local", str(root / f"ds-{n}")),
+                                             ("s3-cold", f"s3://bench/ds-{n}"),
+                                             ("s3-warm", f"s3://bench/ds-{n}"),
+                                             ("local-again", str(root / f"ds-{n}"))):
+                            r = measure({"what": "load", "dataset": dataset})
+                            results[("load", arm)] = r
+                            print(f"  load {arm:11} N={n}: open {r['open']:5.2f} s, all "
+                                  f"{r['examples']} examples {r['wall']:5.2f} s", flush=True)
     report(results, sizes, bench_sizes, arms, args.slots)
     return 0
 
@@ -337,6 +363,14 @@ def report(results: dict, sizes, bench_sizes, arms, slots) -> None:
         print()
         print(table(rows, ["store", "N", "resume scan s", "pack s", "pack scenes/s",
                            "pack peak MB"]))
+    loads = {k[1]: v for k, v in results.items() if k[0] == "load"}
+    if loads:
+        base = (loads["local"]["wall"] + loads["local-again"]["wall"]) / 2
+        print()
+        print(table([[arm, f"{r['open']:.2f}", f"{r['wall']:.2f}", f"{r['wall'] / base:.2f}×"]
+                     for arm, r in loads.items()],
+                    ["read train split of 1000 bench scenes", "open s", "open + every example s",
+                     "× local"]))
     r = results.get(("resume", "local", 10000))
     if r:
         print(f"resume of 10000 listed scenes, local: {r['scan']:.2f} s (goal < 10 s: "
