@@ -11,15 +11,17 @@ subprocesses or the Dask workers). Sections:
   recipe: a real worker process, ~0.2 CPU-s of interpreter start and imports per scene), and
   ``stdlib`` = a worker of the same contract in ``python -S`` (copies a ``bench`` scene into a
   work directory, writes ``_SUCCESS``, renames; ~15 ms), which leaves the runners' own cost
-  visible and makes 10⁴ scenes affordable on a small machine. Reported: slot-seconds per scene
-  (wall × slots / N; the *per-scene overhead* with the stdlib worker), client CPU ms per scene,
-  client peak memory.
+  visible and makes 10⁴ scenes affordable on a small machine (at N ≥ 10⁴ only ``--big-arms``).
+  Reported: slot-seconds per scene (wall × slots / N; the *per-scene overhead* with the stdlib
+  worker), CPU ms per scene of the client, of the scheduler process and of the Dask worker
+  processes (their own CPU, not their scene subprocesses'), client peak memory.
 * **resume** — a half-finished run of N scenes (N/2 complete, some stale work directories or
-  prefixes without ``_SUCCESS``), locally and on S3 (moto's server on 127.0.0.1): the time from
+  prefixes without ``_SUCCESS``), locally and on S3 (moto's server on 127.0.0.1; each scene
+  prefix holds its ``metadata.json`` and ``_SUCCESS``, what the scan touches): the time from
   ``Runner.run()`` to the first submission (listing, ``_SUCCESS`` checks, the to-do list).
 * **pack** — N ``bench`` scenes packed locally (``kubric.datasets.pack``) and to ``s3://``
   (:mod:`kubric.datasets.store_commit`), one encoding process: scenes per second, peak memory.
-* **load** — the train split of the N = 1000 dataset read in full (open + decode every example)
+* **load** — the train split of the N = ``--load-size`` (1000) dataset read in full (open + decode every example)
   from the local directory (twice, before and after: the baseline) and from its ``s3://`` URL with
   a cold and then a warm cache (:mod:`kubric.datasets.dataset_cache`).
 
@@ -203,10 +205,53 @@ def half_finished(scenes: pathlib.Path, root: pathlib.Path, n: int) -> pathlib.P
     return out
 
 
-def start_cluster(procs, root: pathlib.Path, slots: int, plain: bool) -> str:
+def upload_markers(fs, half: pathlib.Path, prefix: str) -> None:
+    """The half-finished run on S3 as the resume scan sees it: every scene prefix with its
+    ``metadata.json`` and, where complete, ``_SUCCESS`` (the scan lists scene prefixes and asks
+    for each ``_SUCCESS``; the other files of a scene cost it nothing, only upload time)."""
+    local = half.parent / f"{half.name}-markers"
+    for scene in half.glob("scene_*"):
+        (local / scene.name).mkdir(parents=True)
+        for name in ("metadata.json", "_SUCCESS"):
+            if (scene / name).exists():
+                os.link(scene / name, local / scene.name / name)
+    fs.put(str(local) + "/", prefix, recursive=True)
+    shutil.rmtree(local)
+
+
+def start_cluster(procs, root: pathlib.Path, slots: int, plain: bool) -> tuple[str, list]:
+    """(address, [scheduler pid, worker pids]) of a real scheduler and ``slots`` one-thread
+    workers (offering ``scene=1`` unless ``plain``)."""
     from dask_helpers import start_dask
     root.mkdir(parents=True, exist_ok=True)
-    return start_dask(procs, root, n_workers=slots, plain=plain, nthreads=1)
+    first = len(procs)
+    address = start_dask(procs, root, n_workers=slots, plain=plain, nthreads=1)
+    return address, [p.pid for p in procs[first:]]
+
+
+def tree_cpu(pids: list[int]) -> float:
+    """CPU seconds (user + system) of the processes ``pids`` and their live descendants, each
+    counting only itself (a finished scene subprocess is not in it)."""
+    parent, own = {}, {}
+    for entry in pathlib.Path("/proc").iterdir():
+        if not entry.name.isdigit():
+            continue
+        try:
+            fields = (entry / "stat").read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        parent[int(entry.name)] = int(fields[1])
+        own[int(entry.name)] = (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+    total, todo = 0.0, list(pids)
+    seen = set()
+    while todo:
+        pid = todo.pop()
+        if pid in seen or pid not in own:
+            continue
+        seen.add(pid)
+        total += own[pid]
+        todo += [c for c, p in parent.items() if p == pid]
+    return total
 
 
 # ------------------------------------------------------------------------------ report
@@ -228,7 +273,11 @@ def main(argv=None) -> int:
                         help="N for the runs with the real `kubric worker bench` process")
     parser.add_argument("--slots", type=int, default=4, help="pool workers = Dask workers")
     parser.add_argument("--arms", default="pool,dask-resource,dask-plain")
+    parser.add_argument("--big-arms", default="pool,dask-plain",
+                        help="the arms also run at N ≥ 10000 (time: ~N × 30 ms of CPU each)")
     parser.add_argument("--sections", default="generate,resume,pack,load")
+    parser.add_argument("--load-size", type=int, default=1000,
+                        help="N of the dataset read from disk and from s3:// (load section)")
     parser.add_argument("--child", default=None, help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.child:
@@ -258,20 +307,28 @@ def main(argv=None) -> int:
                 addresses["dask-resource"] = start_cluster(procs, root / "dr", args.slots, False)
             if "dask-plain" in arms:
                 addresses["dask-plain"] = start_cluster(procs, root / "dp", args.slots, True)
+            big_arms = args.big_arms.split(",")
             for workload, ns in (("stdlib", sizes), ("bench", bench_sizes)):
                 for n in ns:
                     for arm in arms:
+                        if n >= 10000 and arm not in big_arms:
+                            continue
                         out = root / f"gen-{workload}-{arm}-{n}"
+                        address, pids = addresses.get(arm, (None, []))
                         spec = {"what": "generate", "arm": arm.split("-")[0], "n": n,
                                 "worker": workload, "out": str(out), "slots": args.slots,
-                                "address": addresses.get(arm), "scratch": str(root)}
+                                "address": address, "scratch": str(root)}
+                        before = tree_cpu(pids[:1]), tree_cpu(pids[1:])
                         r = measure(spec)
                         r["slot_s"] = r["wall"] * args.slots / n
+                        r["scheduler_ms"] = 1000 * (tree_cpu(pids[:1]) - before[0]) / n
+                        r["workers_ms"] = 1000 * (tree_cpu(pids[1:]) - before[1]) / n
                         results[("generate", workload, arm, n)] = r
                         print(f"  generate {workload:6} {arm:13} N={n:>6}: {r['wall']:7.1f} s, "
                               f"{1000 * r['slot_s']:6.1f} slot-ms/scene, client "
                               f"{1000 * r['cpu'] / n:5.2f} CPU-ms/scene, "
-                              f"{r['maxrss_mb']:6.0f} MB", flush=True)
+                              f"{r['maxrss_mb']:6.0f} MB, scheduler {r['scheduler_ms']:.2f} / "
+                              f"workers {r['workers_ms']:.2f} CPU-ms/scene", flush=True)
                         shutil.rmtree(out, ignore_errors=True)
         if "resume" in sections or "pack" in sections:
             largest = max(sizes)
@@ -292,7 +349,7 @@ def main(argv=None) -> int:
                     print(f"  resume local N={n:>6}: scan {r['scan']:6.2f} s, to do "
                           f"{r['todo']}, {r['maxrss_mb']:.0f} MB", flush=True)
                     start = time.perf_counter()
-                    fs.put(str(half) + "/", f"bench/half-{n}", recursive=True)
+                    upload_markers(fs, half, f"bench/half-{n}")
                     upload = time.perf_counter() - start
                     r = measure({"what": "resume", "out": f"s3://bench/half-{n}", "n": n})
                     results[("resume", "s3", n)] = r
@@ -309,7 +366,7 @@ def main(argv=None) -> int:
                         print(f"  pack {where:5} N={n:>6}: {r['wall']:6.1f} s, "
                               f"{r['packed'] / r['wall']:6.1f} scenes/s, "
                               f"{r['maxrss_mb']:.0f} MB", flush=True)
-                    if "load" in sections and n == 1000:
+                    if "load" in sections and n == args.load_size:
                         for arm, dataset in (("local", str(root / f"ds-{n}")),
                                              ("s3-cold", f"s3://bench/ds-{n}"),
                                              ("s3-warm", f"s3://bench/ds-{n}"),
@@ -333,9 +390,11 @@ def report(results: dict, sizes, bench_sizes, arms, slots) -> None:
                     if r:
                         rows.append([workload, arm, n, f"{r['wall']:.1f}",
                                      f"{1000 * r['slot_s']:.1f}", f"{1000 * r['cpu'] / n:.2f}",
-                                     f"{r['maxrss_mb']:.0f}"])
+                                     f"{r['maxrss_mb']:.0f}", f"{r['scheduler_ms']:.2f}",
+                                     f"{r['workers_ms']:.2f}"])
         print(table(rows, ["worker", "runner", "N", "wall s", f"slot-ms / scene ({slots} slots)",
-                           "client CPU-ms / scene", "client peak MB"]))
+                           "client CPU-ms / scene", "client peak MB",
+                           "scheduler CPU-ms / scene", "Dask workers CPU-ms / scene"]))
         lo, hi = min(sizes), max(sizes)
         for arm in arms:
             a, b = results.get(("generate", "stdlib", arm, lo)), \
@@ -369,7 +428,7 @@ def report(results: dict, sizes, bench_sizes, arms, slots) -> None:
         print()
         print(table([[arm, f"{r['open']:.2f}", f"{r['wall']:.2f}", f"{r['wall'] / base:.2f}×"]
                      for arm, r in loads.items()],
-                    ["read train split of 1000 bench scenes", "open s", "open + every example s",
+                    ["read the train split", "open s", "open + every example s",
                      "× local"]))
     r = results.get(("resume", "local", 10000))
     if r:
