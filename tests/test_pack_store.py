@@ -194,3 +194,42 @@ def test_bad_store_outputs_and_damaged_datasets_are_one_line(store, tmp_path):
                            "d.load('s3://data/damaged', 'train')"], capture_output=True,
                           text=True, cwd=ROOT)
     assert "DatasetError" in proc.stderr and "is damaged" in proc.stderr
+
+
+def test_scheduler_dying_mid_pack_is_one_line_and_the_rerun_completes(store, tmp_path):
+    fs = store["fs"]
+    options = ["--splits", "train=0.75,validation=0.25", "--examples-per-shard", "1",
+               "--no-progress"]
+    ref = kubric("pack", store["scenes"], "--out", tmp_path / "ref", *options)
+    assert ref.returncode == 0, ref.stderr
+    with processes() as procs:
+        address = start_dask(procs, tmp_path, n_workers=2, plain=True, nthreads=1)
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "kubric", "pack", "s3://data/scenes", "--out",
+             "s3://data/lost", "--cluster", address, *options], cwd=ROOT,
+            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        deadline = time.time() + 120
+        while time.time() < deadline and proc.poll() is None:
+            fs.invalidate_cache()
+            if len([k for k in fs.find("data/lost") if k.endswith(".json")
+                    and "/.kubric-pack/." in k]) >= 2:
+                break
+            time.sleep(0.05)
+        assert proc.poll() is None, "the pack finished before the scheduler could be stopped"
+        from dask_helpers import _stop
+        _stop(procs[0])  # the scheduler
+        stdout, stderr = proc.communicate(timeout=120)
+    assert proc.returncode == 2, stdout + stderr
+    lines = stderr.strip().splitlines()
+    assert len(lines) == 1 and "the Dask scheduler at tcp://127.0.0.1:" in lines[0] and \
+        "finished chunks are kept (nothing is published)" in lines[0], stderr
+    fs.invalidate_cache()
+    assert all("/.kubric-pack/" in k for k in fs.find("data/lost"))  # no dataset published
+    (tmp_path / "again").mkdir()
+    with processes() as procs:
+        address = start_dask(procs, tmp_path / "again", n_workers=2, plain=True, nthreads=1)
+        rerun = kubric("pack", "s3://data/scenes", "--out", "s3://data/lost", "--cluster",
+                       address, *options)
+    assert rerun.returncode == 0, rerun.stdout + rerun.stderr
+    assert "resumed:" in rerun.stdout
+    assert s3_tree(fs, "data/lost") == tree(tmp_path / "ref")

@@ -64,6 +64,12 @@ def _pack_on_cluster(args, common: dict) -> int:
         result = pack_sharded(args.scenes_dir, args.out, executor=DaskExecutor(client), **common)
     except (DatasetError, SchemaError) as err:
         return _error("pack", err)
+    except Exception:
+        from kubric.pipeline.dask_runner import scheduler_lost
+        lost = scheduler_lost(client, "finished chunks are kept (nothing is published)")
+        if lost is None:
+            raise
+        return _error("pack", lost)
     finally:
         client.close()
         if cluster is not None:

@@ -158,6 +158,18 @@ def open_cluster(options: ClusterOptions, processes: bool = False):
     return client, cluster
 
 
+def scheduler_lost(client, kept: str) -> ClusterError | None:
+    """A :class:`ClusterError` (one line; ``kept`` says what survives) when ``client`` has lost
+    its scheduler, else None. Dask's own logging is silenced then: closing such a client logs
+    tracebacks after the run has already failed in one line."""
+    if client.status in ("running", "newly-created"):
+        return None
+    _quiet(silent=True)
+    return ClusterError(f"the Dask scheduler at {client.scheduler.address} went away mid-run "
+                        f"(client {client.status}); {kept}: start it again and rerun the same "
+                        "command")
+
+
 # ---------------------------------------------------------------------- on the Dask worker
 def scene_task(cmd: Sequence[str], attempt: int, timeout: float | None, threads: int,
                stop_event: str | None = None, poll: float = 5.0) -> dict:
@@ -238,11 +250,9 @@ class DaskRunner(Runner):
 
     def _check_scheduler(self) -> None:
         """Raise :class:`ClusterError` when the client has lost its scheduler."""
-        if self.client.status not in ("running", "newly-created"):
-            _quiet(silent=True)  # closing a client that lost its scheduler logs tracebacks
-            raise ClusterError(f"the Dask scheduler at {self.client.scheduler.address} went away "
-                               f"mid-run (client {self.client.status}); complete scenes are "
-                               f"kept: start it again and rerun the same command")
+        lost = scheduler_lost(self.client, "complete scenes are kept")
+        if lost is not None:
+            raise lost
 
     def _execute(self, todo: list[int], summary: RunSummary, bar) -> None:
         """Keep the cluster's scene slots busy from a queue of (seed, attempt); only a bounded
@@ -294,4 +304,5 @@ class DaskRunner(Runner):
 
 
 __all__ = ["ClusterError", "ClusterOptions", "DaskRunner", "open_cluster", "scene_task",
+           "scheduler_lost",
            "slurm_job_script", "RESOURCE"]
