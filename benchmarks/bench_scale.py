@@ -278,6 +278,7 @@ def main(argv=None) -> int:
     parser.add_argument("--sections", default="generate,resume,pack,load")
     parser.add_argument("--load-size", type=int, default=1000,
                         help="N of the dataset read from disk and from s3:// (load section)")
+    parser.add_argument("--json", default=None, help="also write every result to this file")
     parser.add_argument("--child", default=None, help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.child:
@@ -376,6 +377,9 @@ def main(argv=None) -> int:
                             print(f"  load {arm:11} N={n}: open {r['open']:5.2f} s, all "
                                   f"{r['examples']} examples {r['wall']:5.2f} s", flush=True)
     report(results, sizes, bench_sizes, arms, args.slots)
+    if args.json:
+        pathlib.Path(args.json).write_text(json.dumps(
+            {"/".join(map(str, k)): v for k, v in results.items()}, indent=1))
     return 0
 
 
