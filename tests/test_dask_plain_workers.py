@@ -68,6 +68,8 @@ def test_generate_on_plain_workers_equals_the_pool(plain, tmp_path):
                   "--cluster", address, "--no-progress")
     assert dask.returncode == 0, dask.stdout + dask.stderr
     assert "12 generated, 0 already complete, 0 failed of 12 scenes" in dask.stdout
+    assert "Dask slots: no worker offers the 'scene' resource: 4 slots from the workers' " \
+        "threads (2 workers, nthreads // 1 each)" in dask.stdout
     got, want = scene_files(tmp_path / "dask"), scene_files(tmp_path / "pool")
     assert len(want) == 12 * 6 and got == want
 

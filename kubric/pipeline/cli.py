@@ -173,6 +173,9 @@ def cmd_generate(args) -> int:
         except ClusterError as err:
             return _error("generate", err)
         print(f"Dask dashboard: {client.dashboard_link}", flush=True)
+        from kubric.pipeline.dask_slots import SceneSlots
+        print(f"Dask slots: {SceneSlots(client, cluster_options.threads_per_scene).describe()}",
+              flush=True)
         runner = DaskRunner(recipe_spec(cls), out, seeds, client,
                             threads_per_scene=cluster_options.threads_per_scene, **common)
     try:
