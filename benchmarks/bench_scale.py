@@ -225,7 +225,10 @@ def start_cluster(procs, root: pathlib.Path, slots: int, plain: bool) -> tuple[s
     from dask_helpers import start_dask
     root.mkdir(parents=True, exist_ok=True)
     first = len(procs)
-    address = start_dask(procs, root, n_workers=slots, plain=plain, nthreads=1)
+    # in this session: under the kernel's autogroup scheduling, workers in sessions of their own
+    # got twice the CPU share of the pool's scenes on the loaded shared machine
+    address = start_dask(procs, root, n_workers=slots, plain=plain, nthreads=1,
+                         own_session=False)
     return address, [p.pid for p in procs[first:]]
 
 
