@@ -432,11 +432,14 @@ def report(results: dict, sizes, bench_sizes, arms, slots) -> None:
     loads = {k[1]: v for k, v in results.items() if k[0] == "load"}
     if loads:
         base = (loads["local"]["wall"] + loads["local-again"]["wall"]) / 2
+        reads = (loads["local"]["wall"] - loads["local"]["open"] + loads["local-again"]["wall"]
+                 - loads["local-again"]["open"]) / 2
         print()
-        print(table([[arm, f"{r['open']:.2f}", f"{r['wall']:.2f}", f"{r['wall'] / base:.2f}×"]
+        print(table([[arm, r["examples"], f"{r['open']:.2f}", f"{r['wall']:.2f}",
+                      f"{r['wall'] / base:.2f}×", f"{(r['wall'] - r['open']) / reads:.2f}×"]
                      for arm, r in loads.items()],
-                    ["read the train split", "open s", "open + every example s",
-                     "× local"]))
+                    ["read the train split", "examples", "open s", "open + every example s",
+                     "× local", "reads after open × local"]))
     r = results.get(("resume", "local", 10000))
     if r:
         print(f"resume of 10000 listed scenes, local: {r['scan']:.2f} s (goal < 10 s: "
