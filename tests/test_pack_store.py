@@ -100,6 +100,13 @@ def test_pack_to_s3_is_bit_identical_and_loads_like_local(store):
     assert np.array_equal(torch_item["video"], load(ref, "train")[2]["video"])
     batch = next(iter(to_grain(load("s3://data/ds", "train"), batch_size=2)))
     assert batch["video"].shape[0] == 2
+    info = kubric("datasets", "info", "s3://data/ds")
+    assert info.returncode == 0, info.stderr
+    local_info = kubric("datasets", "info", ref).stdout.splitlines()
+    assert info.stdout.splitlines()[0] == "dataset bench at s3://data/ds"
+    assert info.stdout.splitlines()[3:] == local_info[3:]  # splits, tasks, features
+    size = lambda text: text.splitlines()[2].split("size on disk ")[1]  # noqa: E731
+    assert size(info.stdout) == size("\n".join(local_info))
     # packing the same output again is refused, --overwrite replaces it
     one_line(kubric("pack", store["scenes"], "--out", "s3://data/ds", *PACK), "already a dataset")
     proc = kubric("pack", store["scenes"], "--out", "s3://data/ds", "--overwrite",

@@ -15,7 +15,6 @@ local dataset: ArrayRecord's random access stays local-disk fast after the first
 from __future__ import annotations
 
 import hashlib
-import json
 import os
 import pathlib
 
@@ -36,8 +35,8 @@ def _marker(url: str) -> bytes:
     except FileNotFoundError:
         raise DatasetError(f"{url!r} is not a kubric dataset (no {layout.INFO_FILE}: not packed, "
                            "or its pack has not finished)") from None
-    except storage.StorageError:
-        raise
+    except storage.StorageError as err:  # unknown protocol, missing package
+        raise DatasetError(str(err)) from None
     except Exception as err:  # each backend raises its own types
         detail = " ".join(str(err).split())[:200] or type(err).__name__
         raise DatasetError(f"{url!r}: cannot read {layout.INFO_FILE} ({detail})") from None
@@ -78,9 +77,13 @@ def fetch(url: str, split: str | None = None) -> pathlib.Path:
     return local
 
 
-def cached_info(url: str) -> dict:
-    """The marker of the dataset at ``url`` (no shard is fetched)."""
-    return json.loads(_marker(storage.normalise(url)))
+def remote_info(url: str) -> dict:
+    """The checked marker (``kubric_dataset.json``) of the dataset at ``url``; nothing is
+    cached."""
+    import tempfile
+    with tempfile.TemporaryDirectory(prefix="kubric-marker-") as tmp:
+        (pathlib.Path(tmp) / layout.INFO_FILE).write_bytes(_marker(storage.normalise(url)))
+        return layout.read_info(tmp)
 
 
-__all__ = ["cache_root", "cached_info", "fetch"]
+__all__ = ["cache_root", "fetch", "remote_info"]

@@ -1,4 +1,5 @@
-"""``kubric datasets info DATASET_DIR``: splits, counts, shards, features with shapes, size."""
+"""``kubric datasets info DATASET_DIR``: splits, counts, shards, features with shapes, size
+(DATASET_DIR may be a URL: its marker is read and its objects listed, no shard is fetched)."""
 
 from __future__ import annotations
 
@@ -19,11 +20,18 @@ def _size(num_bytes: int) -> str:
 
 def dataset_info(dataset_dir) -> str:
     """The text ``kubric datasets info`` prints."""
-    path = pathlib.Path(dataset_dir)
-    info = read_info(path)
+    from kubric.io import storage
+    if storage.is_url(str(dataset_dir)):  # the marker and one listing; no shard is fetched
+        from kubric.datasets.dataset_cache import remote_info
+        path = storage.normalise(str(dataset_dir))
+        info = remote_info(path)
+        size = sum(storage.sizes(path).values())
+    else:
+        path = pathlib.Path(dataset_dir)
+        info = read_info(path)
+        size = sum(p.stat().st_size for p in path.iterdir() if p.is_file())
     schema = schema_from_json(info["schema_json"])
     dims = dict(info["dims"])
-    size = sum(p.stat().st_size for p in path.iterdir() if p.is_file())
     lines = [f"dataset {info['name']} at {path}",
              f"  schema {schema.name} (version {schema.version}), format version "
              f"{info['format_version']}, kubric {info.get('kubric_version')}",
