@@ -21,9 +21,9 @@ subprocesses or the Dask workers). Sections:
   ``Runner.run()`` to the first submission (listing, ``_SUCCESS`` checks, the to-do list).
 * **pack** — N ``bench`` scenes packed locally (``kubric.datasets.pack``) and to ``s3://``
   (:mod:`kubric.datasets.store_commit`), one encoding process: scenes per second, peak memory.
-* **load** — the train split of the N = ``--load-size`` (1000) dataset read in full (open + decode every example)
-  from the local directory (twice, before and after: the baseline) and from its ``s3://`` URL with
-  a cold and then a warm cache (:mod:`kubric.datasets.dataset_cache`).
+* **load** — the train split of the N = ``--load-size`` (1000) dataset read in full (open +
+  decode every example) from the local directory (twice, before and after: the baseline) and
+  from its ``s3://`` URL with a cold and then a warm cache (:mod:`kubric.datasets.dataset_cache`).
 
 Run: ``python benchmarks/bench_scale.py [--sizes 100,1000,10000] [--bench-sizes 100,1000]
 [--slots 4]``; ``make bench`` runs the defaults below (about 25 min on an idle 2-core machine).
