@@ -133,8 +133,9 @@ def undocumented_scene_fields(scene_dir, page: pathlib.Path | None = None) -> li
     fields |= {f"instances.{k}" for inst in meta.get("instances", []) for k in inst}
     events = json.loads((scene_dir / "events.json").read_text())
     fields |= {f"collisions.{k}" for c in events.get("collisions", []) for k in c}
-    ranges = json.loads((scene_dir / "data_ranges.json").read_text())
-    fields |= {f"data_ranges.{k}" for k in ranges}
+    if (scene_dir / "data_ranges.json").is_file():  # absent without float layers (bench)
+        ranges = json.loads((scene_dir / "data_ranges.json").read_text())
+        fields |= {f"data_ranges.{k}" for k in ranges}
     missing |= {f for f in fields if f.split(".", 1)[1] not in names}
     flags = meta.get("flags", {})
     if "recipe" in flags:
