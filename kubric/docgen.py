@@ -134,8 +134,9 @@ def undocumented_scene_fields(scene_dir, page: pathlib.Path | None = None) -> li
     fields |= {f"instances.{k}" for inst in meta.get("instances", []) for k in inst}
     events = json.loads((scene_dir / EVENTS_FILE).read_text())
     fields |= {f"collisions.{k}" for c in events.get("collisions", []) for k in c}
-    ranges = json.loads((scene_dir / DATA_RANGES_FILE).read_text())
-    fields |= {f"data_ranges.{k}" for k in ranges}
+    if (scene_dir / DATA_RANGES_FILE).is_file():  # absent without float layers (bench)
+        ranges = json.loads((scene_dir / DATA_RANGES_FILE).read_text())
+        fields |= {f"data_ranges.{k}" for k in ranges}
     missing |= {f for f in fields if f.split(".", 1)[1] not in names}
     flags = meta.get("flags", {})
     if "recipe" in flags:

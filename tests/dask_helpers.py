@@ -45,24 +45,31 @@ def processes():
             _stop(proc)
 
 
-def spawn(cmd, log: pathlib.Path, env=None) -> subprocess.Popen:
+def spawn(cmd, log: pathlib.Path, env=None, own_session: bool = True) -> subprocess.Popen:
+    """Start ``cmd`` in a new process group: in a new session (the default), or in this one
+    (``own_session=False``: the same scheduler autogroup as this process, so that a benchmark's
+    Dask workers get no more CPU share than its process pool)."""
     fh = open(log, "ab")
-    return subprocess.Popen(cmd, stdout=fh, stderr=subprocess.STDOUT, start_new_session=True,
-                            env=env, stdin=subprocess.DEVNULL)
+    group = {"start_new_session": True} if own_session else {"process_group": 0}
+    return subprocess.Popen(cmd, stdout=fh, stderr=subprocess.STDOUT, env=env,
+                            stdin=subprocess.DEVNULL, **group)
 
 
-def start_dask(procs: list, tmp: pathlib.Path, n_workers: int = 2, timeout: float = 90) -> str:
-    """Start a scheduler and ``n_workers`` workers (one scene slot each); returns the address
-    once every worker has joined."""
+def start_dask(procs: list, tmp: pathlib.Path, n_workers: int = 2, timeout: float = 90,
+               plain: bool = False, nthreads: int = 1, own_session: bool = True) -> str:
+    """Start a scheduler and ``n_workers`` workers (one scene slot each, offering the ``scene``
+    resource; ``plain``: started with no kubric flags, ``nthreads`` threads each); returns the
+    address once every worker has joined."""
     port = free_port()
     address = f"tcp://127.0.0.1:{port}"
     procs.append(spawn([str(BIN / "dask"), "scheduler", "--host", "127.0.0.1", "--port",
-                        str(port), "--no-dashboard"], tmp / "scheduler.log"))
+                        str(port), "--no-dashboard"], tmp / "scheduler.log",
+                       own_session=own_session))
     for k in range(n_workers):
-        procs.append(spawn([str(BIN / "dask"), "worker", address, "--nthreads", "1",
-                            "--resources", "scene=1", "--name", f"w{k}", "--no-dashboard",
-                            "--host", "127.0.0.1", "--death-timeout", "60"],
-                           tmp / f"worker{k}.log"))
+        flags = ["--nthreads", str(nthreads)] + ([] if plain else ["--resources", "scene=1"])
+        procs.append(spawn([str(BIN / "dask"), "worker", address, *flags, "--name", f"w{k}",
+                            "--no-dashboard", "--host", "127.0.0.1", "--death-timeout", "60"],
+                           tmp / f"worker{k}.log", own_session=own_session))
     from distributed import Client
     with Client(address, timeout=timeout) as client:
         client.wait_for_workers(n_workers, timeout=timeout)

@@ -34,6 +34,7 @@ TINY = {
     "multiview_matting": VIEWS + ["min_num_clutter=1", "max_num_clutter=2"],
     "nvs": VIEWS, "complex_brdf": VIEWS, "svr": VIEWS,
     "vbr": BASE + ["resolution=24", "num_frames=3"],
+    "bench": [],  # no rendering: random images and labels (scale measurements)
     "pose_estimation": BASE + ["resolution=24", "frame_end=2", "max_num_people=1",
                                "min_num_clutter=0", "max_num_clutter=1",
                                "character_source=procedural", "motion_source=procedural"],

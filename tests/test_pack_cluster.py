@@ -121,8 +121,10 @@ def test_pack_on_local_cluster_and_bad_input(scenes, tmp_path):
     one_line(kubric("pack", root / "scenes", "--out", tmp_path / "x", "--cluster",
                     f"tcp://127.0.0.1:{free_port()}", "--connect-timeout", "2", *PACK),
              "no Dask scheduler answered at tcp://127.0.0.1:")
+    # a URL output is written through store_commit (tests/test_pack_store.py); a missing
+    # bucket is one line before anything starts
     one_line(kubric("pack", root / "scenes", "--out", "s3://bucket/ds", *PACK),
-             "the dataset is written to a directory")
+             "'s3://bucket/ds' is not writable")
     one_line(kubric("pack", root / "scenes", "--out", tmp_path / "y", "--jobs", 2, *PACK),
              "--jobs needs --cluster")
     assert not (tmp_path / "x").exists() and not (tmp_path / "y").exists()

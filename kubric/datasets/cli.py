@@ -25,9 +25,6 @@ def cmd_pack(args) -> int:
                   workers=1 if args.workers is None else args.workers,
                   examples_per_shard=args.examples_per_shard, progress=not args.no_progress,
                   verify=args.verify, overwrite=args.overwrite)
-    if storage.is_url(args.out):
-        return _error("pack", f"--out {args.out!r}: the dataset is written to a directory (on a "
-                      "filesystem the workers share, with --cluster), not a URL")
     from kubric.pipeline.cli import misplaced_flag
     misplaced = misplaced_flag(args)
     if misplaced:
@@ -42,8 +39,8 @@ def cmd_pack(args) -> int:
     if args.cluster is not None:
         return _pack_on_cluster(args, common)
     try:
-        if storage.is_url(args.scenes_dir):
-            from kubric.datasets.dask_pack import pack_sharded
+        if storage.is_url(args.scenes_dir) or storage.is_url(args.out):
+            from kubric.datasets.dask_pack import pack_sharded  # URL out: store_commit
             result = pack_sharded(args.scenes_dir, args.out, **common)
         else:
             result = pack(args.scenes_dir, args.out, **common)
@@ -77,6 +74,12 @@ def _pack_on_cluster(args, common: dict) -> int:
         result = pack_sharded(args.scenes_dir, args.out, executor=DaskExecutor(client), **common)
     except (DatasetError, SchemaError) as err:
         return _error("pack", err)
+    except Exception:
+        from kubric.pipeline.dask_runner import scheduler_lost
+        lost = scheduler_lost(client, "finished chunks are kept (nothing is published)")
+        if lost is None:
+            raise
+        return _error("pack", lost)
     finally:
         client.close()
         if cluster is not None:
@@ -120,7 +123,9 @@ def add_parser(subparsers) -> None:
         "scenes of SCENES_DIR. Resumable; the output appears only when complete.")
     p.add_argument("scenes_dir", metavar="SCENES_DIR", help="a directory of scenes or its URL "
                    "(s3://bucket/run, gs://..., any fsspec URL)")
-    p.add_argument("--out", required=True, metavar="DATASET_DIR")
+    p.add_argument("--out", required=True, metavar="DATASET_DIR",
+                   help="a directory, or a URL (s3://bucket/ds, gs://..., file://...: written "
+                   "through a commit protocol, kubric_dataset.json last)")
     p.add_argument("--name", default=None, help="dataset name (default: the recipe name)")
     p.add_argument("--splits", default="train=0.9,validation=0.1",
                    help="NAME=FRACTION,... summing to 1 (default train=0.9,validation=0.1); a "

@@ -28,6 +28,8 @@ URLs.
 from __future__ import annotations
 
 import concurrent.futures
+import contextlib
+import dataclasses
 import hashlib
 import json
 import multiprocessing
@@ -48,12 +50,34 @@ PLAN_FILE = "plan.json"
 
 
 # ------------------------------------------------------------------------ on a worker
-def _require_work(work: str) -> pathlib.Path:
-    path = pathlib.Path(work)
-    if not (path / PLAN_FILE).is_file():
+def _require_work(work: str) -> None:
+    """Fail in one line unless this worker sees the work area (a shared directory or a URL)."""
+    if storage.is_url(work):
+        if not storage.isfile(storage.join(work, PLAN_FILE)):
+            raise DatasetError(f"the pack worker on {socket.gethostname()} cannot read "
+                               f"{storage.join(work, PLAN_FILE)!r} (check its storage settings)")
+        return
+    if not (pathlib.Path(work) / PLAN_FILE).is_file():
         raise DatasetError(f"the pack worker on {socket.gethostname()} cannot see {work!r}: "
                            "--out must be on a filesystem shared with the workers")
-    return path
+
+
+@contextlib.contextmanager
+def _staged(work: str, file: str):
+    """A local path to write ``file`` to, published as ``work/file`` when the block ends without
+    an error: renamed within a shared work directory, uploaded to a URL."""
+    if storage.is_url(work):
+        with tempfile.TemporaryDirectory(prefix="kubric-pack-") as scratch:
+            tmp = pathlib.Path(scratch) / file
+            yield tmp
+            storage.upload_file(tmp, storage.join(work, file))
+        return
+    tmp = pathlib.Path(work) / f".{file}.tmp-{os.getpid()}"
+    try:
+        yield tmp
+        os.replace(tmp, pathlib.Path(work) / file)
+    finally:
+        tmp.unlink(missing_ok=True)
 
 
 def _encode_location(location: str) -> tuple[str, bytes | None, str | None]:
@@ -74,14 +98,14 @@ def _encode_location(location: str) -> tuple[str, bytes | None, str | None]:
 
 def encode_chunk(work: str, file: str, scenes: list[str], schema, dims: dict) -> dict:
     """Encode ``scenes`` (paths or URLs) into the ArrayRecord file ``work/file``; then write its
-    record ``work/.file.json`` (the completion mark) and return it."""
+    record ``work/.file.json`` (the completion mark) and return it. ``work`` is a shared
+    directory or a URL (the file is written in local scratch and uploaded)."""
     from array_record.python import array_record_module
-    work_dir = _require_work(work)
+    _require_work(work)
     packer._init_worker(schema, dims)
-    tmp = work_dir / f".{file}.tmp-{os.getpid()}"
-    writer = array_record_module.ArrayRecordWriter(str(tmp), layout.SHARD_WRITER_OPTIONS)
     record = {"file": file, "scenes": [], "corrupt": [], "num_bytes": 0}
-    try:
+    with _staged(work, file) as tmp:
+        writer = array_record_module.ArrayRecordWriter(str(tmp), layout.SHARD_WRITER_OPTIONS)
         for location in scenes:
             name, data, error = _encode_location(location)
             if error is not None:
@@ -91,10 +115,8 @@ def encode_chunk(work: str, file: str, scenes: list[str], schema, dims: dict) ->
             record["scenes"].append(name)
             record["num_bytes"] += len(data)
         writer.close()
-        os.replace(tmp, work_dir / file)
-    finally:
-        tmp.unlink(missing_ok=True)
-    write_json(record, work_dir / f".{file}.json")
+    storage.write_bytes(storage.join(work, f".{file}.json"),
+                        json.dumps(record, indent=2).encode())
     return record
 
 
@@ -102,13 +124,16 @@ def recut_shard(work: str, file: str, pieces: list[tuple[str, list[int]]]) -> di
     """Write ``work/file`` from records of chunk files: ``pieces`` = [(chunk file, [record
     indices])] in order; returns ``{"file", "num_bytes"}``."""
     from array_record.python import array_record_module
-    work_dir = _require_work(work)
-    tmp = work_dir / f".{file}.tmp-{os.getpid()}"
-    writer = array_record_module.ArrayRecordWriter(str(tmp), layout.SHARD_WRITER_OPTIONS)
+    _require_work(work)
     num_bytes = 0
-    try:
+    with tempfile.TemporaryDirectory(prefix="kubric-recut-") as scratch, \
+            _staged(work, file) as tmp:
+        writer = array_record_module.ArrayRecordWriter(str(tmp), layout.SHARD_WRITER_OPTIONS)
         for chunk, indices in pieces:
-            reader = array_record_module.ArrayRecordReader(str(work_dir / chunk))
+            path = storage.join(work, chunk)
+            if storage.is_url(work):  # chunks are read whole: fetch them once
+                path = str(storage.download_file(path, pathlib.Path(scratch) / chunk))
+            reader = array_record_module.ArrayRecordReader(path)
             try:
                 for data in reader.read(indices):
                     writer.write(data)
@@ -116,9 +141,6 @@ def recut_shard(work: str, file: str, pieces: list[tuple[str, list[int]]]) -> di
             finally:
                 reader.close()
         writer.close()
-        os.replace(tmp, work_dir / file)
-    finally:
-        tmp.unlink(missing_ok=True)
     return {"file": file, "num_bytes": num_bytes}
 
 
@@ -142,14 +164,16 @@ class _LocalExecutor:
 
 
 class DaskExecutor:
-    """Tasks on a Dask client; each asks for one ``scene`` slot (as a scene render does)."""
+    """Tasks on a Dask client; each asks for one ``scene`` slot (as a scene render does) where
+    workers offer that resource, else takes one worker thread (a cluster of plain workers)."""
 
     def __init__(self, client):
+        from kubric.pipeline.dask_slots import RESOURCE, uses_resource
         self.client = client
+        self.resources = {RESOURCE: 1} if uses_resource(client) else None
 
     def submit(self, fn, *args):
-        from kubric.pipeline.dask_runner import RESOURCE
-        return self.client.submit(fn, *args, resources={RESOURCE: 1}, pure=False)
+        return self.client.submit(fn, *args, resources=self.resources, pure=False)
 
     def as_completed(self, futures):
         from distributed import as_completed
@@ -202,18 +226,36 @@ def _chunks(scenes: list, size: int) -> list[list]:
     return [scenes[i:i + size] for i in range(0, len(scenes), size)]
 
 
-def pack_sharded(scenes_dir, out, executor=None, name: str | None = None,
-                 splits=packer.DEFAULT_SPLITS, workers: int = 1, schema=None,
-                 examples_per_shard: int = 256, progress: bool = True, verify: bool = False,
-                 overwrite: bool = False,
-                 class_names: Mapping[str, Sequence[str]] | None = None) -> packer.PackResult:
-    """Pack like :func:`kubric.datasets.packer.pack`, one task per shard (module doc).
-    ``executor``: a :class:`DaskExecutor`, or None for ``workers`` local processes;
-    ``class_names`` as for :func:`~kubric.datasets.packer.pack`."""
-    start = time.perf_counter()
+@dataclasses.dataclass
+class PackPlan:
+    """What a sharded pack writes: the scenes of every split (locations, in example order), the
+    resolved schema, the dataset's name and dims, and the plan's key (a hash of all of it: a
+    work area made for another plan is never resumed)."""
+
+    scenes_dir: str
+    name: str
+    schema: object
+    dims: dict
+    split_fractions: dict
+    examples_per_shard: int
+    assignment: dict
+    corrupt: list
+    incomplete: int
+    key: str = ""
+
+    def chunk_files(self) -> dict:
+        """``{(split, k): chunk file name}`` with the scenes of each chunk."""
+        return {(split, k): (f"{self.name}-{split}.chunk-{k:05d}", chunk)
+                for split, scenes in self.assignment.items()
+                for k, chunk in enumerate(_chunks(scenes, self.examples_per_shard))}
+
+
+def make_plan(scenes_dir, name, split_fractions: dict, schema, examples_per_shard: int,
+              class_names, verify: bool) -> PackPlan:
+    """List and read the scenes (module doc) into a :class:`PackPlan`; raises DatasetError (one
+    line) on bad input before anything is written."""
     scenes_dir = storage.normalise(str(scenes_dir)) if storage.is_url(str(scenes_dir)) \
         else str(pathlib.Path(scenes_dir))
-    out = pathlib.Path(out).absolute()
     if storage.is_url(scenes_dir):
         try:
             if not storage.exists(scenes_dir):
@@ -225,8 +267,6 @@ def pack_sharded(scenes_dir, out, executor=None, name: str | None = None,
                                "without it and verify a local copy")
     elif not pathlib.Path(scenes_dir).is_dir():
         raise DatasetError(f"SCENES_DIR {scenes_dir!r} is not a directory")
-    split_fractions = packer.check_options(splits, workers, examples_per_shard, out, overwrite)
-
     with tempfile.TemporaryDirectory(prefix="kubric-pack-meta-") as mirror:
         locations, folders, incomplete = _list_scenes(scenes_dir, pathlib.Path(mirror))
         if not locations:
@@ -246,76 +286,106 @@ def pack_sharded(scenes_dir, out, executor=None, name: str | None = None,
                     location)
             except (packer.SceneError, ValueError) as err:
                 corrupt.append((location, str(err).replace(str(folder), location)))
-
-    plan = {"engine": "sharded", "schema": schema.name, "name": name, "splits": split_fractions,
-            "dims": dims, "examples_per_shard": examples_per_shard,
-            "format_version": layout.FORMAT_VERSION, "scenes": assignment,
-            "shard_writer_options": layout.SHARD_WRITER_OPTIONS,
-            "class_names": {f.name: f.names for f in schema.features if f.names}}
-    plan_key = hashlib.sha256(json.dumps(plan, sort_keys=True).encode()).hexdigest()
-    with packer.output_lock(out):  # one pack per output, as the local packer
-        packer._check_out(out, overwrite)
-        return _pack_locked(scenes_dir, out, executor, name, workers, schema, dims, progress,
-                            verify, examples_per_shard, split_fractions, assignment, corrupt,
-                            locations, incomplete, plan_key, start)
+    plan = PackPlan(scenes_dir, name, schema, dims, split_fractions, examples_per_shard,
+                    assignment, corrupt, incomplete)
+    described = {"engine": "sharded", "schema": schema.name, "name": name,
+                 "splits": split_fractions, "dims": dims,
+                 "examples_per_shard": examples_per_shard,
+                 "format_version": layout.FORMAT_VERSION, "scenes": assignment,
+                 "shard_writer_options": layout.SHARD_WRITER_OPTIONS,
+                 "class_names": {f.name: f.names for f in schema.features if f.names}}
+    plan.key = hashlib.sha256(json.dumps(described, sort_keys=True).encode()).hexdigest()
+    return plan
 
 
-def _pack_locked(scenes_dir, out, executor, name, workers, schema, dims, progress, verify,
-                 examples_per_shard, split_fractions, assignment, corrupt, locations,
-                 incomplete, plan_key, start) -> packer.PackResult:
+def run_plan(plan: PackPlan, work: str, executor, workers: int, progress: bool) -> tuple:
+    """Encode the chunks of ``plan`` not yet recorded in the work area ``work`` (a directory or
+    a URL whose ``plan.json`` is this plan's) and re-cut a split with corrupt scenes; returns
+    (the final shards as the local packer's state, corrupt scenes, resumed scene count)."""
     from tqdm import tqdm
-    work = packer.work_dir(out)
-    _open_work(work, plan_key)
-
-    chunk_of = {}  # (split, k) -> chunk file
-    calls, todo_scenes, records = [], 0, {}
-    for split, scenes in assignment.items():
-        for k, chunk in enumerate(_chunks(scenes, examples_per_shard)):
-            file = f"{name}-{split}.chunk-{k:05d}"
-            chunk_of[split, k] = file
-            mark = work / f".{file}.json"
-            if mark.is_file() and (work / file).is_file():
-                records[split, k] = read_json(mark)
-                continue
-            calls.append((encode_chunk, str(work), file, chunk, schema, dims))
-            todo_scenes += len(chunk)
+    marks = {n for n in storage.listdir(work) if n.startswith(".") and n.endswith(".json")}
+    files = set(storage.listdir(work))
+    chunk_of, calls, todo_scenes, records = {}, [], 0, {}
+    for key, (file, chunk) in plan.chunk_files().items():
+        chunk_of[key] = file
+        if f".{file}.json" in marks and file in files:
+            records[key] = json.loads(storage.read_bytes(storage.join(work, f".{file}.json")))
+            continue
+        calls.append((encode_chunk, work, file, chunk, plan.schema, plan.dims))
+        todo_scenes += len(chunk)
     resumed = sum(len(r["scenes"]) + len(r["corrupt"]) for r in records.values())
     keys = [key for key in chunk_of if key not in records]
     own = executor is None
     executor = executor or _LocalExecutor(workers)
-    bar = tqdm(total=todo_scenes, unit="scene", desc=f"pack {name}", disable=not progress)
+    bar = tqdm(total=todo_scenes, unit="scene", desc=f"pack {plan.name}", disable=not progress)
     try:
         def done(k, record):
             records[keys[k]] = record
             bar.update(len(record["scenes"]) + len(record["corrupt"]))
         _run(executor, calls, done)
         bar.close()
-        state = _recut(work, executor, name, assignment, chunk_of, records, examples_per_shard)
+        state = _recut(work, executor, plan.name, plan.assignment, chunk_of, records,
+                       plan.examples_per_shard)
     finally:
         bar.close()
         if own:
             executor.close()
-    corrupt += [tuple(c) for key in chunk_of for c in records[key]["corrupt"]]
+    corrupt = list(plan.corrupt) + [tuple(c) for key in chunk_of for c in records[key]["corrupt"]]
     if not any(sh["scenes"] for shards in state["shards"].values() for sh in shards):
         first = f"; first: {corrupt[0][0]}: {corrupt[0][1]}" if corrupt else ""
-        shutil.rmtree(work, ignore_errors=True)
-        raise DatasetError(f"no scene could be packed: all {len(locations)} complete scenes are "
+        storage.remove(work)
+        total = sum(len(v) for v in plan.assignment.values()) + len(plan.corrupt)
+        raise DatasetError(f"no scene could be packed: all {total} complete scenes are "
                            f"corrupt{first}")
+    return state, corrupt, resumed
+
+
+def pack_sharded(scenes_dir, out, executor=None, name: str | None = None,
+                 splits=packer.DEFAULT_SPLITS, workers: int = 1, schema=None,
+                 examples_per_shard: int = 256, progress: bool = True, verify: bool = False,
+                 overwrite: bool = False,
+                 class_names: Mapping[str, Sequence[str]] | None = None) -> packer.PackResult:
+    """Pack like :func:`kubric.datasets.packer.pack`, one task per shard (module doc).
+    ``executor``: a :class:`DaskExecutor`, or None for ``workers`` local processes;
+    ``class_names`` as for :func:`~kubric.datasets.packer.pack`. An ``out`` URL is written
+    through :mod:`kubric.datasets.store_commit`."""
+    if storage.is_url(str(out)):
+        from kubric.datasets.store_commit import pack_to_store
+        return pack_to_store(scenes_dir, out, executor, name=name, splits=splits,
+                             workers=workers, schema=schema,
+                             examples_per_shard=examples_per_shard, progress=progress,
+                             verify=verify, overwrite=overwrite, class_names=class_names)
+    start = time.perf_counter()
+    out = pathlib.Path(out).absolute()
+    split_fractions = packer.check_options(splits, workers, examples_per_shard, out, overwrite)
+    plan = make_plan(scenes_dir, name, split_fractions, schema, examples_per_shard,
+                     class_names, verify)
+    with packer.output_lock(out):  # one pack per output, as the local packer
+        packer._check_out(out, overwrite)
+        return _pack_planned(plan, out, executor, workers, progress, verify, split_fractions,
+                             start)
+
+
+def _pack_planned(plan, out, executor, workers, progress, verify, split_fractions,
+                  start) -> packer.PackResult:
+    work = packer.work_dir(out)
+    _open_work(work, plan.key)
+    state, corrupt, resumed = run_plan(plan, str(work), executor, workers, progress)
     from kubric.datasets import tfds_io
-    features = tfds_io.tfds_features(schema, dims)
+    features = tfds_io.tfds_features(plan.schema, plan.dims)
     write_json(state, work / packer.PROGRESS_FILE)  # _finalise removes it
-    counts = packer._finalise(work, state, schema, name, dims, split_fractions, incomplete,
-                              features)
+    counts = packer._finalise(work, state, plan.schema, plan.name, plan.dims, split_fractions,
+                              plan.incomplete, features)
     if verify:  # in the work folder: a dataset that fails never takes the output's name
         from kubric.datasets.verify import verify_dataset
         try:
-            verify_dataset(work, scenes_dir, progress=progress)
+            verify_dataset(work, plan.scenes_dir, progress=progress)
         except DatasetError as err:
             shutil.rmtree(work, ignore_errors=True)
             raise DatasetError(f"{err}; nothing was written to {str(out)!r}") from None
     packer._swap_into_place(work, out)
-    return packer.PackResult(out, counts, incomplete, corrupt, time.perf_counter() - start,
-                             resumed)
+    return packer.PackResult(out, counts, plan.incomplete, corrupt,
+                             time.perf_counter() - start, resumed)
 
 
 def _open_work(work: pathlib.Path, plan_key: str) -> None:
@@ -332,11 +402,11 @@ def _open_work(work: pathlib.Path, plan_key: str) -> None:
     write_json({"plan": plan_key}, work / PLAN_FILE)
 
 
-def _recut(work: pathlib.Path, executor, name: str, assignment: dict, chunk_of: dict,
+def _recut(work: str, executor, name: str, assignment: dict, chunk_of: dict,
            records: dict, per_shard: int) -> dict:
     """The final shards as the local packer's progress state ``{"shards": {split: [...]}}``:
     the chunks themselves, or (a split with corrupt scenes) shards re-cut from them to hold
-    ``per_shard`` good examples each. Removes everything else from ``work``."""
+    ``per_shard`` good examples each. A local work directory is left holding only them."""
     state: dict = {"shards": {}}
     calls, targets = [], []
     for split in assignment:
@@ -356,18 +426,20 @@ def _recut(work: pathlib.Path, executor, name: str, assignment: dict, chunk_of: 
             shard = {"file": f"{name}-{split}.shard-{j:05d}", "scenes": [s for *_, s in part],
                      "num_bytes": 0}
             shards.append(shard)
-            calls.append((recut_shard, str(work), shard["file"], pieces))
+            calls.append((recut_shard, work, shard["file"], pieces))
             targets.append(shard)
         state["shards"][split] = shards
 
     def done(k, result):
         targets[k]["num_bytes"] = result["num_bytes"]
     _run(executor, calls, done)
-    keep = {sh["file"] for shards in state["shards"].values() for sh in shards}
-    for entry in work.iterdir():
-        if entry.name not in keep:
-            entry.unlink()
+    if not storage.is_url(work):  # a URL's work area goes as a whole after the commit
+        keep = {sh["file"] for shards in state["shards"].values() for sh in shards}
+        for entry in pathlib.Path(work).iterdir():
+            if entry.name not in keep:
+                entry.unlink()
     return state
 
 
-__all__ = ["pack_sharded", "DaskExecutor", "encode_chunk", "recut_shard"]
+__all__ = ["pack_sharded", "DaskExecutor", "PackPlan", "encode_chunk", "make_plan",
+           "recut_shard", "run_plan"]

@@ -1,4 +1,5 @@
-"""``kubric datasets info DATASET_DIR``: splits, counts, shards, features with shapes, size."""
+"""``kubric datasets info DATASET_DIR``: splits, counts, shards, features with shapes, size
+(DATASET_DIR may be a URL: its marker is read and its objects listed, no shard is fetched)."""
 
 from __future__ import annotations
 
@@ -18,11 +19,18 @@ def _size(num_bytes: int) -> str:
 
 def dataset_info(dataset_dir) -> str:
     """The text ``kubric datasets info`` prints."""
-    path = pathlib.Path(dataset_dir)
-    info = read_info(path)
+    from kubric.io import storage
+    if storage.is_url(str(dataset_dir)):  # the marker and one listing; no shard is fetched
+        from kubric.datasets.dataset_cache import remote_info
+        path = storage.normalise(str(dataset_dir))
+        info = remote_info(path)
+        size = sum(storage.sizes(path).values())
+    else:
+        path = pathlib.Path(dataset_dir)
+        info = read_info(path)
+        size = sum(p.stat().st_size for p in path.iterdir() if p.is_file())
     schema = Schema.from_json(info["schema_json"])
     dims = dict(info["dims"])
-    size = sum(p.stat().st_size for p in path.iterdir() if p.is_file())
     lines = [f"dataset {info['name']} at {path}",
              f"  schema {schema.name} (version {schema.version}), format version "
              f"{info['format_version']}, kubric {info.get('kubric_version')}",
@@ -34,7 +42,8 @@ def dataset_info(dataset_dir) -> str:
         shards = info["shard_lengths"].get(split, [])
         lines.append(f"    {split:<12} {count:>7} examples in {len(shards)} shards "
                      f"(fraction {info['splits'].get(split, 0):g})")
-    problems = check_shards(path, info)
+    # a local dataset's shards are opened; a URL's are checked when a split is loaded
+    problems = check_shards(path, info) if isinstance(path, pathlib.Path) else []
     if info.get("incomplete_skipped"):
         lines.append(f"  incomplete scenes skipped when packing: {info['incomplete_skipped']}")
     from kubric.datasets.tasks import servable_tasks

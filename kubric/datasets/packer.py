@@ -352,8 +352,9 @@ def pack(scenes_dir, out, name: str | None = None, splits=DEFAULT_SPLITS, worker
                       for shards in state["shards"].values() for sh in shards)
         corrupt += [tuple(c) for shards in state["shards"].values() for sh in shards
                     for c in sh.get("corrupt", [])]
+        done = {split: _done_names(state, split) for split in assignment}  # once: O(N), not O(N²)
         todo = [(split, scene) for split, scenes in assignment.items() for scene in scenes
-                if scene.name not in _done_names(state, split)]
+                if scene.name not in done[split]]
         from kubric.datasets import tfds_io
         features = tfds_io.tfds_features(schema, dims)
         _write_shards(work, state, todo, schema, dims, name, workers, examples_per_shard,

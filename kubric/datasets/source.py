@@ -13,6 +13,10 @@ works in ``DataLoader(num_workers=...)`` and Grain worker processes. It is also 
 ``fork``: a reader opened in the parent (e.g. by looking at ``source[0]`` first) is never used in a
 forked child; the child opens its own (the process id is checked on every read).
 A shard or ``features.json`` that cannot be read is a :class:`DatasetError` naming the file.
+
+``DATASET_DIR`` may be a URL (``s3://bucket/ds``, ``gs://...``, any fsspec URL): the split's
+shards are fetched once into a local cache (:mod:`kubric.datasets.dataset_cache`) and read from
+there.
 """
 
 from __future__ import annotations
@@ -87,18 +91,25 @@ class DataSource:
 
     def __init__(self, dataset_dir, split: str, task=None, **task_options):
         from kubric.datasets.tasks import check_servable, get_task
+        from kubric.io import storage
+        #: the dataset as given: a directory or a URL (read through a local cache)
+        remote = storage.is_url(str(dataset_dir))
+        self.location = str(dataset_dir) if remote else str(pathlib.Path(dataset_dir))
+        if remote:
+            from kubric.datasets.dataset_cache import fetch
+            dataset_dir = fetch(self.location, split if isinstance(split, str) else None)
         self.dataset_dir = pathlib.Path(dataset_dir)
         self.info = layout.read_info(self.dataset_dir)
         if split not in self.info["counts"] or not self.info["counts"][split]:
             have = [s for s, n in self.info["counts"].items() if n]
-            raise DatasetError(f"{str(self.dataset_dir)!r} has no split {split!r} (splits: "
+            raise DatasetError(f"{self.location!r} has no split {split!r} (splits: "
                                f"{', '.join(have)})")
         self.split = split
         self.schema = Schema.from_json(self.info["schema_json"])
         self.dims = dict(self.info["dims"])
         self.task = get_task(task)
         self.task_options = self.task.check_options(task_options)
-        check_servable(self.task, self.schema, repr(str(self.dataset_dir)))
+        check_servable(self.task, self.schema, repr(self.location))
         self._keys = self.task.decode_keys(self.schema, self.task_options)
         self.scenes: list[str] = list(self.info["scenes"][split])
         self._frames = self.task.per_frame and int(self.dims["T"])
@@ -228,7 +239,7 @@ class DataSource:
             yield self[i]
 
     def __repr__(self) -> str:
-        return (f"DataSource({str(self.dataset_dir)!r}, split={self.split!r}, "
+        return (f"DataSource({self.location!r}, split={self.split!r}, "
                 f"task={self.task.name!r}, len={len(self)})")
 
 

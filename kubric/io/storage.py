@@ -154,6 +154,61 @@ def remove(location) -> None:
         pass
 
 
+def upload_file(local_file, location) -> None:
+    """Copy one local file to ``location`` (a path: through a temporary sibling and rename)."""
+    if not is_url(location):
+        write_bytes(location, pathlib.Path(local_file).read_bytes())
+        return
+    fs, path = _fs(location)
+    fs.put_file(str(local_file), path)
+
+
+def download_file(location, local_file) -> pathlib.Path:
+    """Copy the file at ``location`` to ``local_file`` (written to a temporary sibling and
+    renamed, so a cut transfer never leaves a file under the final name); returns its path."""
+    target = pathlib.Path(local_file)
+    target.parent.mkdir(parents=True, exist_ok=True)
+    tmp = target.with_name(f".{target.name}.part-{os.getpid()}")
+    try:
+        if is_url(location):
+            fs, path = _fs(location)
+            fs.get_file(path, str(tmp))
+        else:
+            import shutil
+            shutil.copyfile(location, tmp)
+        os.replace(tmp, target)
+    finally:
+        tmp.unlink(missing_ok=True)
+    return target
+
+
+def copy(source, target) -> None:
+    """Copy one file within a store (server-side for object stores: no bytes pass through
+    this machine); both must be paths or both URLs of the same filesystem."""
+    if not is_url(source):
+        write_bytes(target, pathlib.Path(source).read_bytes())
+        return
+    fs, src = _fs(source)
+    _, dst = _filesystem(target)
+    fs.copy(src, dst)
+
+
+def sizes(location) -> dict[str, int]:
+    """``{name: size in bytes}`` of the files directly under ``location`` (one listing)."""
+    if not is_url(location):
+        try:
+            return {e.name: e.stat().st_size for e in os.scandir(location) if e.is_file()}
+        except (FileNotFoundError, NotADirectoryError):
+            return {}
+    fs, path = _fs(location)
+    try:
+        entries = fs.ls(path, detail=True)
+    except FileNotFoundError:
+        return {}
+    return {e["name"].rstrip("/").rsplit("/", 1)[-1]: int(e.get("size") or 0)
+            for e in entries if e.get("type") == "file"}
+
+
 def upload_dir(local_dir, location, last: str = "_SUCCESS",
                on_file: Callable[[str, int, int], None] | None = None) -> list[str]:
     """Copy the files under ``local_dir`` to ``location`` one by one, ``last`` (when present)
@@ -202,9 +257,28 @@ def complete_scenes(root, success: str = "_SUCCESS") -> list[str]:  # scene_dir.
     if not is_url(root):
         return [n for n in names if os.path.isfile(os.path.join(root, n, success))]
     fs, path = _fs(root)
-    found = fs.glob(f"{path.rstrip('/')}/scene_*/{success}")
-    done = {f.rstrip("/").rsplit("/", 2)[-2] for f in found}
-    return [n for n in names if n in done]
+    markers = [f"{path.rstrip('/')}/{n}/{success}" for n in names]
+    return [n for n, ok in zip(names, _exist_many(fs, markers), strict=True) if ok]
+
+
+def _exist_many(fs, paths: list[str], concurrency: int = 64) -> list[bool]:
+    """``fs.exists`` of every path; on an async filesystem (s3fs, gcsfs) ``concurrency`` requests
+    at a time. One request per path, whatever else the prefixes hold: a glob of
+    ``scene_*/_SUCCESS`` walked every scene prefix one listing after the other (measured on
+    moto's S3, 1000 scenes: 9.0 s; see benchmarks/bench_scale.py)."""
+    from fsspec.asyn import AsyncFileSystem, sync
+    if not isinstance(fs, AsyncFileSystem) or not paths:
+        return [fs.exists(p) for p in paths]
+    import asyncio
+
+    async def check():
+        gate = asyncio.Semaphore(concurrency)
+
+        async def one(p):
+            async with gate:
+                return await fs._exists(p)
+        return await asyncio.gather(*(one(p) for p in paths))
+    return list(sync(fs.loop, check))
 
 
 def check_writable(location) -> None:
@@ -233,5 +307,5 @@ def check_writable(location) -> None:
 
 
 __all__ = ["StorageError", "is_url", "normalise", "join", "exists", "isfile", "listdir",
-           "open_file", "read_bytes", "write_bytes", "remove", "upload_dir", "download_dir",
-           "complete_scenes", "check_writable"]
+           "open_file", "read_bytes", "write_bytes", "remove", "upload_file", "download_file",
+           "copy", "sizes", "upload_dir", "download_dir", "complete_scenes", "check_writable"]

@@ -132,9 +132,10 @@ def cmd_generate(args) -> int:
     misplaced = misplaced_flag(args)
     if misplaced:
         return _error("generate", misplaced)
+    from kubric.pipeline.dask_runner import ClusterError  # no Dask import
     cluster_opts = None
     if args.cluster is not None:
-        from kubric.pipeline.dask_runner import ClusterError, slurm_job_script
+        from kubric.pipeline.dask_runner import slurm_job_script
         cluster_opts = cluster_options(args)
         try:
             cluster_opts.validate()
@@ -174,10 +175,15 @@ def cmd_generate(args) -> int:
             return _error("generate", err)
         from kubric.pipeline.dask_runner import dashboard_link
         print(f"Dask dashboard: {dashboard_link(client, cluster, cluster_opts)}", flush=True)
+        from kubric.pipeline.dask_slots import SceneSlots
+        print(f"Dask slots: {SceneSlots(client, cluster_opts.threads_per_scene).describe()}",
+              flush=True)
         runner = DaskRunner(recipe_spec(cls), out, seeds, client,
                             threads_per_scene=cluster_opts.threads_per_scene, **common)
     try:
         summary = runner.run()
+    except ClusterError as err:  # the scheduler went away mid-run
+        return _error("generate", err)
     finally:
         if client is not None:
             client.close()

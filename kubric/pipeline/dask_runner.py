@@ -5,19 +5,22 @@
 * ``local`` starts a ``LocalCluster`` in this process (``--workers`` slots); its scheduler,
   workers and dashboard listen on 127.0.0.1 only (``--dashboard-address :8787`` asks for every
   interface);
-* ``tcp://HOST:PORT`` (or ``tls://``) joins a running scheduler; start its workers with
-  ``dask worker tcp://HOST:PORT --nthreads 1 --resources scene=1``. A ``tcp://`` address is first
-  probed: it must answer with Dask's handshake within ``--connect-timeout`` (the dashboard's
-  port, 8787, or any other server is refused in one line, never a hang);
+* ``tcp://HOST:PORT`` (or ``tls://``) joins a running scheduler, its workers as they are
+  (:mod:`kubric.pipeline.dask_slots`: the ``scene`` resource where workers offer it, else
+  ``nthreads // threads_per_scene`` slots per worker). A ``tcp://`` address is first probed: it
+  must answer with Dask's handshake within ``--connect-timeout`` (the dashboard's port, 8787, or
+  any other server is refused in one line, never a hang);
 * ``slurm`` submits Dask worker jobs with dask-jobqueue (``--jobs``, ``--cores-per-job``,
   ``--memory``, ``--walltime``, ``--queue``, ``--job-directive``); every job runs
   ``cores-per-job // threads-per-scene`` worker processes.
 
 Each Dask task (:func:`scene_task`) runs one scene in a **fresh** ``python -m kubric worker``
 subprocess (Blender keeps state across scenes) with the per-scene timeout, and returns its log
-text, which the client appends to ``OUT/logs/scene_{seed:08d}.log``. Tasks ask for the resource
-``scene=1``, so a worker slot renders one scene at a time with ``--threads-per-scene`` render
-threads (``KUBRIC_RENDER_THREADS``). A failed attempt is resubmitted up to ``--retries`` times; a
+text, which the client appends to ``OUT/logs/scene_{seed:08d}.log``. A worker slot renders one
+scene at a time with ``--threads-per-scene`` render threads (``KUBRIC_RENDER_THREADS``); the
+client keeps a bounded window of tasks in flight (:class:`~kubric.pipeline.dask_slots.SceneSlots`).
+A scheduler that goes away mid-run ends the run with :class:`ClusterError` (complete scenes
+stay; a rerun finishes the rest). A failed attempt is resubmitted up to ``--retries`` times; a
 task whose worker dies is rerun elsewhere by the scheduler. Completeness is decided as locally:
 exit status 0 and ``_SUCCESS`` present. SIGINT sets a cluster-wide stop event: queued scenes do
 not start, running subprocesses are terminated (they delete their work directories).
@@ -25,7 +28,6 @@ not start, running subprocesses are terminated (they delete their work directori
 
 from __future__ import annotations
 
-import contextlib
 import os
 import re
 import shutil
@@ -39,10 +41,9 @@ from dataclasses import dataclass, field
 
 from kubric.errors import UsageError
 from kubric.io.scene_dir import scene_name
+from kubric.pipeline.dask_slots import RESOURCE, SceneSlots, Slot
 from kubric.pipeline.runner import PARENT_ENV, Runner, RunSummary, run_logged, usable_cores
 
-#: the resource every scene task asks for (one per worker slot).
-RESOURCE = "scene"
 #: the dashboard of a cluster started here: this machine only unless asked
 LOCAL_DASHBOARD = "127.0.0.1:8787"
 #: the largest handshake a Dask scheduler sends (it is about 60 bytes)
@@ -107,11 +108,16 @@ class ClusterOptions:
                                                                  self.dashboard_address})
 
 
-def _quiet():
+def _quiet(silent: bool = False):
+    """Dask's loggers at ERROR (or, ``silent``, at nothing: the run already failed in one
+    line)."""
     import logging
-    for name in ("distributed", "distributed.scheduler", "distributed.worker", "bokeh",
-                 "tornado", "distributed.nanny", "distributed.core"):
-        logging.getLogger(name).setLevel(logging.ERROR)
+    names = {"distributed", "distributed.scheduler", "distributed.worker", "bokeh", "tornado",
+             "distributed.nanny", "distributed.core"}
+    if silent:
+        names |= {n for n in logging.root.manager.loggerDict if n.startswith("distributed")}
+    for name in names:
+        logging.getLogger(name).setLevel(logging.CRITICAL + 1 if silent else logging.ERROR)
 
 
 def slurm_job_script(options: ClusterOptions) -> str:
@@ -165,13 +171,6 @@ def open_cluster(options: ClusterOptions, processes: bool = False):
         detail = str(err).splitlines()[0] if str(err) else type(err).__name__
         raise ClusterError(f"--cluster: {what} within {options.connect_timeout:g} s ({detail})") \
             from None
-    if kind == "address":
-        workers = client.scheduler_info().get("workers", {})
-        if workers and not any(w.get("resources", {}).get(RESOURCE) for w in workers.values()):
-            client.close()
-            raise ClusterError(f"--cluster {options.spec}: none of its {len(workers)} workers "
-                               f"offers the {RESOURCE!r} resource; start them with `dask worker "
-                               f"{options.spec} --nthreads 1 --resources {RESOURCE}=1`")
     return client, cluster
 
 
@@ -230,6 +229,18 @@ def dashboard_link(client, cluster, options: ClusterOptions) -> str:
     return f"http://{host}:{port}/status"
 
 
+def scheduler_lost(client, kept: str) -> ClusterError | None:
+    """A :class:`ClusterError` (one line; ``kept`` says what survives) when ``client`` has lost
+    its scheduler, else None. Dask's own logging is silenced then: closing such a client logs
+    tracebacks after the run has already failed in one line."""
+    if client.status in ("running", "newly-created"):
+        return None
+    _quiet(silent=True)
+    return ClusterError(f"the Dask scheduler at {client.scheduler.address} went away mid-run "
+                        f"(client {client.status}); {kept}: start it again and rerun the same "
+                        "command")
+
+
 # ---------------------------------------------------------------------- on the Dask worker
 def scene_task(cmd: Sequence[str], attempt: int, timeout: float | None, threads: int,
                stop_event: str | None = None, poll: float = 5.0) -> dict:
@@ -282,62 +293,86 @@ class DaskRunner(Runner):
         self.run_id = uuid.uuid4().hex[:8]
         self.poll = 5.0   # seconds between a running task's checks of the stop event
 
-    def _submit(self, seed: int, attempt: int):
+    def _submit(self, seed: int, attempt: int, slot: Slot):
         return self.client.submit(
             scene_task, self.command(seed), attempt, self.timeout, self.threads_per_scene,
-            f"kubric-stop-{self.run_id}", self.poll, resources={RESOURCE: 1}, pure=False,
-            key=f"{scene_name(seed)}-attempt{attempt}-{self.run_id}")
+            f"kubric-stop-{self.run_id}", self.poll, pure=False,
+            key=f"{scene_name(seed)}-attempt{attempt}-{self.run_id}", **slot.kwargs)
 
-    def _finish(self, future, seed: int, attempt: int, summary: RunSummary, bar):
-        """Book one finished task; returns a resubmitted future or None."""
+    def _finish(self, future, seed: int, attempt: int, summary: RunSummary, bar) -> bool:
+        """Book one finished task; True when the scene is to be tried again."""
         try:
             result = future.result()
             rc, text = result["rc"], result["log"]
         except Exception as err:  # KilledWorker, CancelledError, a lost connection, ...
+            self._check_scheduler()
             rc = None
             text = (f"=== attempt {attempt} lost: {type(err).__name__}: "
                     f"{str(err).splitlines()[0] if str(err) else ''}\n")
         self.logs.append(seed, text)
         if self._stop.is_set() and rc != 0:
-            return None
+            return False
         ok = rc == 0 and self.scene_complete(seed)
         if not ok and attempt <= self.retries:
-            with self._lock:
-                summary.attempts += 1
-            return self._submit(seed, attempt + 1)
+            return True
         self._record(seed, ok, summary, bar)
-        return None
+        return False
+
+    def _check_scheduler(self) -> None:
+        """Raise :class:`ClusterError` when the client has lost its scheduler."""
+        lost = scheduler_lost(self.client, "complete scenes are kept")
+        if lost is not None:
+            raise lost
 
     def _execute(self, todo: list[int], summary: RunSummary, bar) -> None:
+        """Keep the cluster's scene slots busy from a queue of (seed, attempt); only a bounded
+        window of futures exists at any time (:class:`SceneSlots`)."""
+        from collections import deque
+
         from distributed import Event, wait
         event = Event(f"kubric-stop-{self.run_id}", client=self.client)
-        pending = {}
-        for seed in todo:
-            pending[self._submit(seed, 1)] = (seed, 1)
-        summary.attempts += len(todo)
+        slots = SceneSlots(self.client, self.threads_per_scene)
+        queue = deque((seed, 1) for seed in todo)
+        pending: dict = {}   # future -> (seed, attempt, slot)
         stop_seen = None
-        while pending:
+        while queue or pending:
             if self._stop.is_set() and stop_seen is None:
                 stop_seen = time.monotonic()
                 event.set()
+                queue.clear()
             if stop_seen is not None and time.monotonic() - stop_seen > self.poll + self.kill_after:
                 self.client.cancel(list(pending))
                 break
+            while queue:
+                slot = slots.take()
+                if slot is None:
+                    break
+                seed, attempt = queue.popleft()
+                pending[self._submit(seed, attempt, slot)] = (seed, attempt, slot)
+                summary.attempts += 1
             finished = [f for f in pending if f.done()]
             if not finished:
-                with contextlib.suppress(TimeoutError):
+                if not pending:
+                    self._check_scheduler()
+                    time.sleep(0.2)   # no slot yet (no workers): look again
+                    continue
+                try:
                     wait(list(pending), timeout=0.5, return_when="FIRST_COMPLETED")
+                except TimeoutError:
+                    pass
+                except Exception:  # FuturesCancelledError: lost the scheduler?
+                    self._check_scheduler()
                 continue
             for future in finished:
-                seed, attempt = pending.pop(future)
-                again = self._finish(future, seed, attempt, summary, bar)
-                if again is not None:
-                    pending[again] = (seed, attempt + 1)
+                seed, attempt, slot = pending.pop(future)
+                slots.give_back(slot)
+                if self._finish(future, seed, attempt, summary, bar):
+                    queue.appendleft((seed, attempt + 1))
                 future.release()
         if stop_seen is not None:
             time.sleep(0.5)
 
 
 __all__ = ["ClusterError", "ClusterOptions", "DaskRunner", "dashboard_link", "open_cluster",
-           "probe_scheduler", "scene_task",
+           "probe_scheduler", "scene_task", "scheduler_lost",
            "slurm_job_script", "RESOURCE"]

@@ -1,3 +1,3 @@
 """Built-in recipes (importing this registers them; no engine is imported here)."""
 
-from kubric.recipes import movi, multiview, pose_estimation, vbr  # noqa: F401
+from kubric.recipes import bench, movi, multiview, pose_estimation, vbr  # noqa: F401
