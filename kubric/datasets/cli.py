@@ -40,8 +40,8 @@ def cmd_pack(args) -> int:
         return _pack_on_cluster(args, common)
     try:
         if storage.is_url(args.scenes_dir) or storage.is_url(args.out):
-            from kubric.datasets.dask_pack import pack_sharded  # URL out: store_commit
-            result = pack_sharded(args.scenes_dir, args.out, **common)
+            from kubric.datasets.store_commit import pack_into
+            result = pack_into(args.scenes_dir, args.out, **common)
         else:
             result = pack(args.scenes_dir, args.out, **common)
     except (DatasetError, SchemaError) as err:
@@ -50,8 +50,9 @@ def cmd_pack(args) -> int:
 
 
 def _pack_on_cluster(args, common: dict) -> int:
-    from kubric.datasets.dask_pack import DaskExecutor, pack_sharded
+    from kubric.datasets.dask_pack import DaskExecutor
     from kubric.datasets.layout import DatasetError
+    from kubric.datasets.store_commit import pack_into
     from kubric.io.schema import SchemaError
     from kubric.pipeline.cli import cluster_options
     from kubric.pipeline.dask_runner import ClusterError, open_cluster, slurm_job_script
@@ -71,7 +72,7 @@ def _pack_on_cluster(args, common: dict) -> int:
     from kubric.pipeline.dask_runner import dashboard_link
     print(f"Dask dashboard: {dashboard_link(client, cluster, options)}", flush=True)
     try:
-        result = pack_sharded(args.scenes_dir, args.out, executor=DaskExecutor(client), **common)
+        result = pack_into(args.scenes_dir, args.out, executor=DaskExecutor(client), **common)
     except (DatasetError, SchemaError) as err:
         return _error("pack", err)
     except Exception:

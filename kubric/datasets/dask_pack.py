@@ -42,7 +42,7 @@ import time
 from collections.abc import Mapping, Sequence
 
 from kubric.datasets import layout, packer
-from kubric.datasets.layout import DatasetError
+from kubric.datasets.layout import DatasetError, DatasetUsageError
 from kubric.io import scene_dir, storage
 from kubric.io.json_io import read_json, write_json
 
@@ -347,14 +347,11 @@ def pack_sharded(scenes_dir, out, executor=None, name: str | None = None,
                  class_names: Mapping[str, Sequence[str]] | None = None) -> packer.PackResult:
     """Pack like :func:`kubric.datasets.packer.pack`, one task per shard (module doc).
     ``executor``: a :class:`DaskExecutor`, or None for ``workers`` local processes;
-    ``class_names`` as for :func:`~kubric.datasets.packer.pack`. An ``out`` URL is written
-    through :mod:`kubric.datasets.store_commit`."""
+    ``class_names`` as for :func:`~kubric.datasets.packer.pack`. ``out`` is a directory; a URL
+    is packed by :func:`kubric.datasets.store_commit.pack_to_store` (:func:`pack_into`)."""
     if storage.is_url(str(out)):
-        from kubric.datasets.store_commit import pack_to_store
-        return pack_to_store(scenes_dir, out, executor, name=name, splits=splits,
-                             workers=workers, schema=schema,
-                             examples_per_shard=examples_per_shard, progress=progress,
-                             verify=verify, overwrite=overwrite, class_names=class_names)
+        raise DatasetUsageError(f"pack_sharded: --out {str(out)!r} is a URL; use "
+                                "kubric.datasets.store_commit.pack_to_store (pack_into)")
     start = time.perf_counter()
     out = pathlib.Path(out).absolute()
     split_fractions = packer.check_options(splits, workers, examples_per_shard, out, overwrite)

@@ -179,4 +179,13 @@ def pack_to_store(scenes_dir, out, executor=None, name=None, splits=packer.DEFAU
                              time.perf_counter() - start, resumed)
 
 
-__all__ = ["COMMIT_FILE", "WORK", "check_output", "commit", "dataset_files", "pack_to_store"]
+__all__ = ["COMMIT_FILE", "WORK", "check_output", "commit", "dataset_files", "pack_into",
+           "pack_to_store"]
+
+
+def pack_into(scenes_dir, out, executor=None, **options) -> packer.PackResult:
+    """The sharded pack into ``out``: :func:`pack_to_store` for a URL, else
+    :func:`kubric.datasets.dask_pack.pack_sharded` (a directory)."""
+    if storage.is_url(str(out)):
+        return pack_to_store(scenes_dir, out, executor, **options)
+    return dask_pack.pack_sharded(scenes_dir, out, executor, **options)
