@@ -4,12 +4,24 @@ from __future__ import annotations
 
 import sys
 
+from kubric.datasets.dask_pack import DaskExecutor
+from kubric.datasets.info import dataset_info
+from kubric.datasets.layout import DatasetError
+from kubric.datasets.packer import pack, read_class_names
+from kubric.datasets.store_commit import pack_into
+from kubric.errors import KubricError
+from kubric.io import storage
+from kubric.io.schema import SchemaError, schema_markdown
+from kubric.pipeline.cleanup import handle_termination, private_tmpdir
+from kubric.pipeline.cli import add_cluster_arguments, cluster_options, misplaced_flag
+from kubric.pipeline.dask_runner import ClusterError, dashboard_link, open_cluster, slurm_job_script
+from kubric.pipeline.recipe import schema_of
+
 
 def _error(command: str, message, code: int | None = None) -> int:
     """Print the one-line error; the exit status is the error's own (a
     :class:`~kubric.errors.KubricError`: 2 for a usage error such as
     :class:`~kubric.datasets.layout.DatasetUsageError`, 1 for bad input data), else 2."""
-    from kubric.errors import KubricError
     if code is None:
         code = message.exit_code if isinstance(message, KubricError) else 2
     print(f"kubric {command}: error: {message}", file=sys.stderr)
@@ -17,15 +29,10 @@ def _error(command: str, message, code: int | None = None) -> int:
 
 
 def cmd_pack(args) -> int:
-    from kubric.datasets.layout import DatasetError
-    from kubric.datasets.packer import pack, read_class_names
-    from kubric.io import storage
-    from kubric.io.schema import SchemaError
     common = dict(name=args.name, splits=args.splits, schema=args.schema,
                   workers=1 if args.workers is None else args.workers,
                   examples_per_shard=args.examples_per_shard, progress=not args.no_progress,
                   verify=args.verify, overwrite=args.overwrite)
-    from kubric.pipeline.cli import misplaced_flag
     misplaced = misplaced_flag(args)
     if misplaced:
         return _error("pack", misplaced)
@@ -33,7 +40,6 @@ def cmd_pack(args) -> int:
         common["class_names"] = read_class_names(args.class_names)
     except DatasetError as err:
         return _error("pack", err)
-    from kubric.pipeline.cleanup import handle_termination, private_tmpdir
     handle_termination()  # SIGTERM like Ctrl-C: unwind, end the pool's workers
     private_tmpdir()  # temporary files (Dask's scratch space too) go when this process ends
     if args.cluster is not None:
@@ -50,12 +56,6 @@ def cmd_pack(args) -> int:
 
 
 def _pack_on_cluster(args, common: dict) -> int:
-    from kubric.datasets.dask_pack import DaskExecutor
-    from kubric.datasets.layout import DatasetError
-    from kubric.datasets.store_commit import pack_into
-    from kubric.io.schema import SchemaError
-    from kubric.pipeline.cli import cluster_options
-    from kubric.pipeline.dask_runner import ClusterError, open_cluster, slurm_job_script
     options = cluster_options(args)
     try:
         options.validate()
@@ -69,7 +69,6 @@ def _pack_on_cluster(args, common: dict) -> int:
         client, cluster = open_cluster(options, processes=True)
     except ClusterError as err:
         return _error("pack", err)
-    from kubric.pipeline.dask_runner import dashboard_link
     print(f"Dask dashboard: {dashboard_link(client, cluster, options)}", flush=True)
     try:
         result = pack_into(args.scenes_dir, args.out, executor=DaskExecutor(client), **common)
@@ -97,8 +96,6 @@ def _report(args, result) -> int:
 
 
 def cmd_info(args) -> int:
-    from kubric.datasets.info import dataset_info
-    from kubric.datasets.layout import DatasetError
     try:
         print(dataset_info(args.dataset_dir))
     except DatasetError as err:
@@ -107,8 +104,6 @@ def cmd_info(args) -> int:
 
 
 def cmd_schema(args) -> int:
-    from kubric.io.schema import SchemaError, schema_markdown
-    from kubric.pipeline.recipe import schema_of
     try:
         print(schema_markdown(schema_of(args.recipe)), end="")
     except SchemaError as err:
@@ -143,7 +138,6 @@ def add_parser(subparsers) -> None:
                    "scenes, e.g. instances/category=OTHER_DATASET/instances-category.labels.txt "
                    "so that both datasets share category ids (repeatable)")
     p.add_argument("--no-progress", action="store_true")
-    from kubric.pipeline.cli import add_cluster_arguments
     add_cluster_arguments(p, "pack on Dask, one task per shard (kubric.datasets.dask_pack): a "
                           "LocalCluster, a running scheduler, or Slurm jobs")
     p.set_defaults(func=cmd_pack)

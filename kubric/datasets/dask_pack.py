@@ -41,10 +41,11 @@ import tempfile
 import time
 from collections.abc import Mapping, Sequence
 
-from kubric.datasets import layout, packer
+from kubric.datasets import layout, packer, tfds_io
 from kubric.datasets.layout import DatasetError, DatasetUsageError
 from kubric.io import scene_dir, storage
 from kubric.io.json_io import read_json, write_json
+from kubric.pipeline.dask_slots import RESOURCE, uses_resource
 
 PLAN_FILE = "plan.json"
 
@@ -168,7 +169,6 @@ class DaskExecutor:
     workers offer that resource, else takes one worker thread (a cluster of plain workers)."""
 
     def __init__(self, client):
-        from kubric.pipeline.dask_slots import RESOURCE, uses_resource
         self.client = client
         self.resources = {RESOURCE: 1} if uses_resource(client) else None
 
@@ -368,7 +368,6 @@ def _pack_planned(plan, out, executor, workers, progress, verify, split_fraction
     work = packer.work_dir(out)
     _open_work(work, plan.key)
     state, corrupt, resumed = run_plan(plan, str(work), executor, workers, progress)
-    from kubric.datasets import tfds_io
     features = tfds_io.tfds_features(plan.schema, plan.dims)
     write_json(state, work / packer.PROGRESS_FILE)  # _finalise removes it
     counts = packer._finalise(work, state, plan.schema, plan.name, plan.dims, split_fractions,

@@ -6,6 +6,8 @@ from __future__ import annotations
 import pathlib
 
 from kubric.datasets.layout import DatasetError, read_info, shard_name
+from kubric.datasets.tasks import servable_tasks
+from kubric.io import storage
 from kubric.io.schema import Schema, shape_text
 
 
@@ -19,7 +21,6 @@ def _size(num_bytes: int) -> str:
 
 def dataset_info(dataset_dir) -> str:
     """The text ``kubric datasets info`` prints."""
-    from kubric.io import storage
     if storage.is_url(str(dataset_dir)):  # the marker and one listing; no shard is fetched
         from kubric.datasets.dataset_cache import remote_info
         path = storage.normalise(str(dataset_dir))
@@ -46,7 +47,6 @@ def dataset_info(dataset_dir) -> str:
     problems = check_shards(path, info) if isinstance(path, pathlib.Path) else []
     if info.get("incomplete_skipped"):
         lines.append(f"  incomplete scenes skipped when packing: {info['incomplete_skipped']}")
-    from kubric.datasets.tasks import servable_tasks
     lines.append(f"  loader tasks: {', '.join(servable_tasks(schema))}")
     lines.append(f"  features ({len(schema.features)}):")
     width = max(len(f.name) for f in schema.features)

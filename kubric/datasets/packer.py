@@ -43,10 +43,11 @@ import zipfile
 from collections.abc import Mapping, Sequence
 
 from kubric import faults
-from kubric.datasets import layout
+from kubric.datasets import layout, tfds_io
 from kubric.datasets.layout import DatasetError, DatasetUsageError
 from kubric.io import scene_dir
 from kubric.io.json_io import read_json, write_json
+from kubric.io.output_lock import OutputBusy, OutputLock
 from kubric.io.scene_reader import SceneError, SceneReader
 from kubric.io.schema import Schema, SchemaError
 from kubric.pipeline.recipe import get_recipe, schema_of
@@ -82,7 +83,6 @@ _WORKER: dict = {}
 
 
 def _init_worker(schema: Schema, dims: dict, parent: int | None = None) -> None:
-    from kubric.datasets import tfds_io
     if parent is not None:  # a pool process: the parent handles Ctrl-C; die with the parent
         signal.signal(signal.SIGINT, signal.SIG_IGN)
         _die_with(parent)
@@ -91,7 +91,6 @@ def _init_worker(schema: Schema, dims: dict, parent: int | None = None) -> None:
 
 def _encode_scene(scene_dir: str) -> tuple[str, bytes | None, str | None]:
     """(scene name, serialised example or None, error or None), in a worker."""
-    from kubric.datasets import tfds_io
     schema, dims = _WORKER["schema"], _WORKER["dims"]
     path = pathlib.Path(scene_dir)
     try:
@@ -385,8 +384,6 @@ def work_dir(out: pathlib.Path) -> pathlib.Path:
 
 def output_lock(out: pathlib.Path):
     """The lock held while packing into ``out`` (``.NAME.lock`` beside it)."""
-    from kubric.io.output_lock import OutputBusy, OutputLock
-
     @contextlib.contextmanager
     def held():
         lock = OutputLock(out.parent / f".{out.name}.lock", f"--out {str(out)!r}")

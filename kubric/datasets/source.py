@@ -30,6 +30,9 @@ import numpy as np
 
 from kubric.datasets import layout
 from kubric.datasets.layout import DatasetError
+from kubric.datasets.tasks import check_servable, get_task
+from kubric.datasets.tfds_io import flatten, unflatten
+from kubric.io import storage
 from kubric.io.schema import Feature, Schema
 
 
@@ -90,8 +93,6 @@ class DataSource:
     """A map-style source of one split (see module doc). Build with :func:`load`."""
 
     def __init__(self, dataset_dir, split: str, task=None, **task_options):
-        from kubric.datasets.tasks import check_servable, get_task
-        from kubric.io import storage
         #: the dataset as given: a directory or a URL (read through a local cache)
         remote = storage.is_url(str(dataset_dir))
         self.location = str(dataset_dir) if remote else str(pathlib.Path(dataset_dir))
@@ -194,7 +195,6 @@ class DataSource:
         from tensorflow_datasets.core import example_parser, utils
         from tensorflow_datasets.proto import tf_example_pb2
 
-        from kubric.datasets.tfds_io import flatten, unflatten
         self._open()
         specs, flat_specs, keys = self._parser
         proto = tf_example_pb2.Example.FromString(data)

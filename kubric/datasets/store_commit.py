@@ -37,7 +37,7 @@ import re
 import tempfile
 import time
 
-from kubric.datasets import dask_pack, layout, packer
+from kubric.datasets import dask_pack, layout, packer, tfds_io
 from kubric.datasets.layout import DatasetError
 from kubric.io import storage
 from kubric.io.json_io import write_json
@@ -108,7 +108,6 @@ def _open_work(out: str, plan_key: str) -> str:
 def _metadata(plan, state: dict, scratch: pathlib.Path) -> tuple[dict, dict[str, str], list]:
     """(counts, {final shard name: staged file}, metadata files in ``scratch``) — the local
     packer's own finaliser run on empty stand-ins for the shards (it reads only the records)."""
-    from kubric.datasets import tfds_io
     meta = scratch / "meta"
     meta.mkdir()
     renames: dict[str, str] = {}

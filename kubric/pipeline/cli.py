@@ -8,7 +8,17 @@ import os
 import signal
 import sys
 
+from kubric.io import storage
+from kubric.pipeline.cleanup import handle_termination, private_tmpdir
+from kubric.pipeline.dask_runner import (
+    ClusterError,  # no Dask import
+    ClusterOptions,
+)
+from kubric.pipeline.inspect import inspect_scene
 from kubric.pipeline.options import OptionError
+from kubric.pipeline.recipe import get_recipe, load_builtin, recipe_spec
+from kubric.pipeline.runner import PARENT_ENV, LocalRunner
+from kubric.pipeline.worker import run_scene
 
 #: the largest seed: numpy's RandomState (and so every recipe's rng) takes seeds < 2**32
 MAX_SEED = 2**32 - 1
@@ -21,7 +31,6 @@ def _error(command: str, message) -> int:
 
 def _die_with_parent() -> None:
     """When started by the local runner, die with it (Linux parent-death signal)."""
-    from kubric.pipeline.runner import PARENT_ENV
     pid = os.environ.pop(PARENT_ENV, None)
     if not pid:
         return
@@ -35,10 +44,6 @@ def _die_with_parent() -> None:
 
 
 def cmd_worker(args) -> int:
-    from kubric.io import storage
-    from kubric.pipeline.cleanup import handle_termination, private_tmpdir
-    from kubric.pipeline.recipe import get_recipe
-    from kubric.pipeline.worker import run_scene
     _die_with_parent()
     handle_termination()  # SIGTERM like SIGINT: unwind, remove the work directory
     seed = args.seed if args.seed is not None else args.first_seed + args.index
@@ -99,7 +104,6 @@ def misplaced_flag(args) -> str | None:
 
 
 def cluster_options(args):
-    from kubric.pipeline.dask_runner import ClusterOptions
     value = {n: d if getattr(args, n) is None else getattr(args, n)
              for n, d in {**CLUSTER_FLAGS, **SLURM_FLAGS}.items()}
     return ClusterOptions(spec=args.cluster, workers=args.workers,
@@ -112,9 +116,6 @@ def cluster_options(args):
 
 
 def cmd_generate(args) -> int:
-    from kubric.io import storage
-    from kubric.pipeline.recipe import get_recipe, recipe_spec
-    from kubric.pipeline.runner import LocalRunner
     if args.scenes < 1:
         return _error("generate", f"--scenes must be ≥ 1, got {args.scenes}")
     if args.first_seed < 0:
@@ -132,7 +133,6 @@ def cmd_generate(args) -> int:
     misplaced = misplaced_flag(args)
     if misplaced:
         return _error("generate", misplaced)
-    from kubric.pipeline.dask_runner import ClusterError  # no Dask import
     cluster_opts = None
     if args.cluster is not None:
         from kubric.pipeline.dask_runner import slurm_job_script
@@ -144,7 +144,6 @@ def cmd_generate(args) -> int:
         if args.print_job_script:
             print(slurm_job_script(cluster_opts))
             return 0
-    from kubric.pipeline.cleanup import handle_termination, private_tmpdir
     handle_termination()  # until the runner installs its own (stop, end the workers, clean up)
     private_tmpdir()  # the workers' temporary folders nest in it: all go when this process ends
     try:
@@ -208,7 +207,6 @@ def format_recipe(cls) -> str:
 
 
 def cmd_recipes(args) -> int:
-    from kubric.pipeline.recipe import get_recipe, load_builtin
     try:
         classes = [get_recipe(args.name)] if args.name else \
             [cls for _, cls in sorted(load_builtin().items())]
@@ -219,8 +217,6 @@ def cmd_recipes(args) -> int:
 
 
 def cmd_inspect(args) -> int:
-    from kubric.io import storage
-    from kubric.pipeline.inspect import inspect_scene
     try:
         if storage.is_url(args.scene_dir):
             from kubric.pipeline.inspect import inspect_url

@@ -34,6 +34,7 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 from kubric.io import storage
+from kubric.io.output_lock import OutputLock
 from kubric.io.scene_dir import complete_scenes, is_complete, scene_name
 from kubric.pipeline.worker import remove_stale
 
@@ -276,7 +277,6 @@ class Runner(abc.ABC):
         """Run every scene not yet complete (one run per local output folder at a time)."""
         if self.remote:
             return self._run()
-        from kubric.io.output_lock import OutputLock
         pathlib.Path(self.out_root).mkdir(parents=True, exist_ok=True)
         with OutputLock(pathlib.Path(self.out_root) / LOCK_FILE, f"--out {str(self.out_root)!r}"):
             return self._run()

@@ -17,6 +17,7 @@ import pathlib
 
 import numpy as np
 
+from kubric.io.scene_writer import write_scene
 from kubric.io.schema import Feature, Schema, register_schema
 from kubric.pipeline.options import Option, resolution
 from kubric.pipeline.recipe import Recipe
@@ -45,7 +46,6 @@ class Bench(Recipe, name="bench"):
                            low=0, high=255)
 
     def generate(self, seed: int, out_dir: pathlib.Path) -> None:
-        from kubric.io.scene_writer import write_scene
         rng = np.random.RandomState(seed)
         (w, h), t, n = self.resolution, self.frames, self.num_instances
         rgba = rng.randint(0, 256, size=(t, h, w, 4)).astype(np.uint8)
