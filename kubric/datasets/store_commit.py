@@ -38,7 +38,7 @@ import tempfile
 import time
 
 from kubric.datasets import dask_pack, layout, packer, tfds_io
-from kubric.datasets.layout import DatasetError
+from kubric.datasets.layout import DatasetError, DatasetUsageError
 from kubric.io import storage
 from kubric.io.json_io import write_json
 
@@ -77,16 +77,16 @@ def check_output(out: str, overwrite: bool) -> None:
         return
     if layout.INFO_FILE in names:
         if not overwrite:
-            raise DatasetError(f"--out {out!r} is already a dataset; pass --overwrite to "
-                               "replace it")
+            raise DatasetUsageError(f"--out {out!r} is already a dataset; pass --overwrite "
+                                    "to replace it")
         foreign = [n for n in names if not _is_dataset_file(n)]
     else:  # a commit cut short: its files, and those of the dataset it was replacing
         record = _read_json(storage.join(out, WORK, COMMIT_FILE))
         foreign = names if record is None else \
             [n for n in names if n not in record.get("files", []) and not _is_dataset_file(n)]
     if foreign:
-        raise DatasetError(f"--out {out!r} holds {foreign[0]!r}, which is not part of a "
-                           "kubric dataset (refusing to write into it)")
+        raise DatasetUsageError(f"--out {out!r} holds {foreign[0]!r}, which is not part of a "
+                                "kubric dataset (refusing to write into it)")
 
 
 def _open_work(out: str, plan_key: str) -> str:
@@ -164,8 +164,8 @@ def pack_to_store(scenes_dir, out, executor=None, name=None, splits=packer.DEFAU
             raise storage.StorageError(f"--out {out!r}: an in-memory filesystem is private to "
                                        "one process; use an object store URL")
         storage.check_writable(out)
-    except storage.StorageError as err:
-        raise DatasetError(str(err)) from None
+    except storage.StorageError as err:  # a bad --out: a usage error, as for a local output
+        raise DatasetUsageError(str(err)) from None
     check_output(out, overwrite)
     plan = dask_pack.make_plan(scenes_dir, name, split_fractions, schema, examples_per_shard,
                                class_names, verify)
