@@ -349,7 +349,7 @@ def test_incomplete_and_corrupt_scenes_are_skipped_and_reported(packed, tmp_path
 def test_pack_resumes_after_interruption(packed, tmp_path, monkeypatch):
     from kubric.datasets import packer as pack_module
     scenes, out = packed
-    real, calls = pack_module._encode_scene, []
+    real, calls = pack_module.encode_scene, []
 
     def interrupted(path):
         calls.append(path)
@@ -357,12 +357,12 @@ def test_pack_resumes_after_interruption(packed, tmp_path, monkeypatch):
             raise KeyboardInterrupt
         return real(path)
 
-    monkeypatch.setattr(pack_module, "_encode_scene", interrupted)
+    monkeypatch.setattr(pack_module, "encode_scene", interrupted)
     with pytest.raises(KeyboardInterrupt):
         pack_module.pack(scenes, tmp_path / "ds", splits=SPLITS, progress=False,
                          examples_per_shard=2)
     assert not (tmp_path / "ds").exists() and (tmp_path / ".ds.incomplete").is_dir()
-    monkeypatch.setattr(pack_module, "_encode_scene", real)
+    monkeypatch.setattr(pack_module, "encode_scene", real)
     result = pack_module.pack(scenes, tmp_path / "ds", splits=SPLITS, progress=False,
                               examples_per_shard=2)
     assert result.resumed_scenes == 2  # the first train shard was kept

@@ -135,7 +135,7 @@ def test_interrupted_sharded_pack_resumes(scenes, tmp_path, monkeypatch):
     gives the same dataset."""
     from kubric.datasets import dask_pack, packer
     root, refs = scenes
-    encode, calls = packer._encode_scene, []
+    encode, calls = packer.encode_scene, []
 
     def failing(path):
         calls.append(path)
@@ -143,7 +143,7 @@ def test_interrupted_sharded_pack_resumes(scenes, tmp_path, monkeypatch):
             raise RuntimeError("stopped")
         return encode(path)
 
-    monkeypatch.setattr(packer, "_encode_scene", failing)
+    monkeypatch.setattr(packer, "encode_scene", failing)
     kwargs = dict(splits="train=0.5,validation=0.5", examples_per_shard=2, progress=False)
     with pytest.raises(RuntimeError, match="stopped"):
         dask_pack.pack_sharded(root / "scenes", tmp_path / "ds", **kwargs)

@@ -99,6 +99,23 @@ PIXEL_OFFSET = 0.5
 TRACK_FIELDS = ("query_points", "target_points", "occluded", "occlusion_reason", "visible",
                 "depth", "points_world", "points_camera", "points_object", "instance_id",
                 "is_foreground", "frames", "resolution", "pixel_offset", "depth_tolerance")
+#: the fields a packed dataset carries (the ``<recipe>_tracks`` schemas derive their features
+#: from this table): (key, dtype, shape with P tracks and T frames, unit, doc)
+PACKED_TRACK_FIELDS = (
+    ("query_points", "float32", ("P", 3), "",
+     "(t, y, x): query frame index and pixel position (pixel centres at +0.5)"),
+    ("target_points", "float32", ("P", "T", 2), "px",
+     "(x, y) pixel position per frame (pixel centres at +0.5)"),
+    ("occluded", "bool", ("P", "T"), "",
+     "behind the camera, outside the image, or hidden by another surface"),
+    ("occlusion_reason", "uint8", ("P", "T"), "",
+     "bits: 1 behind camera, 2 outside image, 4 another instance, 8 depth closer"),
+    ("visible", "float32", ("P", "T"), "", "sub-pixel visible fraction in [0, 1]"),
+    ("depth", "float32", ("P", "T"), "m", "distance of the point to the camera centre"),
+    ("points_world", "float32", ("P", "T", 3), "m", "3D position per frame, world frame"),
+    ("instance_id", "int32", ("P",), "", "0 = background, k = instances[k − 1]"),
+    ("is_foreground", "bool", ("P",), "", "the point lies on an instance"),
+)
 
 
 def _image_stack(array, name: str) -> np.ndarray:

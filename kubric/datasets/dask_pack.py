@@ -82,9 +82,9 @@ def _staged(work: str, file: str):
 
 
 def _encode_location(location: str) -> tuple[str, bytes | None, str | None]:
-    """:func:`packer._encode_scene` for a path or URL (a URL's scene is downloaded first)."""
+    """:func:`packer.encode_scene` for a path or URL (a URL's scene is downloaded first)."""
     if not storage.is_url(location):
-        return packer._encode_scene(location)
+        return packer.encode_scene(location)
     name = location.rstrip("/").rsplit("/", 1)[-1]
     with tempfile.TemporaryDirectory(prefix="kubric-pack-") as tmp:
         local = pathlib.Path(tmp) / name
@@ -92,7 +92,7 @@ def _encode_location(location: str) -> tuple[str, bytes | None, str | None]:
             storage.download_dir(location, local)
         except Exception as err:  # each backend raises its own types
             return name, None, f"cannot read {location}: {' '.join(str(err).split())[:300]}"
-        got = packer._encode_scene(str(local))
+        got = packer.encode_scene(str(local))
     error = got[2].replace(str(local), location) if got[2] else None
     return got[0], got[1], error
 
@@ -103,7 +103,7 @@ def encode_chunk(work: str, file: str, scenes: list[str], schema, dims: dict) ->
     directory or a URL (the file is written in local scratch and uploaded)."""
     from array_record.python import array_record_module
     _require_work(work)
-    packer._init_worker(schema, dims)
+    packer.init_worker(schema, dims)
     record = {"file": file, "scenes": [], "corrupt": [], "num_bytes": 0}
     with _staged(work, file) as tmp:
         writer = array_record_module.ArrayRecordWriter(str(tmp), layout.SHARD_WRITER_OPTIONS)
@@ -272,7 +272,7 @@ def make_plan(scenes_dir, name, split_fractions: dict, schema, examples_per_shar
         if not locations:
             raise DatasetError(f"{scenes_dir!r} holds no complete scene directory (with "
                                f"_SUCCESS); {incomplete} incomplete")
-        schema, dims = packer._schema_and_dims(folders, schema)
+        schema, dims = packer.schema_and_dims(folders, schema)
         schema = packer.resolve_names(schema, folders, class_names)
         name = name or schema.name
         if not layout.NAME_PATTERN.match(name):
@@ -282,7 +282,7 @@ def make_plan(scenes_dir, name, split_fractions: dict, schema, examples_per_shar
         corrupt: list[tuple[str, str]] = []
         for location, folder in zip(locations, folders, strict=True):
             try:
-                assignment[layout.split_of(packer._seed_of(folder), split_fractions)].append(
+                assignment[layout.split_of(packer.scene_seed(folder), split_fractions)].append(
                     location)
             except (packer.SceneError, ValueError) as err:
                 corrupt.append((location, str(err).replace(str(folder), location)))
@@ -358,7 +358,7 @@ def pack_sharded(scenes_dir, out, executor=None, name: str | None = None,
     plan = make_plan(scenes_dir, name, split_fractions, schema, examples_per_shard,
                      class_names, verify)
     with packer.output_lock(out):  # one pack per output, as the local packer
-        packer._check_out(out, overwrite)
+        packer.check_out(out, overwrite)
         return _pack_planned(plan, out, executor, workers, progress, verify, split_fractions,
                              start)
 
@@ -369,8 +369,8 @@ def _pack_planned(plan, out, executor, workers, progress, verify, split_fraction
     _open_work(work, plan.key)
     state, corrupt, resumed = run_plan(plan, str(work), executor, workers, progress)
     features = tfds_io.tfds_features(plan.schema, plan.dims)
-    write_json(state, work / packer.PROGRESS_FILE)  # _finalise removes it
-    counts = packer._finalise(work, state, plan.schema, plan.name, plan.dims, split_fractions,
+    write_json(state, work / packer.PROGRESS_FILE)  # finalise removes it
+    counts = packer.finalise(work, state, plan.schema, plan.name, plan.dims, split_fractions,
                               plan.incomplete, features)
     if verify:  # in the work folder: a dataset that fails never takes the output's name
         from kubric.datasets.verify import verify_dataset
@@ -379,7 +379,7 @@ def _pack_planned(plan, out, executor, workers, progress, verify, split_fraction
         except DatasetError as err:
             shutil.rmtree(work, ignore_errors=True)
             raise DatasetError(f"{err}; nothing was written to {str(out)!r}") from None
-    packer._swap_into_place(work, out)
+    packer.swap_into_place(work, out)
     return packer.PackResult(out, counts, plan.incomplete, corrupt,
                              time.perf_counter() - start, resumed)
 

@@ -82,14 +82,14 @@ class PackResult:
 _WORKER: dict = {}
 
 
-def _init_worker(schema: Schema, dims: dict, parent: int | None = None) -> None:
+def init_worker(schema: Schema, dims: dict, parent: int | None = None) -> None:
     if parent is not None:  # a pool process: the parent handles Ctrl-C; die with the parent
         signal.signal(signal.SIGINT, signal.SIG_IGN)
         _die_with(parent)
     _WORKER.update(schema=schema, dims=dims, features=tfds_io.tfds_features(schema, dims))
 
 
-def _encode_scene(scene_dir: str) -> tuple[str, bytes | None, str | None]:
+def encode_scene(scene_dir: str) -> tuple[str, bytes | None, str | None]:
     """(scene name, serialised example or None, error or None), in a worker."""
     schema, dims = _WORKER["schema"], _WORKER["dims"]
     path = pathlib.Path(scene_dir)
@@ -145,7 +145,7 @@ def find_scenes(scenes_dir: pathlib.Path) -> tuple[list[pathlib.Path], int]:
     return scene_dir.survey(scenes_dir)
 
 
-def _seed_of(scene: pathlib.Path) -> int:
+def scene_seed(scene: pathlib.Path) -> int:
     """The scene's seed: ``metadata.seed``, else ``flags.seed``, else the digits of its name.
     A metadata.json of the wrong shape is a :class:`SceneError` naming the file."""
     path = scene / scene_dir.METADATA_FILE
@@ -180,7 +180,7 @@ def _recipe_of(scene: pathlib.Path) -> str:
                            "(flags.recipe); pass --schema") from None
 
 
-def _schema_and_dims(complete: list[pathlib.Path], schema) -> tuple[Schema, dict]:
+def schema_and_dims(complete: list[pathlib.Path], schema) -> tuple[Schema, dict]:
     """The schema (given, or the recipe of the first scene whose metadata.json reads) and the
     frame count / resolution of the first scene that has them."""
     if schema is not None:
@@ -273,7 +273,7 @@ def packer_files(directory: pathlib.Path) -> tuple[list[str], list[str]]:
     return ours, other
 
 
-def _check_out(out: pathlib.Path, overwrite: bool) -> None:
+def check_out(out: pathlib.Path, overwrite: bool) -> None:
     if out.is_symlink() or (out.exists() and not out.is_dir()):
         raise DatasetUsageError(f"--out {str(out)!r} exists and is not a directory")
     if out.is_dir() and any(out.iterdir()):
@@ -302,7 +302,7 @@ def check_options(splits, workers: int, examples_per_shard: int, out: pathlib.Pa
         raise DatasetUsageError(f"--workers must be ≥ 1, got {workers}")
     if examples_per_shard < 1:
         raise DatasetUsageError(f"examples per shard must be ≥ 1, got {examples_per_shard}")
-    _check_out(out, overwrite)
+    check_out(out, overwrite)
     return split_fractions
 
 
@@ -324,7 +324,7 @@ def pack(scenes_dir, out, name: str | None = None, splits=DEFAULT_SPLITS, worker
     if not complete:
         raise DatasetError(f"{str(scenes_dir)!r} holds no complete scene directory (with "
                            f"_SUCCESS); {incomplete} incomplete")
-    schema, dims = _schema_and_dims(complete, schema)
+    schema, dims = schema_and_dims(complete, schema)
     schema = resolve_names(schema, complete, class_names)
     name = name or schema.name
     if not layout.NAME_PATTERN.match(name):
@@ -333,7 +333,7 @@ def pack(scenes_dir, out, name: str | None = None, splits=DEFAULT_SPLITS, worker
     corrupt: list[tuple[str, str]] = []
     for scene in complete:
         try:
-            assignment[layout.split_of(_seed_of(scene), split_fractions)].append(scene)
+            assignment[layout.split_of(scene_seed(scene), split_fractions)].append(scene)
         except (SceneError, ValueError) as err:
             corrupt.append((str(scene), str(err)))
 
@@ -344,7 +344,7 @@ def pack(scenes_dir, out, name: str | None = None, splits=DEFAULT_SPLITS, worker
             "scenes": {s: [p.name for p in v] for s, v in assignment.items()}}
     plan_key = hashlib.sha256(repr(sorted(plan.items())).encode()).hexdigest()
     with output_lock(out):
-        _check_out(out, overwrite)  # again, now that no other pack can change it
+        check_out(out, overwrite)  # again, now that no other pack can change it
         work = work_dir(out)
         state = _open_work(work, plan_key)
         resumed = sum(len(sh["scenes"]) + len(sh.get("corrupt", []))
@@ -363,7 +363,7 @@ def pack(scenes_dir, out, name: str | None = None, splits=DEFAULT_SPLITS, worker
             shutil.rmtree(work, ignore_errors=True)
             raise DatasetError(f"no scene could be packed: all {len(complete)} complete scenes "
                                f"are corrupt{first}")
-        counts = _finalise(work, state, schema, name, dims, split_fractions, incomplete,
+        counts = finalise(work, state, schema, name, dims, split_fractions, incomplete,
                            features)
         faults.point("pack.finalised")
         if verify:
@@ -373,7 +373,7 @@ def pack(scenes_dir, out, name: str | None = None, splits=DEFAULT_SPLITS, worker
             except DatasetError as err:
                 shutil.rmtree(work, ignore_errors=True)  # finished but wrong: never the output
                 raise DatasetError(f"{err}; nothing was written to {str(out)!r}") from None
-        _swap_into_place(work, out)
+        swap_into_place(work, out)
     return PackResult(out, counts, incomplete, corrupt, time.perf_counter() - start, resumed)
 
 
@@ -430,19 +430,19 @@ def _write_shards(work, state, todo, schema, dims, name, workers, examples_per_s
 
 
 def _encoded(todo, schema: Schema, dims: dict, workers: int):
-    """Iterator of ``_encode_scene`` results in ``todo`` order (a process pool when workers > 1)."""
+    """Iterator of ``encode_scene`` results in ``todo`` order (a process pool when workers > 1)."""
     paths = [str(scene) for _, scene in todo]
     if workers == 1 or len(paths) <= 1:
-        _init_worker(schema, dims)
-        return (_encode_scene(p) for p in paths)
+        init_worker(schema, dims)
+        return (encode_scene(p) for p in paths)
     pool = concurrent.futures.ProcessPoolExecutor(
         max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
-        initializer=_init_worker, initargs=(schema, dims, os.getpid()))
+        initializer=init_worker, initargs=(schema, dims, os.getpid()))
 
     def iterate():
         finished = False
         try:
-            yield from pool.map(_encode_scene, paths, chunksize=1)
+            yield from pool.map(encode_scene, paths, chunksize=1)
             finished = True
         finally:
             if finished:
@@ -558,7 +558,7 @@ def _finish_shard(work: pathlib.Path, state: dict, writer: _ShardWriter) -> None
     write_json(state, work / PROGRESS_FILE)
 
 
-def _finalise(work, state, schema, name, dims, split_fractions, incomplete, features) -> dict:
+def finalise(work, state, schema, name, dims, split_fractions, incomplete, features) -> dict:
     """Final shard names, TFDS metadata and the kubric marker; returns counts per split."""
     import tensorflow_datasets as tfds
 
@@ -595,7 +595,7 @@ def _finalise(work, state, schema, name, dims, split_fractions, incomplete, feat
     return counts
 
 
-def _swap_into_place(work: pathlib.Path, out: pathlib.Path) -> None:
+def swap_into_place(work: pathlib.Path, out: pathlib.Path) -> None:
     """Rename the finished work directory to ``out``, replacing an old dataset (checked to hold
     only packer files) or an empty directory. The old one is first renamed to ``.NAME.old`` (a
     fixed name: one left by a kill here is removed by the next pack) and then deleted."""

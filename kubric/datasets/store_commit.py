@@ -118,7 +118,7 @@ def _metadata(plan, state: dict, scratch: pathlib.Path) -> tuple[dict, dict[str,
             renames[layout.shard_name(plan.name, split, i, len(shards))] = shard["file"]
     write_json(state, meta / packer.PROGRESS_FILE)
     features = tfds_io.tfds_features(plan.schema, plan.dims)
-    counts = packer._finalise(meta, state, plan.schema, plan.name, plan.dims,
+    counts = packer.finalise(meta, state, plan.schema, plan.name, plan.dims,
                               plan.split_fractions, plan.incomplete, features)
     files = sorted(p for p in meta.iterdir() if p.name not in renames)
     return counts, renames, files

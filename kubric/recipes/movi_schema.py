@@ -10,7 +10,9 @@ declare); here they are sequences of PNG images, which decode to the same arrays
 
 from __future__ import annotations
 
+from kubric.annotations.tracks import PACKED_TRACK_FIELDS
 from kubric.assets import clevr
+from kubric.io.scene_dir import TRACKS_FILE
 from kubric.io.schema import Feature, Schema, register_schema
 
 F = Feature
@@ -152,26 +154,8 @@ MOVI_F = register_schema(MOVI_C.extend("movi_f", description="MOVi-F: as E, moti
 #: Point tracks (``tracks.npz``, written with ``--set tracks=N``; docs/tracks.md). Every MOVi
 #: variant has a ``<name>_tracks`` schema with these features: pack with
 #: ``kubric pack DIR --schema movi_e_tracks`` and read with the ``point_tracks`` task.
-TRACK_FEATURES = (
-    F("tracks/query_points", "float32", ("P", 3), "npz:tracks.npz:query_points",
-      doc="(t, y, x): query frame index and pixel position (pixel centres at +0.5)"),
-    F("tracks/target_points", "float32", ("P", "T", 2), "npz:tracks.npz:target_points",
-      unit="px", doc="(x, y) pixel position per frame (pixel centres at +0.5)"),
-    F("tracks/occluded", "bool", ("P", "T"), "npz:tracks.npz:occluded",
-      doc="behind the camera, outside the image, or hidden by another surface"),
-    F("tracks/occlusion_reason", "uint8", ("P", "T"), "npz:tracks.npz:occlusion_reason",
-      doc="bits: 1 behind camera, 2 outside image, 4 another instance, 8 depth closer"),
-    F("tracks/visible", "float32", ("P", "T"), "npz:tracks.npz:visible",
-      doc="sub-pixel visible fraction in [0, 1]"),
-    F("tracks/depth", "float32", ("P", "T"), "npz:tracks.npz:depth", unit="m",
-      doc="distance of the point to the camera centre"),
-    F("tracks/points_world", "float32", ("P", "T", 3), "npz:tracks.npz:points_world",
-      unit="m", doc="3D position per frame, world frame"),
-    F("tracks/instance_id", "int32", ("P",), "npz:tracks.npz:instance_id",
-      doc="0 = background, k = instances[k − 1]"),
-    F("tracks/is_foreground", "bool", ("P",), "npz:tracks.npz:is_foreground",
-      doc="the point lies on an instance"),
-)
+TRACK_FEATURES = tuple(F(f"tracks/{key}", dtype, shape, f"npz:{TRACKS_FILE}:{key}", unit=unit,
+                         doc=doc) for key, dtype, shape, unit, doc in PACKED_TRACK_FIELDS)
 MOVI_TRACKS = {schema.name: register_schema(schema.extend(
     f"{schema.name}_tracks", TRACK_FEATURES,
     description=f"{schema.description} With point tracks (tracks.npz)."))
