@@ -26,6 +26,7 @@ from kubric.asset_tools.bvh import BVHError, read_bvh
 from kubric.asset_tools.character_writer import package_motion
 from kubric.asset_tools.writer import write_manifest
 from kubric.assets.characters import hip_height
+from kubric.core import skinning
 from kubric.errors import InputError
 
 CMU_DIR = Path("/usr/share/assimp/models/BVH")
@@ -188,7 +189,7 @@ def deepmimic_kinematics(clip: dict, urdf) -> dict:
     for n in order[1:]:
         zero[n] = zero[parent_of[n]] + DEEPMIMIC_SCALE * joints[n][1]
     T = len(clip["root"])
-    world = {"root": retarget.quaternion_to_matrix(clip["joints"]["root"])}
+    world = {"root": skinning.quaternions_to_matrices(clip["joints"]["root"])}
     positions = {"root": clip["root"]}
     for n in order[1:]:
         parent = parent_of[n]
@@ -203,7 +204,7 @@ def deepmimic_kinematics(clip: dict, urdf) -> dict:
             local[:, 0, 0], local[:, 0, 1], local[:, 1, 0], local[:, 1, 1] = c, -s, s, c
             local[:, 2, 2] = 1
         else:
-            local = retarget.quaternion_to_matrix(q)
+            local = skinning.quaternions_to_matrices(q)
         world[n] = world[parent] @ local
     return {"order": order, "zero": zero, "world": world, "positions": positions}
 

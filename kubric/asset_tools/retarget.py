@@ -17,6 +17,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from kubric.core.skinning import matrices_to_quaternions, quaternions_to_matrices
+
 Y = np.array([0.0, 1.0, 0.0])
 
 
@@ -34,49 +36,6 @@ def swing(a: np.ndarray, b: np.ndarray) -> np.ndarray:
         return 2 * np.outer(axis, axis) - np.eye(3)
     k = np.array([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]])
     return np.eye(3) + k + k @ k / (1 + c)
-
-
-def matrix_to_quaternion(m: np.ndarray) -> np.ndarray:
-    """(..., 3, 3) rotations → (..., 4) unit quaternions (w, x, y, z)."""
-    m = np.asarray(m, dtype=np.float64)
-    shape = m.shape[:-2]
-    m = m.reshape(-1, 3, 3)
-    tr = np.trace(m, axis1=1, axis2=2)
-    cand = np.stack([tr, m[:, 0, 0], m[:, 1, 1], m[:, 2, 2]], axis=1)
-    k = np.argmax(cand, axis=1)
-    q = np.empty((len(m), 4))
-    for i in range(4):
-        sel = k == i
-        if not sel.any():
-            continue
-        r = m[sel]
-        if i == 0:
-            s = np.sqrt(1.0 + tr[sel]) * 2
-            q[sel] = np.stack([0.25 * s, (r[:, 2, 1] - r[:, 1, 2]) / s,
-                               (r[:, 0, 2] - r[:, 2, 0]) / s, (r[:, 1, 0] - r[:, 0, 1]) / s], 1)
-        else:
-            a, b, c = [(0, 1, 2), (1, 2, 0), (2, 0, 1)][i - 1]
-            s = np.sqrt(1.0 + r[:, a, a] - r[:, b, b] - r[:, c, c]) * 2
-            out = np.empty((len(r), 4))
-            out[:, 0] = (r[:, c, b] - r[:, b, c]) / s
-            out[:, 1 + a] = 0.25 * s
-            out[:, 1 + b] = (r[:, b, a] + r[:, a, b]) / s
-            out[:, 1 + c] = (r[:, c, a] + r[:, a, c]) / s
-            q[sel] = out
-    q /= np.linalg.norm(q, axis=1, keepdims=True)
-    return q.reshape(shape + (4,))
-
-
-def quaternion_to_matrix(q: np.ndarray) -> np.ndarray:
-    """(..., 4) quaternions (w, x, y, z) → (..., 3, 3) rotations."""
-    q = np.asarray(q, dtype=np.float64)
-    q = q / np.linalg.norm(q, axis=-1, keepdims=True)
-    w, x, y, z = np.moveaxis(q, -1, 0)
-    return np.stack([
-        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
-        np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
-        np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1),
-    ], -2)
 
 
 def continuous(q: np.ndarray) -> np.ndarray:
@@ -129,14 +88,14 @@ def retarget_rotations(parents, rest: np.ndarray, source_world: np.ndarray,
         rest_local = rot[b] if p < 0 else rot[p].T @ rot[b]
         parent_world = np.eye(3) if p < 0 else world[:, p]
         local[:, b] = rest_local.T @ np.swapaxes(parent_world, -1, -2) @ world[:, b]
-    return continuous(matrix_to_quaternion(local))
+    return continuous(matrices_to_quaternions(local))
 
 
 def forward_kinematics(parents, rest: np.ndarray, rotations: np.ndarray,
                        root_offsets: np.ndarray | None = None) -> np.ndarray:
     """(T, J, 4, 4) bone-to-model transforms by the contract's FK (docs/characters.md)."""
     T = len(rotations)
-    R = quaternion_to_matrix(rotations)
+    R = quaternions_to_matrices(rotations)
     G = np.empty((T, len(parents), 4, 4))
     for b, p in enumerate(parents):
         L = np.tile(rest[b] if p < 0 else np.linalg.inv(rest[p]) @ rest[b], (T, 1, 1))
