@@ -105,7 +105,8 @@ def check_written(schema: Schema | str, scene) -> None:
     schema = get_schema(schema)
     reader = SceneReader(scene, schema)
     try:
-        SceneReader(scene, resolved_for_check(schema, reader)).example()
+        reader.schema = resolved_for_check(schema, reader)  # same files, read once
+        reader.example()
     except (SceneError, SchemaError) as err:
         raise SchemaError(f"schema {schema.name!r}: the scene written does not pack: "
                           f"{str(err).replace(repr(str(scene)) + ' ', '')}") from None

@@ -149,8 +149,8 @@ class ViewerService:
         def make():
             if layer == "outline":
                 return render.to_png(render.outline(self.frame(name, "segmentation", index)))
-            kind = self.source.formats(name)[layer].kind if layer in self.source.formats(name) \
-                else None
+            fmt = self.source.formats(name).get(layer)
+            kind = fmt.kind if fmt is not None else None
             return render.to_png(render.picture(layer, self.frame(name, layer, index), lo, hi,
                                                 kind))
         return self.cache.get_or_make(("png", name, layer, index, lo, hi), make)

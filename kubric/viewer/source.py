@@ -101,6 +101,7 @@ class DirectorySource(SceneSource):
         self.single = _looks_like_scene(root)
         self._names: list[str] = []
         self._scanned = -np.inf
+        self._recipes: dict[str, tuple] = {}  # name → (metadata.json mtime, its flags.recipe)
 
     def names(self) -> list[str]:
         """Rescanned at most every :data:`RESCAN_SECONDS`: scenes a running ``kubric generate``
@@ -174,10 +175,19 @@ class DirectorySource(SceneSource):
     def formats(self, name: str) -> dict[str, LayerFormat]:
         """The layers a scene may hold: the standard ones the viewer draws, then those its
         recipe's schema declares (klevr's semantic labels, texture_nerf's bands, ...)."""
+        path = self.directory(name) / METADATA_FILE
         try:
-            recipe = self.metadata(name).get("flags", {}).get("recipe")
-        except SceneError:
-            recipe = None
+            stamp = path.stat().st_mtime_ns
+        except OSError:
+            stamp = None
+        cached = self._recipes.get(name)
+        if cached is None or cached[0] != stamp:  # metadata.json read again only when it changed
+            try:
+                recipe = self.metadata(name).get("flags", {}).get("recipe")
+            except SceneError:
+                recipe = None
+            cached = self._recipes[name] = (stamp, recipe)
+        recipe = cached[1]
         own = _recipe_layers(recipe) if isinstance(recipe, str) else {}
         return {**super().formats(name), **own}
 
