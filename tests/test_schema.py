@@ -171,3 +171,28 @@ def test_docs_features_page_is_the_schemas():
     page = (docgen.docs_dir() / "features.md").read_text()
     assert schema_markdown("movi_a") in page and schema_markdown("movi_e") in page
     assert docgen.undocumented_features() == []
+
+
+def test_the_write_time_check_holds_one_layer_at_a_time(tmp_path, monkeypatch):
+    """check_written reads every feature as the packer does, but drops a layer's samples after
+    its last feature (the scene is not held in memory a second time)."""
+    from kubric.io import scene_reader
+    schema = Schema("toy_two_layers", (
+        Feature("albedo", "uint16", ("T", "H", "W", 3), "layer:albedo", "png"),
+        Feature("albedo_range", "float32", (2,), "range:albedo"),
+        Feature("shade", "uint16", ("T", "H", "W", 3), "layer:shade", "png"),
+    ), layers={"albedo": LayerFormat("albedo_{:05d}.png", 3, "unit"),
+               "shade": LayerFormat("shade_{:05d}.png", 3, "unit")})
+    held = []
+    feature = scene_reader.SceneReader.feature
+
+    def spy(self, f):
+        value = feature(self, f)
+        held.append((f.name, sorted(self._layers)))
+        return value
+
+    monkeypatch.setattr(scene_reader.SceneReader, "feature", spy)
+    arr = np.random.RandomState(1).rand(2, 3, 4, 3).astype(np.float32)
+    write_scene(schema, tmp_path, {"albedo": arr, "shade": arr},
+                {"metadata": {"resolution": [4, 3], "num_frames": 2}})
+    assert held == [("albedo", ["albedo"]), ("albedo_range", ["albedo"]), ("shade", ["shade"])]

@@ -257,6 +257,26 @@ class SceneReader:
         return out
 
 
+    def check_each(self) -> None:
+        """Read every feature once, as :meth:`example` does, but keep a layer's samples only
+        until its last feature is read (the write-time check: one layer in memory at a time,
+        not the whole scene a second time)."""
+        last_use: dict[str, int] = {}
+        for i, f in enumerate(self.schema.features):
+            if f.source_kind == "layer":
+                last_use[layer_channels(f.source_arg, f.name)[0]] = i
+            elif f.source_kind == "range":
+                last_use[f.source_arg] = i
+        for i, f in enumerate(self.schema.features):
+            try:
+                self.feature(f)
+            except SchemaError as err:
+                raise SceneError(str(err)) from None
+            for name, j in last_use.items():
+                if j == i:
+                    self._layers.pop(name, None)
+
+
 def read_scene_example(scene_dir, schema: Schema, names=None) -> dict:
     """The example of one complete scene directory (see module doc)."""
     if not is_complete(scene_dir):

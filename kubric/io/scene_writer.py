@@ -106,7 +106,7 @@ def check_written(schema: Schema | str, scene) -> None:
     reader = SceneReader(scene, schema)
     try:
         reader.schema = resolved_for_check(schema, reader)  # same files, read once
-        reader.example()
+        reader.check_each()  # one layer in memory at a time
     except (SceneError, SchemaError) as err:
         raise SchemaError(f"schema {schema.name!r}: the scene written does not pack: "
                           f"{str(err).replace(repr(str(scene)) + ' ', '')}") from None
