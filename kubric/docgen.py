@@ -89,7 +89,12 @@ def recipes_markdown() -> str:
            "`kubric recipes` prints the same tables. Every option is checked before anything "
            "renders; a bad value fails in one line naming the value and what is allowed.", ""]
     out += ["## Render quality (`quality`, `samples`, `denoise`)", "",
-            rst_to_markdown(inspect.cleandoc(render_quality.__doc__)), ""]
+            rst_to_markdown(inspect.cleandoc(render_quality.__doc__)), "",
+            "Each recipe's `default` (the calibration's tables: [render cost](render-cost.md)):",
+            "", "| recipe | `quality=default` renders |", "|---|---|"]
+    out += [f"| `{name}` | {p.label} |"
+            for name, p in sorted(render_quality.CALIBRATED_DEFAULTS.items())]
+    out.append("")
     families: dict[str, list] = {}
     for cls in classes:
         families.setdefault(cls.__module__, []).append(cls)

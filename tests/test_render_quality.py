@@ -10,7 +10,7 @@ import pytest
 from collection_fixtures import run_worker
 
 from kubric.pipeline import OptionError, get_recipe
-from kubric.recipes.render_quality import PROFILES
+from kubric.recipes.render_quality import CALIBRATED_DEFAULTS, PROFILES
 
 EXACT = ("depth", "segmentation", "forward_flow", "backward_flow", "normal",
          "object_coordinates", "uv")
@@ -19,15 +19,22 @@ EXACT = ("depth", "segmentation", "forward_flow", "backward_flow", "normal",
 @pytest.mark.parametrize("recipe", ["movi_a", "movi_e", "klevr", "vbr", "svr"])
 def test_profiles_resolve_to_renderer_settings(recipe):
     for name, profile in PROFILES.items():
+        if name == "default":  # the recipe's calibrated setting (test_render_calibration.py)
+            profile = CALIBRATED_DEFAULTS[recipe]
         r = get_recipe(recipe).from_assignments([f"quality={name}"])
-        assert r.renderer_quality() == {
-            "samples_per_pixel": profile.samples, "use_denoising": profile.denoise,
-            "denoising_quality": profile.denoising_quality,
-            "denoising_prefilter": profile.denoising_prefilter}
+        expected = {"samples_per_pixel": profile.samples, "use_denoising": profile.denoise,
+                    "denoising_quality": profile.denoising_quality,
+                    "denoising_prefilter": profile.denoising_prefilter}
+        if profile.adaptive_threshold:
+            expected.update(adaptive_sampling=True, adaptive_threshold=profile.adaptive_threshold)
+        if name in ("fast", "draft"):  # cheap scenes: the allocator tuning is 2 % of their cost
+            expected["keep_freed_memory"] = True
+        assert r.renderer_quality() == expected
         settings = r.renderer_settings(motion_blur=0.0)
         assert settings == {**r.renderer_quality(), "motion_blur": 0.0}
     default = get_recipe(recipe).from_assignments([])
-    assert default.quality == "default" and default.renderer_quality()["samples_per_pixel"] == 16
+    assert default.quality == "default"
+    assert default.renderer_quality()["samples_per_pixel"] == CALIBRATED_DEFAULTS[recipe].samples
 
 
 def test_samples_and_denoise_override_the_profile():
@@ -69,6 +76,7 @@ def test_exact_layers_identical_across_profiles(tmp_path):
         assert renderer["quality"] == q
         assert renderer["samples_per_pixel"] == PROFILES[q].samples
         assert renderer["denoising_quality"] == PROFILES[q].denoising_quality
+        assert renderer["quality_setting"] == PROFILES[q].label
         assert meta[q]["flags"]["quality"] == q
     from PIL import Image
     rgb = {q: np.stack([np.asarray(Image.open(s / f"rgba_{i:05d}.png"), np.int16)

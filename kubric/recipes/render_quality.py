@@ -1,25 +1,28 @@
 """Render quality profiles: the RGB render's samples and denoiser, chosen by one ``quality`` option.
 
-Every recipe that path-traces RGB mixes in :class:`RenderQuality`: ``--set quality=draft|default|
-final`` picks a profile, and ``samples`` / ``denoise`` (unset by default) override its fields. The
-exact layers (depth, segmentation, flow, normals, object coordinates, UV) come from a separate
-1-sample render with no denoising, so they are bit-identical under every profile.
+Every recipe that path-traces RGB mixes in :class:`RenderQuality`: ``--set quality=draft|fast|
+default|final`` picks a profile, and ``samples`` / ``denoise`` (unset by default) override its
+fields. The exact layers (depth, segmentation, flow, normals, object coordinates, UV) come from a
+separate 1-sample render with no denoising, so they are bit-identical under every profile.
 
-The profiles were chosen from the cost/quality curve measured on MOVi-A (256², 24 frames, seed 3)
-by ``benchmarks/bench_scene_cost.py``: RGB RMSE (8-bit values) against a 1024-spp undenoised
-reference of frames 1–4, and CPU-seconds per scene on the 2-core reference machine; the measured
-table is in docs/render-cost.md. Path tracing costs ~0.10 CPU-s per sample per 256² frame and
-OIDN (HIGH quality, ACCURATE prefilter) ~0.8 CPU-s per 256² frame, so at 16 samples the denoiser
-is a third of the frame's cost; below 16 samples the RMSE of object and edge pixels grows fast.
+* ``draft``: 4 spp, OIDN BALANCED with the FAST prefilter — previews and pipeline debugging.
+* ``fast``: 8 spp, OIDN BALANCED / FAST — the cheapest profile at upstream Kubric's MOVi-A quality
+  (RMSE ≤ 1.07 at ≤ 23 CPU-s per MOVi-A scene; the FAST prefilter makes OIDN nearly free, so the
+  budget buys samples).
+* ``default``: **calibrated per recipe** — :data:`CALIBRATED_DEFAULTS`, chosen by the rule of
+  :func:`choose_default` from ``benchmarks/bench_quality_calibration.py``'s table (every recipe at
+  its own resolution and content, three seeds, errors against a 1024-spp reference over all,
+  object, edge and textured pixels and 1 − SSIM). A recipe outside the table gets 16 spp + OIDN
+  HIGH / ACCURATE.
+* ``final``: 64 spp, OIDN HIGH / ACCURATE — the rule's yardstick; lowest noise on objects.
 
-* ``draft``: 4 spp, OIDN BALANCED with FAST prefilter — previews and pipeline debugging.
-* ``default``: 16 spp, OIDN HIGH / ACCURATE — datasets.
-* ``final``: 64 spp, OIDN HIGH / ACCURATE — the previous default; lowest noise on objects.
+``metadata["renderer"]`` records the profile's name (``quality``), the resolved setting in one line
+(``quality_setting``) and the resolved renderer fields. Measured numbers: docs/render-cost.md.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from kubric.pipeline import Option
 
@@ -27,23 +30,90 @@ from kubric.pipeline import Option
 @dataclass(frozen=True)
 class QualityProfile:
     """The RGB render settings of one quality level (OIDN names as Blender's)."""
-    samples: int                 # Cycles samples per pixel
+    samples: int                 # Cycles samples per pixel (with adaptive sampling: the most)
     denoise: bool                # OIDN on the RGB render
     denoising_quality: str       # HIGH | BALANCED | FAST (OIDN network size)
     denoising_prefilter: str     # ACCURATE | FAST | NONE (cleaning of the albedo/normal guides)
+    adaptive_threshold: float | None = None  # Cycles' noise threshold; None = adaptive off
+    #: reuse freed frame buffers (kubric.renderer.allocator): ~0.5 CPU-s per MOVi-A scene for
+    #: 40–100 MiB of peak RSS, so only the cheap profiles, where that is 2 % of a scene, ask for it
+    keep_freed_memory: bool = False
+
+    @property
+    def label(self) -> str:
+        """One readable line that names the setting, e.g. ``32 spp + OIDN HIGH/FAST``."""
+        spp = (f"≤{self.samples} spp adaptive {self.adaptive_threshold:g}"
+               if self.adaptive_threshold else f"{self.samples} spp")
+        return spp + (f" + OIDN {self.denoising_quality}/{self.denoising_prefilter}"
+                      if self.denoise else ", no denoising")
+
+
+def _oidn(samples, quality="HIGH", prefilter="ACCURATE", adaptive=None) -> QualityProfile:
+    return QualityProfile(samples, True, quality, prefilter, adaptive)
+
+
+#: The settings every recipe is calibrated on (benchmarks/bench_quality_calibration.py), in the
+#: order the table lists them: sample counts with the full denoiser, OIDN's cheaper prefilters
+#: and networks, and adaptive sampling with a noise threshold. ANCHOR is the rule's yardstick.
+CALIBRATION_SETTINGS: tuple[QualityProfile, ...] = (
+    _oidn(4, "BALANCED", "FAST"), _oidn(6, "BALANCED", "FAST"), _oidn(8, "BALANCED", "FAST"),
+    _oidn(8), _oidn(16), _oidn(16, prefilter="FAST"), _oidn(16, prefilter="NONE"), _oidn(24),
+    _oidn(32), _oidn(32, prefilter="FAST"), _oidn(48), _oidn(48, prefilter="FAST"), _oidn(64),
+    _oidn(64, adaptive=0.05), _oidn(64, adaptive=0.1))
+ANCHOR = _oidn(64)
+
+#: The rule that picks a recipe's default from its calibration: the cheapest setting (CPU-s per
+#: frame or view) whose error on every measure is at most RULE_FACTOR × the ANCHOR setting's,
+#: errors pooled over the calibration's seeds. Measures: RGB RMSE (8-bit values) over all pixels,
+#: object pixels, edge pixels and textured pixels, and 1 − SSIM.
+RULE_FACTOR = 1.15
+RULE_MEASURES = ("rmse_all", "rmse_objects", "rmse_edges", "rmse_textured", "dssim")
+
+
+def choose_default(rows: dict[str, dict]) -> str:
+    """The label the rule picks from ``{label: {"cpu": CPU-s per frame, measure: error}}`` (a
+    measure that is None, e.g. no textured pixels in any seed, is left out of the comparison)."""
+    if ANCHOR.label not in rows:
+        raise ValueError(f"the calibration has no {ANCHOR.label!r} row; it has {sorted(rows)}")
+    anchor = rows[ANCHOR.label]
+    passing = [label for label, row in rows.items()
+               if all(row[m] <= RULE_FACTOR * anchor[m] for m in RULE_MEASURES
+                      if anchor[m] is not None and row[m] is not None)]
+    return min(passing, key=lambda label: rows[label]["cpu"])
 
 
 PROFILES: dict[str, QualityProfile] = {
-    "draft": QualityProfile(4, True, "BALANCED", "FAST"),
-    "default": QualityProfile(16, True, "HIGH", "ACCURATE"),
-    "final": QualityProfile(64, True, "HIGH", "ACCURATE"),
+    "draft": replace(_oidn(4, "BALANCED", "FAST"), keep_freed_memory=True),
+    "fast": replace(_oidn(8, "BALANCED", "FAST"), keep_freed_memory=True),
+    "default": _oidn(16),
+    "final": _oidn(64),
+}
+
+#: Each built-in recipe's ``default``, chosen by :func:`choose_default` from the calibration
+#: (docs/data/render-calibration.json, tabled in docs/render-cost.md); a recipe not listed (a
+#: user's) gets PROFILES["default"]. tests/test_render_calibration.py re-applies the rule.
+CALIBRATED_DEFAULTS: dict[str, QualityProfile] = {
+    "movi_a": _oidn(64, adaptive=0.1), "movi_b": _oidn(64, adaptive=0.1),
+    "movi_c": _oidn(64, adaptive=0.1), "movi_d": _oidn(48), "movi_e": _oidn(64, adaptive=0.1),
+    "movi_f": _oidn(48), "complex_brdf": _oidn(64), "klevr": _oidn(48),
+    "toybox": _oidn(64, adaptive=0.05), "multiview_matting": _oidn(64, adaptive=0.05),
+    "nvs": _oidn(64, adaptive=0.05), "robust_nerf": _oidn(48), "svr": _oidn(64, adaptive=0.05),
+    "texture_nerf": _oidn(64), "pose_estimation": _oidn(48), "vbr": _oidn(64),
 }
 
 
+def profile_by_label(label: str) -> QualityProfile:
+    """The calibration setting (or profile) whose :attr:`QualityProfile.label` is ``label``."""
+    for p in (*CALIBRATION_SETTINGS, *PROFILES.values()):
+        if p.label == label:
+            return p
+    raise ValueError(f"unknown render setting {label!r}; known: "
+                     f"{[p.label for p in CALIBRATION_SETTINGS]}")
+
+
 def _profile_help() -> str:
-    return "; ".join(f"{name}: {p.samples} spp" + (f", OIDN {p.denoising_quality.lower()}"
-                                                   if p.denoise else "")
-                     for name, p in PROFILES.items())
+    return "; ".join(f"{name}: " + ("the recipe's calibrated setting" if name == "default"
+                                     else p.label) for name, p in PROFILES.items())
 
 
 class RenderQuality:
@@ -57,25 +127,41 @@ class RenderQuality:
     renderer = "blender"
 
     quality = Option("default", "RGB render quality profile (" + _profile_help() +
-                     "; measured cost and RMSE in docs/render-cost.md)", choices=tuple(PROFILES))
-    samples = Option(None, "Cycles samples per pixel (default: the quality profile's)", type=int,
+                     "; measured cost and error in docs/render-cost.md)", choices=tuple(PROFILES))
+    samples = Option(None, "Cycles samples per pixel, exactly (default: the quality profile's; "
+                     "turns the profile's adaptive sampling off)", type=int,
                      low=1, high=65536, limit=4096)
     denoise = Option(None, "denoise the RGB render with OIDN (default: the quality profile's)",
                      type=bool)
 
+    def base_profile(self) -> QualityProfile:
+        """The chosen profile before overrides: ``default`` is this recipe's calibrated setting
+        (:data:`CALIBRATED_DEFAULTS`) where it has one."""
+        if self.quality == "default":
+            return CALIBRATED_DEFAULTS.get(self.name, PROFILES["default"])
+        return PROFILES[self.quality]
+
     def quality_profile(self) -> QualityProfile:
-        """The chosen profile with ``samples`` / ``denoise`` overrides applied."""
-        p = PROFILES[self.quality]
-        return QualityProfile(p.samples if self.samples is None else self.samples,
-                              p.denoise if self.denoise is None else self.denoise,
-                              p.denoising_quality, p.denoising_prefilter)
+        """The chosen profile with ``samples`` / ``denoise`` overrides applied: ``samples=N`` is
+        exactly N samples per pixel (a profile's adaptive sampling is turned off with it)."""
+        p = self.base_profile()
+        if self.denoise is not None:
+            p = replace(p, denoise=self.denoise)
+        if self.samples is not None:
+            p = replace(p, samples=self.samples, adaptive_threshold=None)
+        return p
 
     def renderer_quality(self) -> dict:
         """Keyword arguments of :class:`kubric.renderer.Blender` for the RGB render."""
         p = self.quality_profile()
-        return {"samples_per_pixel": p.samples, "use_denoising": p.denoise,
-                "denoising_quality": p.denoising_quality,
-                "denoising_prefilter": p.denoising_prefilter}
+        out = {"samples_per_pixel": p.samples, "use_denoising": p.denoise,
+               "denoising_quality": p.denoising_quality,
+               "denoising_prefilter": p.denoising_prefilter}
+        if p.adaptive_threshold:
+            out.update(adaptive_sampling=True, adaptive_threshold=p.adaptive_threshold)
+        if p.keep_freed_memory:
+            out["keep_freed_memory"] = True
+        return out
 
     def renderer_settings(self, **options) -> dict:
         """Keyword settings of :func:`kubric.renderer.create` for ``self.renderer``: Blender gets
@@ -91,4 +177,5 @@ class RenderQuality:
         settings = renderer.settings()
         if self.renderer == "blender":
             settings["quality"] = self.quality
+            settings["quality_setting"] = self.quality_profile().label
         return settings

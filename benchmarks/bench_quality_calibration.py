@@ -1,0 +1,377 @@
+"""Per-recipe render-quality calibration: cost and error of every calibration setting, every recipe.
+
+For every built-in recipe that path-traces RGB (the :class:`~kubric.recipes.render_quality.
+RenderQuality` recipes) and each seed (default 1, 2, 3), one fresh process builds the recipe's
+scene at its own defaults (resolution, content, lights), stops where the recipe would render,
+and renders its middle frame (or view) under every setting of ``CALIBRATION_SETTINGS``
+(samples, OIDN network and prefilter, adaptive sampling) and once at 1024 spp without denoising,
+the reference. Measured per setting: CPU-s (user + system, every thread) of the one-frame render
+after a warm-up render, and the error of its 8-bit RGB against the reference:
+
+* RMSE over **all** pixels; over **object** pixels (segmentation of the exact-layer pass, minus
+  background assets such as the floor and dome); over **edge** pixels (±2 px of a label change);
+  over **textured** pixels (not edge pixels, and the reference's luma has a local standard
+  deviation ≥ 2 levels over 5×5 px: texture, highlights and shading detail — where a denoiser
+  smooths first);
+* 1 − SSIM of the luma (Gaussian window σ 1.5 px, K1 0.01, K2 0.03, L 255; mean over pixels).
+
+Errors are pooled over seeds (RMSE: root of the mean per-seed MSE; 1 − SSIM: mean); cost is the
+mean CPU-s per frame. ``choose_default`` (kubric/recipes/render_quality.py) applies the rule to
+each recipe's pooled rows. Output: the raw rows in ``docs/data/render-calibration.json`` (written
+after every scene, so a stopped run resumes where it stopped with ``--resume``) and the tables in
+``docs/render-cost.md`` between its calibration markers.
+
+Run: ``.venv/bin/python benchmarks/bench_quality_calibration.py [--recipes movi_a klevr]
+[--seeds 1 2 3] [--resume]``. About 90 min on 2 cores for all 16 recipes and three seeds
+(the 1024-spp references are two thirds of it; MOVi-F at 512² a quarter).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import pathlib
+import subprocess
+import sys
+import tempfile
+import time
+
+import numpy as np
+
+HERE = pathlib.Path(__file__).resolve().parent
+ROOT = HERE.parent
+DATA = ROOT / "docs" / "data" / "render-calibration.json"
+DOC = ROOT / "docs" / "render-cost.md"
+BEGIN, END = "<!-- calibration: begin -->", "<!-- calibration: end -->"
+CLASSES = ("all", "objects", "edges", "textured")
+#: toybox needs a categorised asset source (ShapeNet or GSO in use): KuBasic with these
+#: categories stands in (7 categories; toybox's default uses the 5 most common).
+TOY_CATEGORIES = {"cube": "boxy", "sponge": "boxy", "sphere": "round", "cylinder": "round",
+                  "cone": "pointed", "gear": "mechanical", "torus": "ring", "torus_knot": "ring",
+                  "teapot": "kitchen", "suzanne": "figure", "spot": "figure"}
+
+
+def recipe_options(recipe: str, scratch: pathlib.Path) -> list[str]:
+    """Options a recipe needs beyond its defaults to run here (toybox: its object source)."""
+    if recipe != "toybox":
+        return []
+    from kubric import assets
+    from kubric.recipes.klevr import with_categories
+    return [f"objects={with_categories(assets.ensure_kubasic(), TOY_CATEGORIES, scratch)}"]
+
+
+class _Captured(Exception):
+    pass
+
+
+def with_renderer(recipe: str, seed: int, assignments: list[str], scratch: pathlib.Path,
+                  measure) -> dict:
+    """``measure(renderer)`` on the recipe's Blender renderer for ``seed``, called where the recipe
+    would render (inside the recipe's own context: its temporary textures still exist); the
+    recipe stops there. Returns what ``measure`` returned."""
+    from kubric.pipeline.recipe import get_recipe
+    from kubric.renderer import blender
+    original, result = blender.Blender.render, {}
+
+    def capture(self, *args, **kwargs):
+        blender.Blender.render = original
+        result["value"] = measure(self)
+        raise _Captured
+
+    blender.Blender.render = capture
+    try:
+        get_recipe(recipe).from_assignments(assignments).generate(seed, scratch)
+    except _Captured:
+        pass
+    finally:
+        blender.Blender.render = original
+    if "value" not in result:
+        raise SystemExit(f"{recipe} seed {seed} finished without a Blender render")
+    return result["value"]
+
+
+# -- measures (8-bit RGB, (H, W, 3)) --------------------------------------------------------------
+
+def luma(rgb: np.ndarray) -> np.ndarray:
+    return rgb[..., :3].astype(np.float64) @ np.array([0.2126, 0.7152, 0.0722])
+
+
+def edge_pixels(seg: np.ndarray, width: int = 2) -> np.ndarray:
+    """Pixels within ``width`` px of a label change (4-neighbourhood), one (H, W) frame."""
+    from scipy import ndimage
+    e = np.zeros(seg.shape, bool)
+    dy, dx = seg[:-1] != seg[1:], seg[:, :-1] != seg[:, 1:]
+    e[:-1] |= dy
+    e[1:] |= dy
+    e[:, :-1] |= dx
+    e[:, 1:] |= dx
+    return ndimage.binary_dilation(e, iterations=width) if e.any() else e
+
+
+def textured_pixels(ref: np.ndarray, edges: np.ndarray, size: int = 5,
+                    threshold: float = 2.0) -> np.ndarray:
+    """Pixels off the edges where the reference's luma varies locally (std ≥ ``threshold``)."""
+    from scipy import ndimage
+    y = luma(ref)
+    mean = ndimage.uniform_filter(y, size, mode="reflect")
+    var = ndimage.uniform_filter(y * y, size, mode="reflect") - mean * mean
+    return (np.sqrt(np.maximum(var, 0)) >= threshold) & ~edges
+
+
+def ssim(img: np.ndarray, ref: np.ndarray, sigma: float = 1.5) -> float:
+    """Mean SSIM of the two images' luma (Wang et al. 2004 constants, L = 255)."""
+    from scipy import ndimage
+    x, y = luma(img), luma(ref)
+    c1, c2 = (0.01 * 255) ** 2, (0.03 * 255) ** 2
+
+    def blur(a):
+        return ndimage.gaussian_filter(a, sigma, truncate=3.5, mode="reflect")
+
+    mx, my = blur(x), blur(y)
+    vx, vy, cxy = blur(x * x) - mx * mx, blur(y * y) - my * my, blur(x * y) - mx * my
+    s = ((2 * mx * my + c1) * (2 * cxy + c2)) / ((mx * mx + my * my + c1) * (vx + vy + c2))
+    return float(s.mean())
+
+
+def errors(img: np.ndarray, ref: np.ndarray, masks: dict[str, np.ndarray]) -> dict:
+    """{"mse_<class>": mean squared error (None for an empty class), "dssim": 1 − SSIM}."""
+    d2 = ((img[..., :3].astype(np.float64) - ref[..., :3].astype(np.float64)) ** 2).mean(-1)
+    out = {f"mse_{c}": float(d2[m].mean()) if m.any() else None for c, m in masks.items()}
+    out["dssim"] = 1.0 - ssim(img, ref)
+    return out
+
+
+# -- one scene, in a child process -----------------------------------------------------------------
+
+def measure_settings(r, reference_samples: int) -> dict:
+    """The calibration of one scene's middle frame on renderer ``r`` (see the module doc)."""
+    from kubric.recipes.render_quality import CALIBRATION_SETTINGS
+    frame = (r.scene.frame_start + r.scene.frame_end) // 2
+    seg = r.render([frame], ("segmentation",))["segmentation"][0, ..., 0]
+    background = [i for i, a in enumerate(r.scene.assets, start=1)
+                  if getattr(a, "background", False)]
+
+    def render(p, denoise=True, adaptive=None):
+        r.samples_per_pixel, r.use_denoising = p, denoise
+        r.adaptive_sampling = adaptive is not None
+        if adaptive is not None:
+            r.adaptive_threshold = adaptive
+        c0, w0 = time.process_time(), time.perf_counter()
+        rgb = r.render([frame], ("rgba",))["rgba"][0]
+        return rgb, time.process_time() - c0, time.perf_counter() - w0
+
+    render(1, False)  # warm-up: kernels, textures, persistent data
+    ref, ref_cpu, _ = render(reference_samples, False)
+    edges = edge_pixels(seg)
+    masks = {"all": np.ones(seg.shape, bool),
+             "objects": (seg > 0) & ~np.isin(seg, background),
+             "edges": edges, "textured": textured_pixels(ref, edges)}
+    rows = {}
+    for p in CALIBRATION_SETTINGS:
+        r.denoising_quality, r.denoising_prefilter = p.denoising_quality, p.denoising_prefilter
+        rgb, cpu, wall = render(p.samples, p.denoise, p.adaptive_threshold)
+        rows[p.label] = {"cpu": cpu, "wall": wall, **errors(rgb, ref, masks)}
+        print(f"  {p.label:44s} {cpu:7.2f} CPU-s  RMSE {np.sqrt(rows[p.label]['mse_all']):6.3f}",
+              flush=True)
+    h, w = seg.shape
+    return {"frame": frame, "resolution": [w, h], "reference_cpu": ref_cpu,
+            "fractions": {c: float(m.mean()) for c, m in masks.items()}, "settings": rows}
+
+
+def child(recipe: str, seed: int, reference_samples: int, assignments: list[str],
+          out: pathlib.Path) -> None:
+    with tempfile.TemporaryDirectory(prefix="bench_calibration_") as tmp:
+        tmp = pathlib.Path(tmp)
+        options = [*recipe_options(recipe, tmp / "objects"), *assignments]
+        result = with_renderer(recipe, seed, options, tmp / "scene",
+                               lambda r: measure_settings(r, reference_samples))
+    out.write_text(json.dumps({"recipe": recipe, "seed": seed, **result}))
+
+
+# -- pooling, the rule, the tables -----------------------------------------------------------------
+
+def pooled(scenes: list[dict]) -> dict[str, dict]:
+    """{label: {"cpu", "rmse_<class>", "dssim", "cpu_min", "cpu_max"}} over the recipe's seeds."""
+    labels = list(scenes[0]["settings"])
+    out = {}
+    for label in labels:
+        rows = [s["settings"][label] for s in scenes]
+        cpu = [r["cpu"] for r in rows]
+        row = {"cpu": float(np.mean(cpu)), "cpu_min": min(cpu), "cpu_max": max(cpu),
+               "dssim": float(np.mean([r["dssim"] for r in rows]))}
+        for c in CLASSES:
+            mses = [r[f"mse_{c}"] for r in rows if r[f"mse_{c}"] is not None]
+            row[f"rmse_{c}"] = float(np.sqrt(np.mean(mses))) if mses else None
+        out[label] = row
+    return out
+
+
+def recipe_rows(data: dict) -> dict[str, dict[str, dict]]:
+    """{recipe: pooled rows} from the calibration file's scenes."""
+    by_recipe: dict[str, list[dict]] = {}
+    for scene in data["scenes"]:
+        by_recipe.setdefault(scene["recipe"], []).append(scene)
+    return {name: pooled(scenes) for name, scenes in by_recipe.items()}
+
+
+def _fmt(v, spec=".3f"):
+    return "–" if v is None else format(v, spec)
+
+
+def tables(data: dict) -> str:
+    """The markdown of the calibration section: the summary, then one table per recipe."""
+    from kubric.recipes.render_quality import (
+        ANCHOR,
+        CALIBRATED_DEFAULTS,
+        PROFILES,
+        RULE_FACTOR,
+        RULE_MEASURES,
+        choose_default,
+    )
+    rows_of = recipe_rows(data)
+    seeds: dict[str, list[int]] = {}
+    for s in data["scenes"]:
+        seeds.setdefault(s["recipe"], []).append(s["seed"])
+    meta = {s["recipe"]: s for s in data["scenes"]}
+    names = ", ".join(m.replace("rmse_", "RMSE ").replace("dssim", "1 − SSIM")
+                      for m in RULE_MEASURES)
+    lines = [
+        f"Printed by `benchmarks/bench_quality_calibration.py` ({data['date']}, "
+        f"{data['reference_samples']}-spp reference, {data['machine']}). Rule: **the cheapest "
+        f"setting whose error on every measure ({names}) is at most {RULE_FACTOR}× that of "
+        f"{ANCHOR.label}**, errors pooled over the seeds. Cost: CPU-s of one frame's (or view's) "
+        "RGB render, mean over seeds; × 64 spp is its ratio to the anchor's cost in the same run. "
+        "*worst ratio* is the largest error ratio to the anchor over the five measures.",
+        "",
+        "| recipe | resolution | seeds | chosen default | CPU-s / frame | × 64 spp cost | worst "
+        "ratio | previous default (16 spp) worst ratio | in code |",
+        "|---|---|---|---|---|---|---|---|---|"]
+
+    def worst(row, anchor):
+        return max(row[m] / anchor[m] for m in RULE_MEASURES
+                   if row[m] is not None and anchor[m])
+
+    for name, rows in rows_of.items():
+        anchor, chosen = rows[ANCHOR.label], choose_default(rows)
+        old = rows.get(PROFILES["default"].label)
+        code = CALIBRATED_DEFAULTS.get(name)
+        w, h = meta[name]["resolution"]
+        lines.append(
+            f"| {name} | {w}×{h} | {', '.join(map(str, sorted(seeds[name])))} | {chosen} | "
+            f"{rows[chosen]['cpu']:.2f} | {rows[chosen]['cpu'] / anchor['cpu']:.2f} | "
+            f"{worst(rows[chosen], anchor):.2f} | {_fmt(old and worst(old, anchor), '.2f')} | "
+            f"{'yes' if code is not None and code.label == chosen else 'NO'} |")
+    lines.append("")
+    for name, rows in rows_of.items():
+        anchor, chosen = rows[ANCHOR.label], choose_default(rows)
+        w, h = meta[name]["resolution"]
+        fr = np.mean([[s["fractions"][c] for c in CLASSES] for s in data["scenes"]
+                      if s["recipe"] == name], axis=0)
+        ref_cpu = np.mean([s["reference_cpu"] for s in data["scenes"] if s["recipe"] == name])
+        lines += [
+            f"#### {name}", "",
+            f"{w}×{h}, frame/view {meta[name]['frame']} of seeds "
+            f"{', '.join(map(str, sorted(seeds[name])))}; reference {ref_cpu:.0f} CPU-s per "
+            f"frame; pixels: objects {fr[1]:.1%}, edges {fr[2]:.1%}, textured {fr[3]:.1%}.", "",
+            "| setting | CPU-s / frame (min–max) | × 64 spp | RMSE all | objects | edges | "
+            "textured | 1 − SSIM | worst ratio | rule |",
+            "|---|---|---|---|---|---|---|---|---|---|"]
+        for label, row in rows.items():
+            ratio = worst(row, anchor)
+            mark = "**chosen**" if label == chosen else ("passes" if ratio <= RULE_FACTOR
+                                                          else "")
+            lines.append(
+                f"| {label} | {row['cpu']:.2f} ({row['cpu_min']:.2f}–{row['cpu_max']:.2f}) | "
+                f"{row['cpu'] / anchor['cpu']:.2f} | {_fmt(row['rmse_all'])} | "
+                f"{_fmt(row['rmse_objects'])} | {_fmt(row['rmse_edges'])} | "
+                f"{_fmt(row['rmse_textured'])} | {row['dssim']:.4f} | {ratio:.2f} | {mark} |")
+        lines.append("")
+    return "\n".join(lines)
+
+
+def write_doc(data: dict, doc: pathlib.Path = DOC) -> None:
+    text = doc.read_text()
+    if BEGIN not in text or END not in text:
+        raise SystemExit(f"{doc} has no {BEGIN} … {END} section to fill")
+    head, rest = text.split(BEGIN, 1)
+    tail = rest.split(END, 1)[1]
+    doc.write_text(f"{head}{BEGIN}\n{tables(data)}\n{END}{tail}")
+
+
+def calibrated_recipes() -> list[str]:
+    from kubric.pipeline.recipe import load_builtin
+    from kubric.recipes.render_quality import RenderQuality
+    return [name for name, cls in load_builtin().items() if issubclass(cls, RenderQuality)]
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--recipes", nargs="*", help="default: every RenderQuality recipe")
+    parser.add_argument("--seeds", nargs="*", type=int, default=[1, 2, 3])
+    parser.add_argument("--reference-samples", type=int, default=1024)
+    parser.add_argument("--json", type=pathlib.Path, default=DATA)
+    parser.add_argument("--doc", type=pathlib.Path, default=DOC)
+    parser.add_argument("--no-doc", action="store_true", help="leave the docs page as it is")
+    parser.add_argument("--resume", action="store_true",
+                        help="keep the scenes already in --json (same settings and reference)")
+    parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                        help="extra options for every recipe (smoke runs only: resolution=32)")
+    parser.add_argument("--child", nargs=3, metavar=("RECIPE", "SEED", "OUT"),
+                        help=argparse.SUPPRESS)
+    args = parser.parse_args(argv)
+    os.environ.setdefault("KUBRIC_CACHE_DIR", str(ROOT / ".cache" / "kubric"))
+    if args.child:
+        recipe, seed, out = args.child
+        child(recipe, int(seed), args.reference_samples, args.set, pathlib.Path(out))
+        return 0
+    from kubric.recipes.render_quality import CALIBRATION_SETTINGS
+    available = calibrated_recipes()
+    recipes = args.recipes or available
+    unknown = sorted(set(recipes) - set(available))
+    if unknown:
+        raise SystemExit(f"not a calibrated recipe: {unknown}; allowed: {available}")
+    grid = [p.label for p in CALIBRATION_SETTINGS]
+    data = {"reference_samples": args.reference_samples, "settings": grid, "scenes": [],
+            "set": args.set}
+    if args.resume and args.json.exists():
+        old = json.loads(args.json.read_text())
+        if (old["reference_samples"], old["settings"], old.get("set", [])) == \
+                (args.reference_samples, grid, args.set):
+            data["scenes"] = old["scenes"]
+    done = {(s["recipe"], s["seed"]) for s in data["scenes"]}
+    data["date"] = time.strftime("%Y-%m-%d")
+    data["machine"] = f"{len(os.sched_getaffinity(0))} cores"
+    todo = [(r, s) for r in recipes for s in args.seeds if (r, s) not in done]
+    start = time.perf_counter()
+    for k, (recipe, seed) in enumerate(todo, 1):
+        print(f"[{k}/{len(todo)}] {recipe} seed {seed} ({time.perf_counter() - start:.0f} s "
+              "elapsed)", flush=True)
+        with tempfile.NamedTemporaryFile(suffix=".json", delete=False) as f:
+            out = pathlib.Path(f.name)
+        cmd = [sys.executable, str(pathlib.Path(__file__).resolve()), "--child", recipe,
+               str(seed), str(out), "--reference-samples", str(args.reference_samples)]
+        for s in args.set:
+            cmd += ["--set", s]
+        proc = subprocess.run(cmd, cwd=ROOT, stderr=subprocess.PIPE, text=True)
+        if proc.returncode:
+            raise SystemExit(f"{recipe} seed {seed} failed ({proc.returncode}):\n"
+                             f"{proc.stderr[-3000:]}")
+        data["scenes"].append(json.loads(out.read_text()))
+        out.unlink()
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(json.dumps(data, indent=1))
+    if not data["scenes"]:
+        raise SystemExit("nothing calibrated")
+    data["scenes"].sort(key=lambda s: (available.index(s["recipe"]), s["seed"]))
+    args.json.write_text(json.dumps(data, indent=1))
+    text = tables(data)
+    print(text.split("\n\n#### ")[0])
+    if not args.no_doc:
+        write_doc(data, args.doc)
+        print(f"tables → {args.doc}; rows → {args.json}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
