@@ -10,7 +10,7 @@ CPU seconds (every thread) per frame, after a warm-up render. This is the curve 
 ``quality`` profiles (kubric/recipes/render_quality.py, docs/render-cost.md).
 
 Run: ``.venv/bin/python benchmarks/bench_render_levers.py [--seed 3] [--reference-samples 1024]
-[--set KEY=VALUE ...]``. About 8 min on 2 cores.
+[--set KEY=VALUE ...]``. About 10 min on 2 cores.
 """
 
 from __future__ import annotations
@@ -49,14 +49,24 @@ LEVERS = [
      {"caustics_reflective": False, "caustics_refractive": False}),
     ("16 spp + OIDN, bounces 2/2/4", {"samples_per_pixel": 16},
      {"diffuse_bounces": 2, "glossy_bounces": 2, "max_bounces": 4, "transmission_bounces": 4}),
-    ("64 spp + OIDN, adaptive 0.01", {"samples_per_pixel": 64, "adaptive_sampling": True}, {}),
-    ("64 spp + OIDN, adaptive 0.03", {"samples_per_pixel": 64, "adaptive_sampling": True},
-     {"adaptive_threshold": 0.03}),
+    ("64 spp + OIDN, adaptive 0.01", {"samples_per_pixel": 64, "adaptive_sampling": True,
+                                      "adaptive_threshold": 0.01}, {}),
+    ("64 spp + OIDN, adaptive 0.03", {"samples_per_pixel": 64, "adaptive_sampling": True,
+                                      "adaptive_threshold": 0.03}, {}),
+    ("64 spp + OIDN, adaptive 0.1 (default)", {"samples_per_pixel": 64,
+                                                "adaptive_sampling": True,
+                                                "adaptive_threshold": 0.1}, {}),
+    ("8 spp + OIDN prefilter FAST", {"samples_per_pixel": 8, "denoising_prefilter": "FAST"}, {}),
+    ("8 spp + OIDN BALANCED", {"samples_per_pixel": 8, "denoising_quality": "BALANCED"}, {}),
+    ("8 spp + OIDN BALANCED/FAST (fast)", {"samples_per_pixel": 8,
+                                            "denoising_quality": "BALANCED",
+                                            "denoising_prefilter": "FAST"}, {}),
     ("4 spp + OIDN BALANCED/FAST (draft)", {"samples_per_pixel": 4,
                                              "denoising_quality": "BALANCED",
                                              "denoising_prefilter": "FAST"}, {}),
 ]
-BASE = {"samples_per_pixel": 16, "use_denoising": True, "adaptive_sampling": False, **HIGH}
+BASE = {"samples_per_pixel": 16, "use_denoising": True, "adaptive_sampling": False,
+        "adaptive_threshold": 0.01, **HIGH}
 
 
 class _Captured(Exception):
