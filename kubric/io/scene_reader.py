@@ -245,36 +245,35 @@ class SceneReader:
             return np.zeros((0, *shape), dtype=dtype)
         return np.stack(values)
 
+    def _read(self, f: Feature):
+        """:meth:`feature`, with a schema error about this scene raised as a SceneError."""
+        try:
+            return self.feature(f)
+        except SchemaError as err:
+            raise SceneError(str(err)) from None
+
     def example(self, names=None) -> dict:
         """``{feature name: value}`` for ``names`` (default: every feature of the schema)."""
-        out = {}
-        for f in self.schema.features:
-            if names is None or f.name in names:
-                try:
-                    out[f.name] = self.feature(f)
-                except SchemaError as err:
-                    raise SceneError(str(err)) from None
-        return out
-
+        return {f.name: self._read(f) for f in self.schema.features
+                if names is None or f.name in names}
 
     def check_each(self) -> None:
         """Read every feature once, as :meth:`example` does, but keep a layer's samples only
         until its last feature is read (the write-time check: one layer in memory at a time,
         not the whole scene a second time)."""
-        last_use: dict[str, int] = {}
+        last_use: dict[str, int] = {}  # layer name → index of the last feature that reads it
         for i, f in enumerate(self.schema.features):
             if f.source_kind == "layer":
                 last_use[layer_channels(f.source_arg, f.name)[0]] = i
             elif f.source_kind == "range":
                 last_use[f.source_arg] = i
+        drop_after: dict[int, list[str]] = {}
+        for name, i in last_use.items():
+            drop_after.setdefault(i, []).append(name)
         for i, f in enumerate(self.schema.features):
-            try:
-                self.feature(f)
-            except SchemaError as err:
-                raise SceneError(str(err)) from None
-            for name, j in last_use.items():
-                if j == i:
-                    self._layers.pop(name, None)
+            self._read(f)
+            for name in drop_after.get(i, ()):
+                self._layers.pop(name, None)
 
 
 def read_scene_example(scene_dir, schema: Schema, names=None) -> dict:
