@@ -40,6 +40,9 @@ import time
 import numpy as np
 
 HERE = pathlib.Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))
+from bench_scene_cost import edge_band  # noqa: E402
+
 ROOT = HERE.parent
 DATA = ROOT / "docs" / "data" / "render-calibration.json"
 DOC = ROOT / "docs" / "render-cost.md"
@@ -99,14 +102,7 @@ def luma(rgb: np.ndarray) -> np.ndarray:
 
 def edge_pixels(seg: np.ndarray, width: int = 2) -> np.ndarray:
     """Pixels within ``width`` px of a label change (4-neighbourhood), one (H, W) frame."""
-    from scipy import ndimage
-    e = np.zeros(seg.shape, bool)
-    dy, dx = seg[:-1] != seg[1:], seg[:, :-1] != seg[:, 1:]
-    e[:-1] |= dy
-    e[1:] |= dy
-    e[:, :-1] |= dx
-    e[:, 1:] |= dx
-    return ndimage.binary_dilation(e, iterations=width) if e.any() else e
+    return edge_band(seg[None], width)[0]
 
 
 def textured_pixels(ref: np.ndarray, edges: np.ndarray, size: int = 5,

@@ -25,6 +25,7 @@ import time
 import numpy as np
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
+from bench_quality_calibration import with_renderer  # noqa: E402
 from bench_scene_cost import edge_band, rmse  # noqa: E402
 
 #: (label, renderer options, extra Cycles attributes)
@@ -69,30 +70,6 @@ BASE = {"samples_per_pixel": 16, "use_denoising": True, "adaptive_sampling": Fal
         "adaptive_threshold": 0.01, **HIGH}
 
 
-class _Captured(Exception):
-    pass
-
-
-def build_renderer(seed: int, assignments: list[str], scratch: pathlib.Path):
-    """The MOVi-A recipe's renderer for ``seed``, stopped just before it renders."""
-    from kubric.pipeline.recipe import get_recipe
-    from kubric.renderer import blender
-    original, captured = blender.Blender.render, {}
-
-    def capture(self, *args, **kwargs):
-        captured["renderer"] = self
-        raise _Captured
-
-    blender.Blender.render = capture
-    try:
-        get_recipe("movi_a").from_assignments(assignments).generate(seed, scratch)
-    except _Captured:
-        pass
-    finally:
-        blender.Blender.render = original
-    return captured["renderer"]
-
-
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seed", type=int, default=3)
@@ -104,7 +81,8 @@ def main(argv=None) -> int:
     from kubric.renderer import blender
     frames = [1, 2, 3, 4]
     with tempfile.TemporaryDirectory(prefix="bench_levers_") as tmp:
-        r = build_renderer(args.seed, args.set, pathlib.Path(tmp))
+        # the MOVi-A recipe's renderer for the seed, stopped just before it renders
+        r = with_renderer("movi_a", args.seed, args.set, pathlib.Path(tmp), lambda r: r)
         cycles = r.bpy_scene.cycles
         extra: dict = {}
         defaults: dict = {}
