@@ -23,7 +23,6 @@ from kubric.errors import KubricError
 SUBCOMMAND_MODULES = (
     "kubric.pipeline.cli",
     "kubric.asset_tools.cli",
-    "kubric.annotations.tracks_cli",
     "kubric.datasets.exports.cli",
     "kubric.datasets.cli",
     "kubric.viewer.cli",

@@ -13,8 +13,8 @@ import sys
 import numpy as np
 import pytest
 
-from kubric.annotations import nerf_export
 from kubric.datasets import DatasetError, load
+from kubric.datasets.exports import nerf as nerf_export
 from kubric.datasets.multiview_tasks import BLENDER_TO_OPENCV
 from kubric.io import png_io, tiff_io
 

@@ -168,10 +168,26 @@ def test_coco_bad_input(tmp_path):
     assert proc.returncode == 2 and "--depth-scale must be > 0" in proc.stderr
 
 
-def test_tapvid_spellings_share_the_command(tmp_path):
-    for cmd in (["tracks", "export", "--format", "tapvid"], ["export", "tapvid"]):
-        proc = kubric(*cmd, tmp_path, "--out", tmp_path / "t.pkl")
-        assert proc.returncode == 2 and "no complete scene" in proc.stderr, proc.stderr
+def test_one_export_command_per_registered_format(tmp_path):
+    """Every module of kubric/datasets/exports/ that defines export_<its name> is a row of
+    FORMATS and a `kubric export` sub-command; the old `kubric tracks export` prints one line
+    naming `kubric export tapvid`."""
+    import ast
+
+    from kubric.datasets.exports import FORMATS
+    defined = set()
+    for path in (ROOT / "kubric" / "datasets" / "exports").glob("*.py"):
+        for node in ast.parse(path.read_text()).body:
+            if isinstance(node, ast.FunctionDef) and node.name == f"export_{path.stem}":
+                defined.add(f"kubric.datasets.exports.{path.stem}:{node.name}")
+    assert defined == set(FORMATS.values())
+    usage = kubric("export", "--help").stdout
+    assert all(name in usage for name in FORMATS)
+    proc = kubric("export", "tapvid", tmp_path, "--out", tmp_path / "t.pkl")
+    assert proc.returncode == 2 and "no complete scene" in proc.stderr, proc.stderr
+    old = kubric("tracks", "export", tmp_path, "--format", "tapvid", "--out", tmp_path / "t.pkl")
+    assert old.returncode == 2 and old.stderr.count("\n") == 1
+    assert "use `kubric export tapvid SCENES --out FILE.pkl`" in old.stderr
 
 
 # ------------------------------------------------------------------------------------- BOP

@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 import kubric as kb
-from kubric.annotations import lasr_export as lx
 from kubric.core import camera_geometry as geo
+from kubric.datasets.exports import lasr as lx
 from kubric.io.layers import write_image_dict
 from kubric.io.pfm_io import decode_pfm, encode_pfm, read_pfm, write_pfm
 
@@ -183,13 +183,27 @@ def test_export_refuses_bad_instances_and_ambiguous_roots(tmp_path):
     assert not any(p.name.startswith(".") for p in tmp_path.iterdir())
 
 
-def test_command_line(tmp_path, capsys):
+def test_command_line(tmp_path):
+    """``kubric export lasr``: the export, then one error line each (exit 2) for an existing
+    output, a missing scene and a bad --instances."""
+    import subprocess
+    import sys
+
+    def kubric(*args):
+        return subprocess.run([sys.executable, "-m", "kubric", "export", "lasr", *map(str, args)],
+                              capture_output=True, text=True, timeout=120)
+
     _synthetic_scene(tmp_path / "scene")
-    assert lx.main([str(tmp_path / "scene"), "--out", str(tmp_path / "o"), "--instances", "0,1",
-                    "--sequence", "clip"]) == 0
-    assert "wrote LASR sequence clip (3 frames)" in capsys.readouterr().out
+    ok = kubric(tmp_path / "scene", "--out", tmp_path / "o", "--instances", "0,1",
+                "--sequence", "clip")
+    assert ok.returncode == 0, ok.stderr
+    assert "wrote LASR sequence clip (3 frames)" in ok.stdout
     assert (tmp_path / "o" / "configs" / "clip.config").is_file()
-    assert lx.main([str(tmp_path / "scene"), "--out", str(tmp_path / "o")]) == 2
-    assert lx.main([str(tmp_path / "nowhere"), "--out", str(tmp_path / "p")]) == 2
-    lines = capsys.readouterr().err.strip().splitlines()
-    assert len(lines) == 2 and all(line.startswith("lasr_export: error: ") for line in lines)
+    for args, says in (((tmp_path / "scene", "--out", tmp_path / "o"), "already exists"),
+                       ((tmp_path / "nowhere", "--out", tmp_path / "p"), "nowhere"),
+                       ((tmp_path / "scene", "--out", tmp_path / "q", "--instances", "a"),
+                        "--instances 'a'")):
+        bad = kubric(*args)
+        lines = bad.stderr.strip().splitlines()
+        assert bad.returncode == 2 and len(lines) == 1, bad.stderr
+        assert lines[0].startswith("kubric export lasr: error: ") and says in lines[0]

@@ -166,7 +166,7 @@ def test_transforms_rays_land_on_the_model_surface(scenes, recipe):
 def test_iter_views_rays_match_the_camera_metadata(scenes):
     """The library's loader: its rays equal those from metadata.json's OpenCV intrinsics and
     camera matrices (an independent path), and walking them by depth reaches the point cloud."""
-    from kubric.annotations.nerf_export import iter_views
+    from kubric.datasets.exports.nerf import iter_views
     scene = scenes["klevr"]
     meta = file_io.read_json(scene / "metadata.json")
     k = np.asarray(meta["camera"]["intrinsics_pixels"])

@@ -179,8 +179,8 @@ def test_occlusion_agrees_with_tapvid_rule(scene):
 def test_tapvid_export(scene, tmp_path):
     scene_dir, tr, layers = scene
     out = tmp_path / "kubric_tapvid.pkl"
-    proc = subprocess.run([sys.executable, "-m", "kubric", "tracks", "export",
-                           str(scene_dir.parent), "--format", "tapvid", "--out", str(out)],
+    proc = subprocess.run([sys.executable, "-m", "kubric", "export", "tapvid",
+                           str(scene_dir.parent), "--out", str(out)],
                           cwd=ROOT, capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0, proc.stderr
     with open(out, "rb") as fp:
@@ -194,15 +194,8 @@ def test_tapvid_export(scene, tmp_path):
     np.testing.assert_array_equal(ex["occluded"], tr["occluded"])
     assert ex["occluded"].dtype == np.bool_
     np.testing.assert_array_equal(ex["query_points"], tr["query_points"])
-    # the new spelling, `kubric export tapvid`, writes the same bytes
-    new = tmp_path / "new.pkl"
-    proc = subprocess.run([sys.executable, "-m", "kubric", "export", "tapvid",
-                           str(scene_dir.parent), "--out", str(new)], cwd=ROOT,
-                          capture_output=True, text=True, timeout=120)
-    assert proc.returncode == 0, proc.stderr
-    assert new.read_bytes() == out.read_bytes()
     # a folder without tracks: one clear line
-    bad = subprocess.run([sys.executable, "-m", "kubric", "tracks", "export", str(tmp_path),
+    bad = subprocess.run([sys.executable, "-m", "kubric", "export", "tapvid", str(tmp_path),
                           "--out", str(tmp_path / "x.pkl")], cwd=ROOT, capture_output=True,
                          text=True, timeout=60)
     assert bad.returncode == 2 and len(bad.stderr.strip().splitlines()) == 1

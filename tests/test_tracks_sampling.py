@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 from kubric.annotations import tracks as tr
-from kubric.annotations.track_files import read_tracks, tapvid_example, write_tracks
+from kubric.annotations.track_files import read_tracks, write_tracks
+from kubric.datasets.exports.tapvid import tapvid_example
 from kubric.pipeline import OptionError, get_recipe
 
 

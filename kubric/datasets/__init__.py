@@ -9,16 +9,32 @@
   when TensorFlow is installed);
 * the output contract: :mod:`kubric.io.schema` (one schema per recipe).
 
-TFDS, array_record, torch and Grain are imported only when used.
+TFDS, array_record, torch and Grain are imported only when used, and the names below only on
+first use, so :mod:`kubric.datasets.exports` (which recipes may import) stays below the packer
+and the pipeline.
 """
 
-from kubric.datasets.adapters import to_grain, to_tf, to_torch, torch_collate
-from kubric.datasets.info import dataset_info
-from kubric.datasets.layout import DatasetError
-from kubric.datasets.packer import pack
-from kubric.datasets.source import DataSource, load
-from kubric.datasets.tasks import TASKS, register_task
-from kubric.datasets.verify import verify_dataset
+import importlib
 
-__all__ = ["DataSource", "DatasetError", "TASKS", "dataset_info", "load", "pack",
-           "register_task", "to_grain", "to_tf", "to_torch", "torch_collate", "verify_dataset"]
+#: public name → the module that defines it (imported on first access)
+_LAZY = {
+    "to_grain": "adapters", "to_tf": "adapters", "to_torch": "adapters",
+    "torch_collate": "adapters", "dataset_info": "info", "DatasetError": "layout",
+    "pack": "packer", "DataSource": "source", "load": "source", "TASKS": "tasks",
+    "register_task": "tasks", "verify_dataset": "verify",
+}
+
+
+def __getattr__(name):
+    if name not in _LAZY:
+        raise AttributeError(f"module 'kubric.datasets' has no attribute {name!r}")
+    value = getattr(importlib.import_module(f"kubric.datasets.{_LAZY[name]}"), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__():
+    return sorted(set(globals()) | set(_LAZY))
+
+
+__all__ = sorted(_LAZY)

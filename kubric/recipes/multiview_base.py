@@ -20,7 +20,7 @@ every layer of every view at once and view ``i`` is the file ``*_{i:05d}.*``. St
 7. write the layers, ``metadata.json`` (instances ordered by visible pixels over all views, as
    MOVi), an empty ``events.json`` (nothing moves, nothing collides), the recipe's extra layers and
    files, and the camera export ``transforms_{train,val,test}.json``
-   (:mod:`kubric.annotations.nerf_export`).
+   (:mod:`kubric.datasets.exports.nerf`).
 
 Scene metadata added by this family: ``num_views``, ``views`` (per view: ``split``),
 ``split_ratio``, ``splits`` (``{split: [view, ...]}``), ``look_at``, ``dropped_objects``.
@@ -38,8 +38,8 @@ import numpy as np
 
 import kubric as kb
 from kubric import assets
-from kubric.annotations import nerf_export
 from kubric.core import camera_geometry as geo
+from kubric.datasets.exports import nerf
 from kubric.io.layers import LAYERS
 from kubric.io.scene_writer import write_scene
 from kubric.pipeline import Option, OptionError, Recipe, float_range, resolution
@@ -177,7 +177,7 @@ class MultiviewBase(RenderQuality, Recipe):
     resolution = Option((128, 128), "(width, height) in pixels: N or WxH", type=resolution)
     num_views = Option(32, "number of camera views (frames 0 .. num_views-1)", low=1, high=10000)
     split_ratio = Option((8, 1, 1), "train,val,test weights: view v is split by v mod "
-                         "(train+val+test) (see transforms_*.json)", type=nerf_export.split_ratio)
+                         "(train+val+test) (see transforms_*.json)", type=nerf.split_ratio)
     camera_distance = Option((9.0, 11.0), "camera distance (m) from the look-at point, low,high",
                              type=float_range, low=0.1)
     elevation_range = Option((20.0, 70.0), "camera elevation above the horizon (degrees), "
@@ -187,7 +187,7 @@ class MultiviewBase(RenderQuality, Recipe):
 
     # ------------------------------------------------------------------ checks
     def check(self) -> None:
-        message = nerf_export.check_views(self.name, self.num_views, self.split_ratio)
+        message = nerf.check_views(self.name, self.num_views, self.split_ratio)
         if message:
             raise OptionError(message)
         check_source_options(self, names=("objects",))
@@ -284,7 +284,7 @@ class MultiviewBase(RenderQuality, Recipe):
         scene = kb.Scene(resolution=self.resolution, frame_start=0,
                          frame_end=self.num_views - 1)
         scene.metadata["dropped_objects"] = 0
-        splits = nerf_export.view_splits(self.num_views, self.split_ratio)
+        splits = nerf.view_splits(self.num_views, self.split_ratio)
         with tempfile.TemporaryDirectory(prefix=f"kubric_{self.name}_") as scratch:
             self.scratch = pathlib.Path(scratch)  # for generated files (meshes, textures)
             background = self.build_background(scene, rng, sources)
@@ -302,7 +302,7 @@ class MultiviewBase(RenderQuality, Recipe):
         candidates = [a for a in scene.foreground_assets if isinstance(a, kb.PhysicalObject)]
         visible = annotate_instances(scene, layers, candidates)
         by_split = {s: [v for v, name in enumerate(splits) if name == s]
-                    for s in nerf_export.SPLITS}
+                    for s in nerf.SPLITS}
         metadata, events = scene_documents(
             self, scene, seed, visible, background=background, renderer=render_settings,
             num_views=self.num_views, views=[{"split": s} for s in splits],
@@ -313,7 +313,7 @@ class MultiviewBase(RenderQuality, Recipe):
                            for name in extra.layers})
         depth = layers["depth"][layers["depth"] < geo.BACKGROUND_DEPTH]
         near, far = (float(depth.min()), float(depth.max())) if depth.size else (0.0, 0.0)
-        transforms = nerf_export.nerf_transforms(
+        transforms = nerf.nerf_transforms(
             scene.camera, list(scene.frames), scene.resolution, splits, view_files,
             extra={"recipe": self.name, "seed": int(seed), "near": near, "far": far,
                    "split_ratio": list(self.split_ratio)})

@@ -1,7 +1,7 @@
 """``vbr``: the paper's video-based reconstruction challenge (LASR, Yang et al. 2021): one object
 moves and spins in front of the camera; the scene directory holds RGB and the exact layers
 (silhouette = segmentation, forward / backward flow, depth, ...) and a ready-to-train LASR
-sequence in ``lasr/`` (:mod:`kubric.annotations.lasr_export`).
+sequence in ``lasr/`` (:mod:`kubric.datasets.exports.lasr`).
 
 The object floats (gravity 0, no floor): **rigid** is a KuBasic shape (or an asset of
 ``objects_source``, e.g. a ShapeNet build) with a random-hue material; **articulated** is a
@@ -144,7 +144,7 @@ class Vbr(RenderQuality, Recipe, name="vbr"):
                             type=pathlib.Path, must_exist=True)
     character_source, motion_source = source_options("character: ")
     lasr_export = Option(True, "also write the LASR sequence into lasr/ "
-                         "(kubric.annotations.lasr_export)")
+                         "(kubric.datasets.exports.lasr)")
 
     # ------------------------------------------------------------------ checks
     def check(self) -> None:
@@ -293,6 +293,6 @@ class Vbr(RenderQuality, Recipe, name="vbr"):
             write_scene(self.schema, out_dir, layers, metadata, events)
             simulator.close()
         if self.lasr_export:
-            from kubric.annotations.lasr_export import export_lasr
+            from kubric.datasets.exports.lasr import export_lasr
             export_lasr(out_dir, out_dir / "lasr", sequence=sequence,
                         root=order.index(base))

@@ -18,8 +18,8 @@ tasks and code written for MOVi read vbr datasets. Differences from MOVi:
   ``metadata/object_model`` (KuBasic shape, asset id, URDF model, or ``<character>/<clip>``),
   ``metadata/background`` (the colour, ``#rrggbbaa``).
 
-The LASR sequence in ``lasr/`` is an export of these layers (:mod:`kubric.annotations.
-lasr_export`) and is not packed.
+The LASR sequence in ``lasr/`` is an export of these layers (:mod:`kubric.datasets.exports.
+lasr`) and is not packed.
 """
 
 from __future__ import annotations

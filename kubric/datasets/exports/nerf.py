@@ -1,4 +1,5 @@
-"""The camera export of the multi-view recipes: NeRF "blender" ``transforms_{split}.json`` files.
+"""The NeRF export: "blender" ``transforms_{split}.json`` files, written by the multi-view recipes
+into every scene and copied with the views they name by ``kubric export nerf`` (:func:`export_nerf`).
 
 Every multi-view scene is one render whose frames are the views (view ``i`` = frame
 ``frame_start + i`` = the files ``*_{i:05d}.*``). The views are split into ``train`` / ``val`` /
@@ -27,7 +28,11 @@ Reading a pixel's ray from the JSON alone (what the tests do): for pixel (row i,
 
 from __future__ import annotations
 
+import json
 import math
+import os
+import pathlib
+import shutil
 from collections.abc import Mapping, Sequence
 
 import numpy as np
@@ -35,6 +40,7 @@ import numpy as np
 from kubric.core import camera_geometry as geo
 from kubric.errors import InputError
 from kubric.io import png_io, tiff_io
+from kubric.io import scene_dir as scene_dirs
 from kubric.io.schema import VIEW_SPLITS
 
 SPLITS = VIEW_SPLITS  # declared with the schema conversion that indexes them
@@ -145,16 +151,10 @@ def iter_views(scene_dir, split: str = "train"):
     """Yield one dict per view of ``split`` of a multi-view scene directory: ``view``, ``rgb``
     (H, W, 3) uint8, ``depth`` (H, W) metres, ``origins`` / ``directions`` (H, W, 3) world rays and
     ``transform_matrix`` (4, 4) — what a NeRF data loader needs, from the files alone."""
-    import json
-    import pathlib
-
     if split not in SPLITS:
         raise InputError(f"iter_views: unknown split {split!r}; allowed: {list(SPLITS)}")
     scene_dir = pathlib.Path(scene_dir)
-    path = scene_dir / f"transforms_{split}.json"
-    if not path.is_file():
-        raise FileNotFoundError(f"iter_views: {path} does not exist (not a multi-view scene?)")
-    data = json.loads(path.read_text())
+    data = read_transforms(scene_dir, split, "iter_views")
     for entry in data["frames"]:
         origins, directions = pixel_rays_from_transforms(data, entry)
         rgb = png_io.read_png(scene_dir / (entry["file_path"] + ".png"))[..., :3]
@@ -162,3 +162,48 @@ def iter_views(scene_dir, split: str = "train"):
         yield {"view": int(entry["view"]), "rgb": rgb, "depth": depth, "origins": origins,
                "directions": directions,
                "transform_matrix": np.asarray(entry["transform_matrix"], np.float64)}
+
+
+def read_transforms(scene_dir: pathlib.Path, split: str, who: str) -> dict:
+    """The parsed ``transforms_{split}.json`` of a scene; FileNotFoundError (one line) naming it
+    when the scene has none (not a multi-view scene)."""
+    path = scene_dir / f"transforms_{split}.json"
+    if not path.is_file():
+        raise FileNotFoundError(f"{who}: {path} does not exist (not a multi-view scene: the "
+                                "multi-view recipes write transforms_*.json)")
+    return json.loads(path.read_text())
+
+
+def view_files(data: Mapping) -> list[str]:
+    """The files a transforms dict names: each view's RGBA PNG and its ``*_file`` layers."""
+    out = []
+    for entry in data["frames"]:
+        out.append(entry["file_path"].removeprefix("./") + ".png")
+        out += [v for k, v in sorted(entry.items()) if k.endswith("_file")]
+    return out
+
+
+def export_nerf(root, out) -> tuple[pathlib.Path, int]:
+    """Copy every complete multi-view scene under ``root`` (or ``root`` itself) into
+    ``out/<scene name>/``: its ``transforms_{train,val,test}.json`` and the files their views
+    name, nothing else (a folder NeRF, instant-ngp and nerfstudio read as it is). ``out`` must
+    not exist; it is written through a temporary sibling and appears complete or not at all.
+    Returns (out, number of scenes)."""
+    scenes = scene_dirs.scenes_under(root)
+    out = pathlib.Path(out)
+    if out.exists():
+        raise FileExistsError(f"export nerf: {str(out)!r} already exists")
+    tmp = out.with_name(f".{out.name}.incomplete-{os.getpid()}")
+    try:
+        for scene in scenes:
+            (tmp / scene.name).mkdir(parents=True)
+            for split in SPLITS:
+                data = read_transforms(scene, split, "export nerf")
+                shutil.copy2(scene / f"transforms_{split}.json", tmp / scene.name)
+                for name in view_files(data):
+                    shutil.copy2(scene / name, tmp / scene.name / name)
+        os.replace(tmp, out)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    return out, len(scenes)

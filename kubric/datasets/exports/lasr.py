@@ -1,4 +1,5 @@
-"""Export a scene directory as a LASR / ViSER video sequence (the ``DAVIS`` folder layout).
+"""Export a scene directory as a LASR / ViSER video sequence (the ``DAVIS`` folder layout):
+``kubric export lasr SCENE --out DIR``; the ``vbr`` recipe writes one into every scene's ``lasr/``.
 
 LASR (Yang et al., CVPR 2021, "Learning Articulated Shape Reconstruction from a Monocular Video")
 and its successor ViSER read one video as ``database/DAVIS/<Kind>/Full-Resolution/<seq>/`` plus a
@@ -260,35 +261,3 @@ def export_lasr(scene_dir, out_dir, sequence: str | None = None,
         raise
     return summary
 
-
-def main(argv=None) -> int:
-    """``python -m kubric.annotations.lasr_export SCENE_DIR --out DIR [--instances 0,2]
-    [--root K] [--sequence NAME]``: :func:`export_lasr` for one scene directory (e.g. a MOVi
-    scene, with the instances that make the object). Errors: one line, exit 2."""
-    import argparse
-    import sys
-
-    parser = argparse.ArgumentParser(prog="python -m kubric.annotations.lasr_export",
-                                     description=export_lasr.__doc__.splitlines()[0])
-    parser.add_argument("scene_dir")
-    parser.add_argument("--out", required=True, help="the LASR folder to create")
-    parser.add_argument("--instances", default=None,
-                        help="comma-separated instance indices (0-based) forming the object")
-    parser.add_argument("--root", type=int, default=None, help="instance of the Cameras frame")
-    parser.add_argument("--sequence", default=None, help="sequence name")
-    args = parser.parse_args(argv)
-    try:
-        chosen = None if args.instances is None else \
-            [int(v) for v in args.instances.split(",") if v.strip()]
-        summary = export_lasr(args.scene_dir, args.out, args.sequence, chosen, args.root)
-    except (ValueError, KeyError, OSError) as err:
-        message = " ".join(str(err).split()) or type(err).__name__
-        print(f"lasr_export: error: {message}", file=sys.stderr)
-        return 2
-    print(f"wrote LASR sequence {summary['sequence']} ({summary['num_frames']} frames) to "
-          f"{args.out}")
-    return 0
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())

@@ -1,0 +1,76 @@
+"""The TAP-Vid export (``kubric export tapvid SCENES --out FILE.pkl``): the point tracks
+(``tracks.npz``, :mod:`kubric.annotations.track_files`) of every complete scene as one pickle.
+
+It holds a dict ``{scene name: video dict}`` (:func:`export_tapvid`) in the layout of TAP-Vid's
+``tapvid_davis.pkl`` (TAP-Vid's loaders accept it) with two extra keys:
+
+==============  ==============  =======  ========================================================
+key             shape           dtype    meaning
+==============  ==============  =======  ========================================================
+video           (T, H, W, 3)    uint8    the RGB frames
+points          (N, T, 2)       float32  (x, y) **normalised to [0, 1]**: pixel position / (W, H)
+                                         (TAP-Vid's pickle convention; its loaders multiply by
+                                         the frame size, giving raster coordinates in which the
+                                         centre of pixel (r, c) is (c + 0.5, r + 0.5))
+occluded        (N, T)          bool     True = occluded
+target_points   (N, T, 2)       float32  (x, y) in raster pixels (= points · (W, H)), the
+                                         ``target_points`` of TAP-Vid's training/eval batches
+query_points    (N, 3)          float32  (t, y, x): frame index and raster pixel position
+==============  ==============  =======  ========================================================
+"""
+
+from __future__ import annotations
+
+import pathlib
+import pickle
+
+import numpy as np
+
+from kubric.annotations.track_files import TRACKS_FILE, read_tracks
+from kubric.errors import InputError
+from kubric.io import scene_dir
+from kubric.io.layers import read_layer
+from kubric.io.paths import atomic_write_bytes
+
+
+def tapvid_example(tracks: dict, video: np.ndarray) -> dict[str, np.ndarray]:
+    """One scene in TAP-Vid's layout (module doc)."""
+    video = np.asarray(video)
+    if video.ndim != 4 or video.shape[-1] not in (3, 4) or video.dtype != np.uint8:
+        raise InputError(f"video must be uint8 (T, H, W, 3 or 4), got {video.dtype} {video.shape}")
+    w, h = (int(v) for v in tracks["resolution"])
+    t = len(tracks["frames"])
+    if video.shape[:3] != (t, h, w):
+        raise InputError(f"video shape {video.shape[:3]} does not match the tracks' "
+                         f"(T, H, W) = {(t, h, w)}")
+    target = np.asarray(tracks["target_points"], dtype=np.float32)
+    return {
+        "video": np.ascontiguousarray(video[..., :3]),
+        "points": (target / np.array([w, h], dtype=np.float32)).astype(np.float32),
+        "occluded": np.asarray(tracks["occluded"], dtype=bool),
+        "target_points": target,
+        "query_points": np.asarray(tracks["query_points"], dtype=np.float32),
+    }
+
+
+def scene_dirs_with_tracks(root) -> list[pathlib.Path]:
+    """Complete scene directories under ``root`` (or ``root`` itself), each with tracks.npz;
+    ValueError (one line) when there is none or a complete scene lacks its tracks."""
+    candidates = scene_dir.scenes_under(root)
+    lacking = [p.name for p in candidates if not (p / TRACKS_FILE).is_file()]
+    if lacking:
+        raise InputError(f"scene {lacking[0]!r} has no {TRACKS_FILE} ({len(lacking)} of "
+                         f"{len(candidates)} scenes lack it; generate with --set tracks=N)")
+    return candidates
+
+
+def export_tapvid(root, out) -> tuple[pathlib.Path, int]:
+    """Write every complete scene under ``root`` as one TAP-Vid pickle ``out``; returns
+    (path, number of scenes)."""
+    scenes = scene_dirs_with_tracks(root)
+    data = {}
+    for scene in scenes:
+        tracks = read_tracks(scene / TRACKS_FILE)
+        data[scene.name] = tapvid_example(tracks, read_layer(scene, "rgba"))
+    payload = pickle.dumps(data, protocol=pickle.HIGHEST_PROTOCOL)
+    return atomic_write_bytes(payload, out), len(data)
