@@ -97,7 +97,7 @@ def test_backend_example_touches_two_files_and_renders(tmp_path):
     base = package / "kubric" / "renderer" / "base.py"
     row = code[("row", "kubric/renderer/base.py")]
     text = base.read_text()
-    anchor = '    "raycast": "kubric.renderer.raycast:Raycast",\n'
+    anchor = '    "raycast": Backend("kubric.renderer.raycast:Raycast", Capabilities(photoreal=False)),\n'
     assert anchor in text
     base.write_text(text.replace(anchor, anchor + row))
     changed = _changed_files(ROOT / "kubric", package / "kubric")
@@ -113,6 +113,17 @@ def test_backend_example_touches_two_files_and_renders(tmp_path):
     rgba = file_io.read_image_dict(scene)["rgba"]
     palette = {tuple(c) for c in label_palette(64)}
     assert {tuple(c) for c in rgba[..., :3].reshape(-1, 3)} <= palette
+    # recipes ask the row's capabilities: one that needs photoreal RGB refuses it in one line
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(map(str, [NO_BPY, package])))
+    refused = subprocess.run([sys.executable, "-m", "kubric", "worker", "complex_brdf", "--seed",
+                              "1", "--out", str(tmp_path / "brdf"), "--set", "renderer=labels"],
+                             cwd=tmp_path, env=env, capture_output=True, text=True, timeout=300)
+    assert refused.returncode == 2
+    assert refused.stderr == ("kubric worker: error: complex_brdf: renderer=labels cannot render "
+                              "photoreal RGB (the complex_brdf recipe); backends that can: "
+                              "blender\n")
+    assert "`complex_brdf: renderer=labels cannot render photoreal RGB (the complex_brdf " \
+        "recipe); backends\nthat can: blender`" in DOC.read_text()
 
 
 def _changed_files(a: pathlib.Path, b: pathlib.Path) -> list[str]:

@@ -58,9 +58,9 @@ def test_zero_characters_leaves_flags_unchanged():
 
 
 def test_characters_need_the_blender_renderer():
-    with pytest.raises(OptionError, match="renderer=raycast has no skinned characters"):
+    with pytest.raises(OptionError, match="renderer=raycast cannot render skinned characters"):
         get_recipe("movi_c")(characters=1, renderer="raycast").check()
-    with pytest.raises(OptionError, match="renderer=raycast has no skinned characters"):
+    with pytest.raises(OptionError, match="renderer=raycast cannot render skinned characters"):
         get_recipe("pose_estimation")(renderer="raycast").check()
 
 

@@ -48,7 +48,7 @@ def test_raycast_is_a_renderer_and_checks_its_requests():
         r.render(return_layers=("depth", "colour"))
     with pytest.raises(ValueError, match="frames is empty"):
         r.render(frames=[])
-    with pytest.raises(ValueError, match="motion_blur must be 0"):
+    with pytest.raises(base.CapabilityError, match="cannot render motion blur"):
         base.create("raycast", scene, motion_blur=0.5)
     empty = r.render(return_layers=("depth", "segmentation", "forward_flow"))
     assert np.all(empty["depth"] == geo.BACKGROUND_DEPTH) and not empty["segmentation"].any()
@@ -156,7 +156,8 @@ def test_sphere_primitive_is_blenders_uv_sphere():
 # ---------------------------------------------------------------------------------- recipes
 def test_raycast_recipe_options_are_checked():
     movi_a = get_recipe("movi_a")
-    with pytest.raises(OptionError, match="renderer=raycast has no samples=4"):
+    with pytest.raises(OptionError, match=r"renderer=raycast cannot take the RGB quality "
+                       r"settings \(samples, denoising\) \(samples=4\)"):
         movi_a.from_assignments(["renderer=raycast", "samples=4"])
     with pytest.raises(OptionError, match="renderer"):
         movi_a.from_assignments(["renderer=povray"])

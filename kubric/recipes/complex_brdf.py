@@ -41,6 +41,8 @@ class ComplexBrdf(MultiviewBase, name="complex_brdf"):
     3 point lights on the upper hemisphere, 24 fixed views, 12 bounces."""
 
     schema = multiview_schema.COMPLEX_BRDF
+    #: the point is specular vs Lambertian appearance: a preview RGB would not show it
+    renderer_needs = ("photoreal",)
 
     num_views = Option(24, "number of camera views on the fixed orbit", low=1, high=10000)
     material = Option("random", "metal (specular), rubber (Lambertian) or random per seed",

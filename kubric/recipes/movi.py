@@ -227,11 +227,11 @@ class MoviC(MoviBase, name="movi_c"):
                 out.pop(name)
         return out
 
-    def check_renderer(self) -> None:
-        super().check_renderer()
-        if self.characters and self.renderer != "blender":
-            raise OptionError(f"{self.name}: renderer={self.renderer} has no skinned characters "
-                              f"(characters={self.characters}); these need renderer=blender")
+    def renderer_requests(self) -> dict[str, str]:
+        out = super().renderer_requests()
+        if self.characters:
+            out["characters"] = f"characters={self.characters}"
+        return out
 
     def open_sources(self):
         sources = super().open_sources()

@@ -43,7 +43,6 @@ from kubric.recipes.common import (
     source_location,
 )
 from kubric.recipes.render_quality import RenderQuality
-from kubric.renderer.base import BACKENDS
 
 DYNAMIC_SPAWN_REGION = ((-5.0, -5.0, 1.0), (5.0, 5.0, 5.0))
 STATIC_SPAWN_REGION = ((-7.0, -7.0, 0.0), (7.0, 7.0, 10.0))
@@ -100,9 +99,6 @@ class MoviBase(RenderQuality, Recipe):
                             type=source_location)
     save_state = Option(False, "also write scene.blend (animated) and scene.bullet (initial "
                         "physics state)")
-    renderer = Option("blender", "rendering backend, one of kubric.renderer.BACKENDS "
-                      "(docs/renderers.md: blender = Cycles; raycast = embree, exact layers "
-                      "without bpy, RGB not photoreal)", choices=tuple(BACKENDS))
     tracks = Option(0, "point tracks to sample and write to tracks.npz (0 = none; docs/tracks.md)",
                     low=0)
     track_queries = Option(None, "file of given track queries, rows (t, y, x) in pixels (.npy, "
@@ -125,21 +121,13 @@ class MoviBase(RenderQuality, Recipe):
         self.check_tracks()
         check_min_max(self)
 
-    def check_renderer(self) -> None:
-        """Options that only the Blender backend honours fail here for another backend."""
-        if self.renderer == "blender":
-            return
-        given = [f"{name}={getattr(self, name)}" for name in ("samples", "denoise")
-                 if getattr(self, name) is not None]
-        if self.quality != "default":
-            given.append(f"quality={self.quality}")
+    def renderer_requests(self) -> dict[str, str]:
+        out = super().renderer_requests()
         if self.save_state:
-            given.append("save_state=True")
+            out["save_state"] = "save_state=True"
         if getattr(self, "max_motion_blur", 0.0) > 0:
-            given.append(f"max_motion_blur={self.max_motion_blur}")
-        if given:
-            raise OptionError(f"{self.name}: renderer={self.renderer} has no {', '.join(given)}; "
-                              "these need renderer=blender")
+            out["motion_blur"] = f"max_motion_blur={self.max_motion_blur}"
+        return out
 
     def check_tracks(self) -> None:
         """Bad track options fail here, before anything renders (one line)."""

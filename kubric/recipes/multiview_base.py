@@ -192,6 +192,7 @@ class MultiviewBase(RenderQuality, Recipe):
             raise OptionError(message)
         check_source_options(self, names=("objects",))
         check_min_max(self)
+        self.check_renderer()
 
     def prepare(self) -> None:
         self.open_sources()

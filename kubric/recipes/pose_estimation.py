@@ -62,11 +62,7 @@ class PoseEstimation(MoviBase, name="pose_estimation"):
     max_num_clutter = Option(6, "most clutter objects", low=0, high=50)
     character_source, motion_source = source_options("")
 
-    def check_renderer(self) -> None:
-        super().check_renderer()
-        if self.renderer != "blender":
-            raise OptionError(f"{self.name}: renderer={self.renderer} has no skinned characters; "
-                              "this recipe needs renderer=blender")
+    renderer_needs = ("characters",)
 
     def open_sources(self) -> dict:
         sources = super().open_sources()

@@ -23,8 +23,10 @@ separate 1-sample render with no denoising, so they are bit-identical under ever
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from typing import ClassVar
 
-from kubric.pipeline import Option
+from kubric.pipeline import Option, OptionError
+from kubric.renderer.base import BACKENDS, capabilities, refusal
 
 
 @dataclass(frozen=True)
@@ -116,15 +118,32 @@ def _profile_help() -> str:
                                      else p.label) for name, p in PROFILES.items())
 
 
+def _backends_help() -> str:
+    """The ``renderer`` option's help: each backend of BACKENDS with what it can do."""
+    rows = []
+    for name, row in BACKENDS.items():
+        caps = row.capabilities
+        can = ["photoreal RGB" if caps.photoreal else "RGB not photoreal"]
+        can += sorted(caps.effects) + (["saves state"] if caps.can_save_state else [])
+        rows.append(f"{name}: {', '.join(can)}")
+    return "; ".join(rows)
+
+
 class RenderQuality:
-    """Mixin of a recipe: the ``quality`` / ``samples`` / ``denoise`` options and their resolution
-    into renderer keyword arguments and ``metadata["renderer"]`` fields.
+    """Mixin of every recipe that renders: the ``renderer`` option (a backend of
+    :data:`kubric.renderer.base.BACKENDS`), the ``quality`` / ``samples`` / ``denoise`` options and
+    their resolution into renderer keyword arguments and ``metadata["renderer"]`` fields.
 
-    ``renderer``: the backend of :data:`kubric.renderer.base.BACKENDS` the recipe renders with
-    (``blender`` unless the recipe declares a ``renderer`` option); the quality profile applies
-    to Blender only."""
+    A recipe asks its backend for capabilities, never for a name: :attr:`renderer_needs` (what
+    it always needs, e.g. ``("photoreal",)``) and :meth:`renderer_requests` (what its options
+    ask for) are checked by :meth:`check_renderer` before anything renders — one line naming the
+    backend, the request and the backends that can. The quality profile applies to backends with
+    ``quality_profiles``."""
 
-    renderer = "blender"
+    renderer = Option("blender", "rendering backend (docs/renderers.md): " + _backends_help(),
+                      choices=tuple(BACKENDS))
+    #: capabilities (kubric.renderer.base.NEEDS) this recipe always needs of its backend
+    renderer_needs: ClassVar[tuple[str, ...]] = ()
 
     quality = Option("default", "RGB render quality profile (" + _profile_help() +
                      "; measured cost and error in docs/render-cost.md)", choices=tuple(PROFILES))
@@ -163,19 +182,38 @@ class RenderQuality:
             out["keep_freed_memory"] = True
         return out
 
+    def renderer_requests(self) -> dict[str, str]:
+        """What this recipe's options ask of its backend: capability (NEEDS) → the request, for
+        :meth:`check_renderer`. Recipes extend it (e.g. ``max_motion_blur`` → motion_blur)."""
+        out = {need: f"the {self.name} recipe" for need in self.renderer_needs}
+        given = [f"{name}={getattr(self, name)}" for name in ("samples", "denoise")
+                 if getattr(self, name) is not None]
+        if self.quality != "default":
+            given.append(f"quality={self.quality}")
+        if given:
+            out["quality_profiles"] = ", ".join(given)
+        return out
+
+    def check_renderer(self) -> None:
+        """One line (OptionError) when the chosen backend lacks a capability the recipe or its
+        options ask for (:meth:`renderer_requests`)."""
+        message = refusal(self.renderer, self.renderer_requests(), self.name)
+        if message:
+            raise OptionError(message)
+
     def renderer_settings(self, **options) -> dict:
-        """Keyword settings of :func:`kubric.renderer.create` for ``self.renderer``: Blender gets
-        the quality profile (:meth:`renderer_quality`) and ``options``; other backends ``options``
-        only (they have no path-traced RGB to tune)."""
-        if self.renderer == "blender":
+        """Keyword settings of :func:`kubric.renderer.create` for ``self.renderer``: a backend
+        with ``quality_profiles`` gets the quality profile (:meth:`renderer_quality`) and
+        ``options``; others ``options`` only (they have no path-traced RGB to tune)."""
+        if capabilities(self.renderer).quality_profiles:
             return {**self.renderer_quality(), **options}
         return dict(options)
 
     def render_metadata(self, renderer) -> dict:
         """``metadata["renderer"]``: the renderer's own ``settings()``, plus the quality profile's
-        name where it applies (Blender)."""
+        name where it applies (``quality_profiles``)."""
         settings = renderer.settings()
-        if self.renderer == "blender":
+        if capabilities(self.renderer).quality_profiles:
             settings["quality"] = self.quality
             settings["quality_setting"] = self.quality_profile().label
         return settings

@@ -152,6 +152,7 @@ class Vbr(RenderQuality, Recipe, name="vbr"):
             raise OptionError(f"{self.name}: option step_rate={self.step_rate} must be a multiple "
                               f"of frame_rate={self.frame_rate}")
         check_source_options(self)
+        self.check_renderer()
         path = self.urdf_file
         if path is not None:
             from kubric.assets.articulated import link_visuals
@@ -164,6 +165,12 @@ class Vbr(RenderQuality, Recipe, name="vbr"):
                 raise OptionError(f"{where}: {' '.join(str(err).split())[:200]}") from None
             if not visuals:
                 raise OptionError(f"{where}: no link has a <visual> to render")
+
+    def renderer_requests(self) -> dict[str, str]:
+        out = super().renderer_requests()
+        if self.object_type == "character":
+            out["characters"] = "object_type=character"
+        return out
 
     def prepare(self) -> None:
         self.open_sources()

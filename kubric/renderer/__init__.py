@@ -3,16 +3,28 @@
 ``kubric.renderer.create(name, scene, scratch_dir, **settings)`` builds a registered backend
 (``blender``: Cycles on ``bpy==5.0.1``; ``raycast``: embree, exact layers without bpy). The
 backend classes ``Blender`` and ``Raycast`` are loaded on first access, so ``import kubric.renderer``
-imports neither bpy nor embree.
+imports neither bpy nor embree; ``kubric.renderer.capabilities(name)`` says what a backend can do
+(photoreal RGB, layers, exposure effects, state saving) without importing it either.
 """
 
 import importlib
 
-from kubric.renderer.base import ALL_LAYERS, ANNOTATION_LAYERS, BACKENDS, Renderer, create
+from kubric.renderer.base import (
+    ALL_LAYERS,
+    ANNOTATION_LAYERS,
+    BACKENDS,
+    EFFECTS,
+    Capabilities,
+    CapabilityError,
+    Renderer,
+    capabilities,
+    create,
+)
 
-__all__ = ["ALL_LAYERS", "ANNOTATION_LAYERS", "BACKENDS", "Renderer", "create"]
+__all__ = ["ALL_LAYERS", "ANNOTATION_LAYERS", "BACKENDS", "EFFECTS", "Capabilities",
+           "CapabilityError", "Renderer", "capabilities", "create"]
 #: backend class name → its module, for ``kubric.renderer.Blender`` etc. (derived from BACKENDS)
-_LAZY = {spec.split(":")[1]: spec.split(":")[0] for spec in BACKENDS.values()}
+_LAZY = {row.path.split(":")[1]: row.path.split(":")[0] for row in BACKENDS.values()}
 
 
 def __getattr__(name):

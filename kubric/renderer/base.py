@@ -16,7 +16,15 @@ use, so naming a backend never imports bpy or embree). It is constructed as
   background (depth / z: 10000).
 * ``settings()`` → the JSON-able dict recorded as ``metadata["renderer"]``: ``engine`` (the
   backend's name for itself) and the settings that decide its pixels.
-* ``layers``: the subset of :data:`ALL_LAYERS` the backend can produce; ``scene``: the scene.
+* ``save_state(path)`` → the path written: the backend's own scene file (Blender: ``.blend``),
+  for backends whose capabilities have a ``state_file_suffix``; other backends refuse in one line.
+* ``capabilities``: what the backend can do (:class:`Capabilities`), declared with its row in
+  :data:`BACKENDS`, so :func:`capabilities` answers without importing the backend (no bpy);
+  ``layers`` is ``capabilities.layers``; ``scene``: the scene.
+
+Recipes ask, never compare names: ``capabilities(name).photoreal``, or :func:`refusal` /
+:func:`require` for what a recipe's options ask of its backend (:data:`NEEDS`); a bad combination
+is one line naming the backend, the request and the backends that can.
 
 Adding a backend = one new module with the class + one row in :data:`BACKENDS`.
 """
@@ -25,8 +33,12 @@ from __future__ import annotations
 
 import abc
 import importlib
+import pathlib
+from dataclasses import dataclass
 
 import numpy as np
+
+from kubric.errors import UsageError
 
 #: the exact annotation layers (one value per pixel centre; docs/conventions.md)
 ANNOTATION_LAYERS = ("depth", "z", "segmentation", "forward_flow", "backward_flow", "normal",
@@ -34,18 +46,155 @@ ANNOTATION_LAYERS = ("depth", "z", "segmentation", "forward_flow", "backward_flo
 #: every layer a backend may be asked for
 ALL_LAYERS = ("rgba",) + ANNOTATION_LAYERS
 
-#: name → "module:Class" of every backend (the recipes' ``renderer`` option values)
-BACKENDS = {
-    "blender": "kubric.renderer.blender:Blender",
-    "raycast": "kubric.renderer.raycast:Raycast",
+#: exposure effects a backend may render into RGB (the annotation layers stay exact): motion
+#: blur over a shutter, thin-lens depth of field (the camera's ``use_dof``), rolling shutter
+EFFECTS = ("motion_blur", "depth_of_field", "rolling_shutter")
+
+
+class CapabilityError(UsageError, ValueError):
+    """Something asked of a backend that it cannot do (one line: the backend, the request and
+    the backends that can; exit status 2)."""
+
+
+@dataclass(frozen=True)
+class Capabilities:
+    """What a backend can do (declared with its row in :data:`BACKENDS`).
+
+    Attributes:
+      photoreal: its RGB is path traced (shading, shadows, reflections, specular BRDFs); False:
+        a preview (e.g. raycast's Lambert shading) that only makes a scene complete.
+      layers: the subset of :data:`ALL_LAYERS` it can produce.
+      effects: the subset of :data:`EFFECTS` it renders.
+      state_file_suffix: ``save_state`` writes its scene file with this suffix (``".blend"``);
+        None: it saves no state.
+      characters: it renders skinned characters (:class:`kubric.core.characters.Character`).
+      quality_profiles: it takes the recipes' RGB quality settings (``samples_per_pixel``,
+        ``use_denoising``, ``adaptive_sampling``, ...; docs/render-cost.md).
+    """
+
+    photoreal: bool = False
+    layers: tuple[str, ...] = ALL_LAYERS
+    effects: frozenset[str] = frozenset()
+    state_file_suffix: str | None = None
+    characters: bool = False
+    quality_profiles: bool = False
+
+    def __post_init__(self):
+        object.__setattr__(self, "layers", tuple(self.layers))
+        object.__setattr__(self, "effects", frozenset(self.effects))
+        for what, given, allowed in (("layers", self.layers, ALL_LAYERS),
+                                     ("effects", self.effects, EFFECTS)):
+            unknown = sorted(set(given) - set(allowed))
+            if unknown:
+                raise ValueError(f"Capabilities: unknown {what} {unknown}; allowed: "
+                                 f"{list(allowed)}")
+
+    @property
+    def can_save_state(self) -> bool:
+        return self.state_file_suffix is not None
+
+    def has(self, need: str) -> bool:
+        """Whether it can do ``need``, one of :data:`NEEDS`."""
+        if need not in NEEDS:
+            raise ValueError(f"unknown renderer capability {need!r}; allowed: {list(NEEDS)}")
+        if need in EFFECTS:
+            return need in self.effects
+        if need in ALL_LAYERS:
+            return need in self.layers
+        return bool(self.can_save_state if need == "save_state" else getattr(self, need))
+
+
+#: what a recipe may ask of its backend → the words of a refusal ("renderer=X cannot ...")
+NEEDS = {
+    "photoreal": "render photoreal RGB",
+    "characters": "render skinned characters",
+    "save_state": "save its state as a scene file",
+    "quality_profiles": "take the RGB quality settings (samples, denoising)",
+    **{effect: f"render {effect.replace('_', ' ')}" for effect in EFFECTS},
+    **{layer: f"make the {layer} layer" for layer in ALL_LAYERS},
 }
+
+
+@dataclass(frozen=True)
+class Backend:
+    """One row of :data:`BACKENDS`: where the class is (``"module:Class"``, imported on first
+    use) and what it can do (read without importing it)."""
+
+    path: str
+    capabilities: Capabilities
+
+
+#: name → Backend of every backend (the recipes' ``renderer`` option values)
+BACKENDS = {
+    "blender": Backend("kubric.renderer.blender:Blender", Capabilities(
+        photoreal=True, effects={"motion_blur", "depth_of_field"}, state_file_suffix=".blend",
+        characters=True, quality_profiles=True)),
+    "raycast": Backend("kubric.renderer.raycast:Raycast", Capabilities(photoreal=False)),
+}
+
+
+def capabilities(name: str) -> Capabilities:
+    """What the backend ``name`` can do, without importing it."""
+    if name not in BACKENDS:
+        raise ValueError(f"unknown renderer {name!r}; allowed: {sorted(BACKENDS)}")
+    return BACKENDS[name].capabilities
+
+
+def able(needs) -> list[str]:
+    """The backends that can do every one of ``needs`` (names of :data:`NEEDS`)."""
+    return [name for name, row in BACKENDS.items() if all(row.capabilities.has(n) for n in needs)]
+
+
+def refusal(name: str, requests: dict[str, str], who: str) -> str | None:
+    """One line when backend ``name`` cannot do what ``requests`` (need → what asked for it,
+    e.g. ``{"motion_blur": "max_motion_blur=2.0"}``) asks, naming the backends that can; else
+    None."""
+    missing = {need: asked for need, asked in requests.items()
+               if not capabilities(name).has(need)}
+    return _refusal_line(name, missing, who) if missing else None
+
+
+def _refusal_line(name: str, missing: dict[str, str], who: str) -> str:
+    what = "; ".join(f"{NEEDS[need]} ({asked})" for need, asked in missing.items())
+    can = able(missing)
+    return (f"{who}: renderer={name} cannot {what}; backends that can: "
+            f"{', '.join(can) if can else 'none'}")
+
+
+def require(name: str, requests: dict[str, str], who: str) -> None:
+    """:func:`refusal` as a :class:`CapabilityError`."""
+    message = refusal(name, requests, who)
+    if message:
+        raise CapabilityError(message)
+
+
+def name_of(cls: type) -> str | None:
+    """The name the backend class ``cls`` is registered under in BACKENDS (None: no row)."""
+    path = f"{cls.__module__}:{cls.__qualname__}"
+    return next((name for name, row in BACKENDS.items() if row.path == path), None)
+
+
+class _Declared:
+    """``Backend.capabilities``: the Capabilities of the class's row in BACKENDS (the defaults
+    for a class no row names)."""
+
+    def __get__(self, obj, cls):
+        name = name_of(cls)
+        return Capabilities() if name is None else BACKENDS[name].capabilities
+
+
+class _Layers:
+    def __get__(self, obj, cls):
+        return cls.capabilities.layers
 
 
 class Renderer(abc.ABC):
     """The protocol every rendering backend implements (see module doc)."""
 
-    #: the layers this backend can produce (a subset of ALL_LAYERS)
-    layers: tuple[str, ...] = ALL_LAYERS
+    #: what this backend can do (:class:`Capabilities`, from its row in BACKENDS)
+    capabilities = _Declared()
+    #: the layers this backend can produce (``capabilities.layers``)
+    layers = _Layers()
     #: the scene it renders (a :class:`kubric.core.scene.Scene`), set by the constructor
     scene = None
 
@@ -57,6 +206,27 @@ class Renderer(abc.ABC):
     @abc.abstractmethod
     def settings(self) -> dict:
         """``metadata["renderer"]``: ``engine`` and the settings that decide the pixels."""
+
+    def save_state(self, path) -> pathlib.Path:
+        """Write the backend's scene file to ``path`` (its suffix is
+        ``capabilities.state_file_suffix``); a backend without one refuses in one line."""
+        self._require({"save_state": f"save_state({str(path)!r})"},
+                      f"{type(self).__name__}.save_state")
+        raise NotImplementedError(f"{type(self).__name__} declares state_file_suffix but does "
+                                  "not implement save_state")
+
+    def require_effects(self, requests: dict[str, str]) -> None:
+        """One line (:class:`CapabilityError`) for each effect of ``requests`` (effect → the
+        setting that asks for it) this backend does not render; a backend calls it for the
+        effects its settings and scene ask for instead of ignoring them."""
+        self._require({e: asked for e, asked in requests.items() if asked}, type(self).__name__)
+
+    def _require(self, requests: dict[str, str], who: str) -> None:
+        missing = {need: asked for need, asked in requests.items()
+                   if not self.capabilities.has(need)}
+        if missing:
+            raise CapabilityError(_refusal_line(name_of(type(self)) or type(self).__name__,
+                                                missing, who))
 
     def check_request(self, frames, return_layers) -> tuple[list[int], tuple[str, ...]]:
         """The validated (frames, layers) of a render call: frames default to the scene's range,
@@ -83,9 +253,8 @@ class Renderer(abc.ABC):
 
 def backend(name: str) -> type:
     """The backend class registered as ``name`` (imports its module)."""
-    if name not in BACKENDS:
-        raise ValueError(f"unknown renderer {name!r}; allowed: {sorted(BACKENDS)}")
-    module, cls = BACKENDS[name].split(":")
+    capabilities(name)  # an unknown name: one line naming the allowed ones
+    module, cls = BACKENDS[name].path.split(":")
     return getattr(importlib.import_module(module), cls)
 
 

@@ -301,8 +301,9 @@ class Raycast(Renderer):
 
     Settings: ``background_transparency`` (bool: rgba alpha 0 where no surface is hit; default
     False, the background colour is opaque); ``motion_blur`` only 0 / False (a recipe passes its
-    shutter; this backend renders none). ``scratch_dir`` is accepted for the protocol and unused
-    (nothing is written).
+    shutter; this backend renders no exposure effect: a shutter, or a camera with ``use_dof``,
+    is refused in one line naming the backends that render it). ``scratch_dir`` is accepted for
+    the protocol and unused (nothing is written).
     """
 
     def __init__(self, scene, scratch_dir=None, *, background_transparency=False,
@@ -310,9 +311,7 @@ class Raycast(Renderer):
         if not isinstance(background_transparency, (bool, np.bool_)):
             raise TypeError("Raycast option background_transparency must be True or False, got "
                             f"{background_transparency!r}")
-        if motion_blur:
-            raise ValueError(f"Raycast option motion_blur must be 0 or False (the raycast "
-                             f"renderer renders no motion blur), got {motion_blur!r}")
+        self.require_effects({"motion_blur": motion_blur and f"motion_blur={motion_blur!r}"})
         self.scene = scene
         self.scratch_dir = scratch_dir
         self.background_transparency = bool(background_transparency)
@@ -357,6 +356,8 @@ class Raycast(Renderer):
         if camera is None:
             raise ValueError("the scene has no camera: add a PerspectiveCamera or "
                              "OrthographicCamera before rendering")
+        self.require_effects({"depth_of_field": getattr(camera, "use_dof", False) and
+                              f"camera {camera.name!r} use_dof=True"})
         geometry = self.geometry()
         out: dict[str, np.ndarray] = {}
         for i, frame in enumerate(frames):

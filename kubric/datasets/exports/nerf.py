@@ -192,13 +192,13 @@ def export_nerf(root, out) -> tuple[pathlib.Path, int]:
     scenes = scene_dirs.scenes_under(root)
     out = pathlib.Path(out)
     if out.exists():
-        raise FileExistsError(f"export nerf: {str(out)!r} already exists")
+        raise FileExistsError(f"{str(out)!r} already exists (choose a new folder)")
     tmp = out.with_name(f".{out.name}.incomplete-{os.getpid()}")
     try:
         for scene in scenes:
             (tmp / scene.name).mkdir(parents=True)
             for split in SPLITS:
-                data = read_transforms(scene, split, "export nerf")
+                data = read_transforms(scene, split, scene.name)
                 shutil.copy2(scene / f"transforms_{split}.json", tmp / scene.name)
                 for name in view_files(data):
                     shutil.copy2(scene / name, tmp / scene.name / name)
