@@ -49,8 +49,8 @@ def make_scene(args, with_people: bool):
                          position=(-1.2 + 2.4 * i / max(1, args.people - 1), 1.0, 0),
                          material=kb.PrincipledBSDFMaterial(color="tan"))
             if args.character == "humans":
-                from kubric import assets
-                characters, motions = assets.ensure_humans()
+                from kubric import asset_tools
+                characters, motions = asset_tools.ensure_humans()
                 person, clip = characters.create("average", **where), motions.create("cmu_01_01")
                 start = 2.0 + 0.3 * i
             else:

@@ -36,9 +36,9 @@ TOY_CATEGORIES = {"cube": "box", "sponge": "box", "sphere": "ball", "torus": "ri
 
 
 def categorised_kubasic(out: pathlib.Path) -> pathlib.Path:
-    from kubric import assets
+    from kubric import asset_tools
     from kubric.recipes.klevr import with_categories
-    return with_categories(assets.ensure_kubasic(), TOY_CATEGORIES, out)
+    return with_categories(asset_tools.ensure_kubasic(), TOY_CATEGORIES, out)
 
 
 def generate(recipe: str, options: list[str], out: pathlib.Path) -> float:

@@ -79,7 +79,7 @@ def figure3_picks(factor, shapes):
 
 
 def measure(scenes: int) -> list[dict]:
-    from kubric.assets import ensure_kubasic
+    from kubric.asset_tools import ensure_kubasic
 
     source = ensure_kubasic()
     shapes = [i for i in source.all_asset_ids if i != "dome"]

@@ -59,9 +59,9 @@ def recipe_options(recipe: str, scratch: pathlib.Path) -> list[str]:
     """Options a recipe needs beyond its defaults to run here (toybox: its object source)."""
     if recipe != "toybox":
         return []
-    from kubric import assets
+    from kubric import asset_tools
     from kubric.recipes.klevr import with_categories
-    return [f"objects={with_categories(assets.ensure_kubasic(), TOY_CATEGORIES, scratch)}"]
+    return [f"objects={with_categories(asset_tools.ensure_kubasic(), TOY_CATEGORIES, scratch)}"]
 
 
 class _Captured(Exception):

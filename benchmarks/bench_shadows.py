@@ -33,7 +33,7 @@ def cpu_seconds() -> float:
 
 
 def build(catch: bool, size: int, samples: int):
-    from kubric.assets import ensure_kubasic
+    from kubric.asset_tools import ensure_kubasic
     from kubric.renderer.blender import Blender
 
     rng = np.random.RandomState(0)

@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 import kubric as kb
-from kubric.assets import ensure_kubasic
+from kubric.asset_tools import ensure_kubasic
 
 # The one departure from the printed listing: its region [[-1,-1,0],[1,1,1]] holds no eight
 # unit-sized shapes above the floor, so objects are placed in a region 2.5 times as wide.

@@ -1,5 +1,5 @@
 """Shared helpers for the character tests: a tiny animated scene with a walking person, either
-the procedural tube person or (where ``kubric.assets.ensure_humans`` exists) the MakeHuman
+the procedural tube person or (where ``kubric.asset_tools.ensure_humans`` exists) the MakeHuman
 "average" body walking CMU clip 01_01 — the same tests run on both."""
 
 import numpy as np
@@ -16,10 +16,10 @@ def person_and_clip(kind: str, **kwargs):
     """(character, clip, clip_start seconds) of ``kind`` ("procedural" or "humans")."""
     if kind == "procedural":
         return tube_person(**kwargs), walk_clip(), 0.0
-    from kubric import assets
-    if not hasattr(assets, "ensure_humans"):
-        pytest.skip("the humans source builder (kubric.assets.ensure_humans) is not in this tree")
-    characters, motions = assets.ensure_humans()
+    from kubric import asset_tools
+    if not hasattr(asset_tools, "ensure_humans"):
+        pytest.skip("the humans source builder (kubric.asset_tools.ensure_humans) is not in this tree")
+    characters, motions = asset_tools.ensure_humans()
     return characters.create("average", **kwargs), motions.create("cmu_01_01"), 2.0
 
 

@@ -39,7 +39,7 @@ def pytest_configure(config):
     _set_env("XDG_CACHE_HOME", str(home / "cache"))
     _set_env("BLENDER_USER_RESOURCES", str(home / "blender"))
     if config.getoption("--no-blender"):
-        from kubric.assets import ensure_kubasic
+        from kubric.asset_tools import ensure_kubasic
         if not (base / "test-assets" / "KuBasic").is_dir():
             print(f"building KuBasic into {base / 'test-assets'} (first run only, about a "
                   "minute)", file=sys.stderr, flush=True)

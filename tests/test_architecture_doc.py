@@ -86,7 +86,7 @@ def test_recipe_layer_and_task_examples_run_as_written(tmp_path, monkeypatch):
 
 
 def test_backend_example_touches_two_files_and_renders(tmp_path):
-    from kubric.assets import ensure_kubasic
+    from kubric.asset_tools import ensure_kubasic
     ensure_kubasic()  # built here (bpy makes one of its shapes), so the worker below needs no bpy
     code = blocks()
     package = tmp_path / "pkg"

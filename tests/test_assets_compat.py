@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 
 import kubric as kb
-from kubric import randomness
 from kubric.asset_tools.writer import Collision, package_object
 from kubric.assets.asset_source import AssetSource
+from kubric.core import rng as rng_policy
 from kubric.randomness import WorkerRandomState, bind_worker_rng
 
 BASE = {"sun": (11.6608, -6.62799, 25.8232), "lamp_back": (-1.1685, 2.64602, 5.81574),
@@ -62,7 +62,7 @@ def test_clevr_lights_values_and_jitter():
 
 def test_clevr_lights_rng_none_rule():
     # without a kb.setup rng: upstream's unseeded default (warns once; not reproducible)
-    randomness._warned.discard("kb.assets.utils.get_clevr_lights")
+    rng_policy._warned.discard("kb.assets.utils.get_clevr_lights")
     with pytest.warns(UserWarning, match="get_clevr_lights called without rng="):
         kb.assets.utils.get_clevr_lights()
     rng = WorkerRandomState(3)

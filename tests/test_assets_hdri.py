@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 import kubric as kb
-from kubric.asset_tools import hdri
+from kubric.asset_tools import ensure_hdri_source, hdri
 from kubric.asset_tools.hdri import bpy_world_hdri_dir, build_hdri_source
-from kubric.assets import AssetSource, ensure_hdri_source
+from kubric.assets import AssetSource
 
 
 @pytest.fixture(autouse=True)

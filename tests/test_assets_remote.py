@@ -17,7 +17,7 @@ import pytest
 from http_helpers import serve
 
 import kubric as kb
-from kubric.assets import ensure_kubasic
+from kubric.asset_tools import ensure_kubasic
 from kubric.assets.asset_source import ManifestError
 from kubric.assets.remote_source import RemoteSourceError, cache_folder
 

@@ -16,10 +16,9 @@ PACKAGE = pathlib.Path(kubric.__file__).parent
 RUNTIME = sorted(p.stem for p in (PACKAGE / "assets").glob("*.py") if p.stem != "__init__")
 TOOLS = sorted(p.stem for p in (PACKAGE / "asset_tools").glob("*.py") if p.stem != "__init__")
 HEAVY = ("bpy", "pybullet", "trimesh", "torch", "tensorflow", "jax", "dask", "grain")
-#: the runtime's documented lazy imports of build tools: sources built on demand
-ON_DEMAND = {("__init__", "ensure_kubasic"), ("__init__", "ensure_hdri_source"),
-             ("__init__", "ensure_pybullet_collection"), ("__init__", "ensure_humans"),
-             ("articulated", "export_link_meshes")}
+#: the runtime's lazy imports of build tools: none (the first-use builds are
+#: kubric.asset_tools.ensure_*, the GLB writer is kubric.assets.glb)
+ON_DEMAND: set = set()
 
 
 def _run(code: str) -> dict:
@@ -104,7 +103,7 @@ def test_the_import_scan_sees_imports():
 
 
 def test_a_worker_opens_and_extracts_a_built_source_with_the_runtime_only(tmp_path):
-    from kubric.assets import ensure_kubasic
+    from kubric.asset_tools import ensure_kubasic
 
     source_dir = ensure_kubasic().manifest_path.parent  # built (if needed) here, with the build tools
     scratch = tmp_path / "cache"

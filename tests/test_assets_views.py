@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import kubric as kb
-from kubric.assets import ensure_kubasic
+from kubric.asset_tools import ensure_kubasic
 
 
 @pytest.fixture(scope="module")

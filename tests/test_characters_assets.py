@@ -489,7 +489,8 @@ def test_offline_download_fails_with_one_clear_line(tmp_path, monkeypatch):
 
 @needs_cmu
 def test_ensure_humans_builds_once_into_the_cache():
-    from kubric.assets import cache_dir, ensure_humans
+    from kubric.asset_tools import ensure_humans
+    from kubric.assets import cache_dir
     chars, clips = ensure_humans()
     assert chars.manifest_path.is_relative_to(cache_dir())
     assert "average" in chars and "cmu_01_01" in clips and "deepmimic_walk" in clips

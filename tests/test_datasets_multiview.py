@@ -41,10 +41,10 @@ def kubric_cli(*args):
 @pytest.fixture(scope="module")
 def packed(tmp_path_factory):
     """{recipe: (scenes dir, dataset dir)}; svr draws from a KuBasic copy with categories."""
-    from kubric import assets
+    from kubric import asset_tools
     from kubric.recipes.klevr import with_categories
     root = tmp_path_factory.mktemp("mvdata")
-    source = with_categories(assets.ensure_kubasic(), CATEGORIES, root / "toys")
+    source = with_categories(asset_tools.ensure_kubasic(), CATEGORIES, root / "toys")
     out = {}
     for recipe, (count, options) in RUNS.items():
         if recipe == "svr":

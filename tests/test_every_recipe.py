@@ -80,9 +80,9 @@ def _kubric(*args, timeout=600):
 
 @pytest.fixture(scope="module")
 def toys(tmp_path_factory):
-    from kubric import assets
+    from kubric import asset_tools
     from kubric.recipes.klevr import with_categories
-    return with_categories(assets.ensure_kubasic(), TOY_CATEGORIES,
+    return with_categories(asset_tools.ensure_kubasic(), TOY_CATEGORIES,
                            tmp_path_factory.mktemp("toys") / "toys")
 
 

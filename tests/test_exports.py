@@ -146,12 +146,12 @@ def test_coco_multiview(scenes, tmp_path):
 def test_coco_asset_categories(scenes, tmp_path):
     """movi_c: categories are the default objects collection's, in sorted order."""
     pytest.importorskip("pycocotools")
-    from kubric import assets
+    from kubric import asset_tools
     out = tmp_path / "movi_c.json"
     assert kubric("export", "coco", scenes / "movi_c", "--out", out).returncode == 0
     coco, n_ann = _check_coco(out, scenes / "movi_c", "asset category")
     meta = file_io.read_json(scenes / "movi_c" / "scene_00000002" / "metadata.json")
-    source = assets.ensure_pybullet_collection(limit=meta["flags"]["collection_limit"])
+    source = asset_tools.ensure_pybullet_collection(limit=meta["flags"]["collection_limit"])
     assert [c["name"] for c in coco.dataset["categories"]] == source.categories
     assert n_ann >= 3
 
@@ -202,7 +202,7 @@ def test_bop(scenes, tmp_path, recipe):
     klevr: a multi-view scene without a z layer (z-depth from the distance layer)."""
     import trimesh
 
-    from kubric import assets
+    from kubric import asset_tools
     out = tmp_path / "bop"
     proc = kubric("export", "bop", scenes / recipe, "--out", out)
     assert proc.returncode == 0, proc.stderr
@@ -225,8 +225,8 @@ def test_bop(scenes, tmp_path, recipe):
     hits, gaps, errors = [], [], []
     for scene_dir in sorted((scenes / recipe).glob("scene_*")):
         meta = file_io.read_json(scene_dir / "metadata.json")
-        source = assets.ensure_pybullet_collection(limit=meta["flags"]["collection_limit"]) \
-            if recipe == "movi_c" else assets.ensure_kubasic()
+        source = asset_tools.ensure_pybullet_collection(limit=meta["flags"]["collection_limit"]) \
+            if recipe == "movi_c" else asset_tools.ensure_kubasic()
         bounds = {a: source.db[a]["kwargs"]["bounds"] for a in source.all_asset_ids}
         w, h = meta["metadata"]["resolution"]
         bop = out / "train_pbr" / f"{meta['metadata']['seed']:06d}"

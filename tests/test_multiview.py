@@ -48,9 +48,9 @@ def run_worker(recipe, out, seed, options, timeout=300):
 
 
 def kubasic_with_categories(out, categories):
-    from kubric import assets
+    from kubric import asset_tools
     from kubric.recipes.klevr import with_categories
-    return with_categories(assets.ensure_kubasic(), categories, out)
+    return with_categories(asset_tools.ensure_kubasic(), categories, out)
 
 
 @pytest.fixture(scope="module")

@@ -37,7 +37,7 @@ def _grow(mask):
 
 
 def test_asset_k_in_every_view_on_a_transparent_background(scenes):
-    from kubric.assets import ensure_kubasic
+    from kubric.asset_tools import ensure_kubasic
 
     ids = [i for i in ensure_kubasic().all_asset_ids if i != "dome"]
     for seed, scene_dir in scenes.items():

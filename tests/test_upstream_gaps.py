@@ -16,6 +16,7 @@ import pytest
 import kubric as kb
 from kubric import file_io, randomness
 from kubric.core import objects as core_objects
+from kubric.core import rng as rng_policy
 from kubric.pipeline import get_recipe
 from kubric.pipeline.worker import run_scene
 
@@ -29,7 +30,7 @@ def test_upstream_defaulted_functions_run_without_rng_and_warn_once():
     """examples/simulator.py calls resample_while without rng, examples/keyframing.py
     get_clevr_lights(); both had an unseeded default generator upstream."""
     _no_worker_rng()
-    randomness._warned.clear()
+    rng_policy._warned.clear()
     cube = kb.Cube(scale=0.2)
     with pytest.warns(randomness.UnseededRandomnessWarning, match="resample_while"):
         trials = kb.resample_while(cube, [kb.position_sampler([[-1, -1, 0], [1, 1, 1]])],

@@ -88,7 +88,7 @@ def test_upstream_style_script_runs_unchanged(tmp_path):
     import subprocess
     import sys
 
-    from kubric.assets import ensure_kubasic
+    from kubric.asset_tools import ensure_kubasic
     root = pathlib.Path(__file__).resolve().parents[1]
     kubasic = ensure_kubasic().manifest_path
     out = tmp_path / "job"

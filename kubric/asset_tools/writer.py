@@ -26,6 +26,7 @@ import numpy as np
 
 from kubric.asset_tools import physics
 from kubric.assets.archive import write_archive
+from kubric.assets.glb import write_visual_glb
 from kubric.errors import InputError
 
 OBJ_IMPORT_KWARGS = {"forward_axis": "Y", "up_axis": "Z"}  # z-up OBJ into Blender unchanged
@@ -169,14 +170,6 @@ def _write_visual_obj(mesh, path: Path, material: str | None = None) -> None:
             raise InputError("a textured OBJ needs UVs: the mesh has none (or not one per vertex)")
         lines += ["f " + " ".join(str(i + 1) for i in face) for face in mesh.faces]
     path.write_text("\n".join(lines) + "\n")
-
-
-def write_visual_glb(mesh, path: Path) -> None:
-    """GLB in glTF's y-up convention: (x, y, z) z-up → (x, z, -y)."""
-    to_gltf = np.array([[1, 0, 0, 0], [0, 0, 1, 0], [0, -1, 0, 0], [0, 0, 0, 1]], dtype=float)
-    m = mesh.copy()
-    m.apply_transform(to_gltf)
-    path.write_bytes(m.export(file_type="glb"))
 
 
 def package_object(asset_id: str, visual, out_dir: str | os.PathLike, *, collision: Collision,

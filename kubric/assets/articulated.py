@@ -3,7 +3,8 @@
 :func:`link_visuals` reads a URDF's ``<link><visual>`` elements (``origin`` xyz / rpy; geometry
 ``mesh`` (file + ``scale``), ``box``, ``sphere``, ``cylinder`` or ``capsule``, axis z) and
 :func:`export_link_meshes` writes one GLB per link that has visuals, in that link's URDF frame
-(metres, z up; glTF files are y up, so Blender's importer brings them in z up).
+(metres, z up; written by :func:`kubric.assets.glb.write_visual_glb`: glTF files are y up, so
+Blender's importer brings them in z up).
 
 :func:`add_articulated` adds such a URDF to a scene: the base link is a
 :class:`~kubric.core.objects.FileBasedObject` whose ``simulation_filename`` is the URDF (PyBullet
@@ -21,6 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
+from kubric.assets.glb import write_visual_glb
 from kubric.core.objects import FileBasedObject
 from kubric.errors import InputError
 
@@ -104,8 +106,6 @@ def link_visuals(urdf: str | os.PathLike) -> dict[str, object]:
 
 def export_link_meshes(urdf: str | os.PathLike, out_dir: str | os.PathLike) -> dict[str, Path]:
     """Write ``<out_dir>/<link>.glb`` for every link with visuals; returns ``{link: path}``."""
-    from kubric.asset_tools.writer import write_visual_glb
-
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     paths = {}

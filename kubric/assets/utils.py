@@ -12,7 +12,7 @@ import numpy as np
 
 from kubric.assets import clevr
 from kubric.core import lights as core_lights
-from kubric.randomness import require_rng
+from kubric.core.rng import require_rng
 
 
 def _unit_cube_sample(rng) -> np.ndarray:
@@ -31,7 +31,7 @@ def get_clevr_lights(light_jitter: float = 1.0, rng=None) -> list:
       rng: ``numpy.random.RandomState`` or ``Generator``, drawn from three numbers per light in
         the order of :data:`kubric.assets.clevr.LIGHTS`. ``None`` means the worker rng bound by
         ``kb.setup``, else (as upstream) an unseeded generator whose jitter is not reproducible
-        (see :mod:`kubric.randomness`).
+        (see :mod:`kubric.core.rng`).
     Returns:
       ``[sun (DirectionalLight), lamp_back, lamp_key, lamp_fill (RectAreaLight)]``, not yet
       added to any scene (``scene += get_clevr_lights(rng=rng)`` adds them all).

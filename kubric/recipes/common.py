@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from kubric import assets
+from kubric import asset_tools
 from kubric.assets.asset_source import ManifestError
 from kubric.assets.remote_source import RemoteSourceError, is_remote, local_path
 from kubric.io import storage
@@ -55,7 +55,7 @@ def kubasic_sources(kubasic_source) -> dict:
     """``{"kubasic": source}``: the folder given by the option, else the locally built KuBasic."""
     if kubasic_source is not None:
         return {"kubasic": open_existing_source(kubasic_source, "kubasic_source")}
-    return {"kubasic": assets.ensure_kubasic()}
+    return {"kubasic": asset_tools.ensure_kubasic()}
 
 
 def check_source_options(recipe, names=None) -> None:

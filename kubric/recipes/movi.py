@@ -42,7 +42,7 @@ import abc
 import numpy as np
 
 import kubric as kb
-from kubric import assets
+from kubric import asset_tools
 from kubric.assets import clevr
 from kubric.assets.utils import get_clevr_lights
 from kubric.pipeline import Option, OptionError, float_range
@@ -237,9 +237,9 @@ class MoviC(MoviBase, name="movi_c"):
         sources = super().open_sources()
         sources["objects"] = open_existing_source(self.objects_source, "objects_source") \
             if self.objects_source is not None else \
-            assets.ensure_pybullet_collection(limit=self.collection_limit)
+            asset_tools.ensure_pybullet_collection(limit=self.collection_limit)
         sources["hdri"] = open_existing_source(self.hdri_source, "hdri_source") \
-            if self.hdri_source is not None else assets.ensure_hdri_source()
+            if self.hdri_source is not None else asset_tools.ensure_hdri_source()
         for key in ("objects", "hdri"):
             categories = self.object_categories if key == "objects" else None
             try:

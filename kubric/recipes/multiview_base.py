@@ -37,7 +37,7 @@ import tempfile
 import numpy as np
 
 import kubric as kb
-from kubric import assets
+from kubric import asset_tools
 from kubric.core import camera_geometry as geo
 from kubric.datasets.exports import nerf
 from kubric.io.layers import LAYERS
@@ -125,7 +125,7 @@ def sized_object(source, asset_id: str, size: float):
 
 def open_hdri_source(path):
     """The HDRI source at ``path``, or the HDRIs shipped with bpy when None."""
-    return assets.ensure_hdri_source() if path is None else open_source(path, "hdri_source")
+    return asset_tools.ensure_hdri_source() if path is None else open_source(path, "hdri_source")
 
 
 def sphere_cap_positions(rng, count: int, distance, elevation_deg, target) -> np.ndarray:

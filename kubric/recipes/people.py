@@ -53,13 +53,13 @@ def open_people_sources(character_source, motion_source) -> dict:
             out[key] = open_existing_source(value, f"{key[:-1]}_source")
         else:
             if humans is None:
-                from kubric import assets
-                if not hasattr(assets, "ensure_humans"):
-                    raise OptionError("the default humans source needs kubric.assets."
+                from kubric import asset_tools
+                if not hasattr(asset_tools, "ensure_humans"):
+                    raise OptionError("the default humans source needs kubric.asset_tools."
                                       "ensure_humans (`kubric assets humans`), which this "
                                       "installation lacks; give character_source=procedural "
                                       "motion_source=procedural or source folders")
-                humans = assets.ensure_humans()
+                humans = asset_tools.ensure_humans()
             out[key] = humans[0] if key == "characters" else humans[1]
     return out
 

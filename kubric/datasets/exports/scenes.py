@@ -16,7 +16,7 @@ from __future__ import annotations
 import dataclasses
 import pathlib
 
-from kubric import assets
+from kubric import asset_tools
 from kubric.errors import InputError
 from kubric.io import scene_dir
 from kubric.io.json_io import read_json
@@ -112,7 +112,7 @@ def objects_sources(flags: dict, extra=()) -> list:
         if isinstance(value, str) and value:
             out.append(kb.AssetSource(value))
     if "collection_limit" in flags and flags.get("objects_source") is None:
-        out.append(assets.ensure_pybullet_collection(limit=flags.get("collection_limit")))
+        out.append(asset_tools.ensure_pybullet_collection(limit=flags.get("collection_limit")))
     return out
 
 
@@ -123,7 +123,7 @@ def model_sources(flags: dict, extra=()) -> list:
 
     kubasic = flags.get("kubasic_source")
     return objects_sources(flags, extra) + [kb.AssetSource(kubasic) if kubasic
-                                            else assets.ensure_kubasic()]
+                                            else asset_tools.ensure_kubasic()]
 
 
 __all__ = ["ExportError", "ID_BASE", "Scene", "annotation_id", "find_scenes", "image_id",
