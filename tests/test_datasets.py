@@ -206,12 +206,6 @@ def test_no_tensorflow_after_load_and_decode(packed):
     assert proc.returncode == 0 and "no tensorflow" in proc.stdout, proc.stderr[-2000:]
 
 
-def test_to_tf_without_tensorflow_is_one_line(packed):
-    from kubric.datasets.adapters import to_tf
-    with pytest.raises(layout.DatasetError, match="tf.data needs TensorFlow"):
-        to_tf(packed[1], "train")
-
-
 def test_tasks_video_frames(packed):
     _, out = packed
     full = load(out, "train")

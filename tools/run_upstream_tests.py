@@ -10,8 +10,14 @@ temporary directory and run there with this interpreter's pytest, isolated from 
 pytest configuration and fixtures, so they see the package exactly as a user's script would.
 
 Upstream's tests import ``traitlets``, ``pyquaternion`` and ``hypothesis`` (and ``tensorflow`` for
-its old dataset tests). These are not dependencies of this package: install them into any folder
-(``pip install --target DIR traitlets pyquaternion``) and pass ``--extra-path DIR``.
+its old dataset tests). These are not dependencies of this package: ``--install-deps DIR`` installs
+into DIR those of them this environment lacks, and puts DIR on the tests' path. It never installs a
+package the environment already has (above all numpy: a plain ``pip install --target DIR
+pyquaternion`` also puts the newest numpy into DIR, which then shadows the environment's, and
+``import bpy`` fails there): pip runs with ``--no-deps``, then every requirement of what landed in
+DIR must be met by DIR or the environment — a missing one is installed the same way, one the
+environment has in a version that does not fit stops with one line. ``--extra-path DIR`` adds a
+folder you filled yourself.
 
 A module that cannot be imported counts all of its tests as failed; their number is read from the
 module's source (``test_*`` functions and methods, times the length of literal
@@ -23,6 +29,7 @@ from __future__ import annotations
 import argparse
 import ast
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -98,15 +105,93 @@ def _outcomes(junit: Path) -> tuple[dict[str, str], dict[str, str]]:
     return outcomes, broken
 
 
+#: what upstream's unit tests import beyond this package's own dependencies
+UPSTREAM_TEST_DEPS = ("traitlets", "pyquaternion", "hypothesis")
+
+
+def _canonical(name: str) -> str:
+    return re.sub(r"[-_.]+", "-", name).lower()
+
+
+def _env_version(name: str) -> str | None:
+    """The version of distribution ``name`` installed in this environment, or None."""
+    from importlib import metadata
+    try:
+        return metadata.version(name)
+    except metadata.PackageNotFoundError:
+        return None
+
+
+def install_command(target: Path, packages) -> list[str]:
+    """The pip command that installs ``packages`` into ``target`` and nothing else (no deps)."""
+    return [sys.executable, "-m", "pip", "install", "--quiet", "--disable-pip-version-check",
+            "--no-deps", "--target", str(target), *packages]
+
+
+def unmet_requirements(target: Path) -> list[str]:
+    """Requirements of the distributions in ``target`` that neither ``target`` nor this
+    environment has; ``SystemExit`` (one line) for one the environment has in a version that does
+    not satisfy it (installing it into ``target`` would shadow the environment's)."""
+    from importlib import metadata
+
+    from packaging.requirements import Requirement
+    local = {_canonical(d.metadata["Name"]): d.version
+             for d in metadata.distributions(path=[str(target)])}
+    unmet = []
+    for dist in metadata.distributions(path=[str(target)]):
+        for text in dist.requires or ():
+            req = Requirement(text)
+            if req.marker is not None and not req.marker.evaluate({"extra": ""}):
+                continue
+            name = _canonical(req.name)
+            env = None if name in local else _env_version(req.name)
+            have = local.get(name, env)
+            if have is None:
+                unmet.append(f"{req.name}{req.specifier}")  # its marker holds here
+            elif env is not None and not req.specifier.contains(have, prereleases=True):
+                raise SystemExit(f"run_upstream_tests: {dist.metadata['Name']} needs {req}, but "
+                                 f"this environment has {req.name} {have}; not installing a "
+                                 f"second copy into {str(target)!r}")
+    return sorted(set(unmet))
+
+
+def install_deps(target: Path, packages=UPSTREAM_TEST_DEPS, run=subprocess.run) -> list[str]:
+    """Install into ``target`` the ``packages`` this environment lacks and, in turn, their
+    requirements that neither has (module doc). Returns what was installed."""
+    from importlib import metadata
+    target.mkdir(parents=True, exist_ok=True)
+    wanted = sorted({p for p in packages if _env_version(p) is None})
+    installed: list[str] = []
+    for _ in range(10):
+        if not wanted:
+            break
+        run(install_command(target, wanted), check=True)
+        installed += wanted
+        wanted = unmet_requirements(target)
+    shadowing = sorted(_canonical(d.metadata["Name"])
+                       for d in metadata.distributions(path=[str(target)])
+                       if _env_version(d.metadata["Name"]) is not None)
+    if wanted or shadowing:
+        raise SystemExit(f"run_upstream_tests: {str(target)!r}: still unmet {wanted}, or "
+                         f"shadowing this environment's {shadowing}")
+    return installed
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("path", type=Path, help="upstream Kubric's test/ folder (or checkout)")
     parser.add_argument("--extra-path", action="append", default=[],
                         help="folder added to PYTHONPATH (e.g. holding traitlets, pyquaternion)")
+    parser.add_argument("--install-deps", type=Path, metavar="DIR", default=None,
+                        help="install the upstream tests' imports this environment lacks into "
+                             "DIR (never numpy or anything else it has) and add DIR to the path")
     parser.add_argument("-k", dest="keyword", default=None, help="pytest -k expression")
     parser.add_argument("--show-passed", action="store_true", help="list passed tests too")
     args = parser.parse_args(argv)
     source = _find_test_dir(args.path.resolve())
+    if args.install_deps is not None:
+        install_deps(args.install_deps.resolve())
+        args.extra_path.append(args.install_deps)
 
     with tempfile.TemporaryDirectory(prefix="kubric_upstream_tests_") as tmp:
         work = Path(tmp) / "test"

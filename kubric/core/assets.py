@@ -12,6 +12,8 @@ upstream Kubric's (traitlets') ``asset.observe(handler, names, type="change" | "
 Keyframe interpolation (``get_value_at``, ``at_frame``, ``get_values_over_time``): vectors and
 scalars interpolate **linearly**, quaternions by **slerp** (shorter arc), anything else holds the
 previous keyframe. Before the first / after the last keyframe the first / last value is held.
+Keys may sit at fractional frames (as in upstream Kubric and Blender): rendered frames are whole,
+so a fractional key changes what is rendered only through this interpolation (docs/conventions.md).
 Renderer views must key Blender with linear interpolation so Blender's motion matches this.
 """
 
@@ -37,7 +39,7 @@ class Asset(kt.HasProperties):
     Attributes:
       uid: read-only id, unique in the asset's scene: given by the first scene the asset joins
         (``name``, ``name.001``, ... in joining order); the name while in no scene.
-      keyframes: ``{property: {frame: value}}``.
+      keyframes: ``{property: {frame: value}}`` (frame: int, or float when fractional).
       linked_objects: ``{view: backend object}``, filled by views.
       scenes: the scenes this asset was added to.
     """
@@ -52,7 +54,7 @@ class Asset(kt.HasProperties):
         self._uid: str | None = None  # set by the first scene the asset joins
         self.linked_objects: dict[Any, Any] = {}
         self.scenes: list = []
-        self.keyframes: dict[str, dict[int, Any]] = defaultdict(dict)
+        self.keyframes: dict[str, dict[int | float, Any]] = defaultdict(dict)
         self._init_properties(kwargs)
 
     @property
@@ -131,21 +133,36 @@ class Asset(kt.HasProperties):
             self._notify_observers("change", name, old=old, new=self._values[name])
 
     # ------------------------------------------------------------------ keyframes
-    def keyframe_insert(self, name: str, frame: int) -> None:
-        """Store the current value of property ``name`` at ``frame`` and notify every view."""
+    def _key_frame(self, frame) -> int | float:
+        """A keyframe's frame: an integer, or a finite real number as upstream / Blender accept
+        (a key at a fractional time); an integral float (``1.0``) is the integer frame."""
+        if isinstance(frame, bool) or not isinstance(frame, (int, float, np.integer,
+                                                             np.floating)):
+            raise TypeError(f"{self.uid}: keyframe frame must be a number (int or float), got "
+                            f"{frame!r}")
+        value = float(frame)
+        if not np.isfinite(value):
+            raise ValueError(f"{self.uid}: keyframe frame must be finite, got {frame!r}")
+        return int(value) if value.is_integer() else value
+
+    def keyframe_insert(self, name: str, frame: int | float) -> None:
+        """Store the current value of property ``name`` at ``frame`` and notify every view.
+
+        ``frame`` may be fractional (``1.5``: halfway between frames 1 and 2); an integral float
+        is that integer frame, so ``keyframe_insert(n, 1.0)`` and ``(n, 1)`` are the same key.
+        Values between keys interpolate as the module doc says, fractional keys included."""
         self.get_property(name)  # raises KeyError naming the allowed properties
-        if isinstance(frame, bool) or not isinstance(frame, (int, np.integer)):
-            raise TypeError(f"{self.uid}: keyframe frame must be an integer, got {frame!r}")
-        frame = int(frame)
+        frame = self._key_frame(frame)
         self.keyframes[name][frame] = self._values[name]
         for view in self.views:
             view.on_keyframe(self, name, frame)
         self._notify_observers("keyframe", name, frame=frame)
 
-    def keyframe_delete(self, name: str, frame: int) -> None:
+    def keyframe_delete(self, name: str, frame: int | float) -> None:
         """Remove the keyframe of ``name`` at ``frame`` and notify every view; a missing one is a
         ``KeyError`` naming the frames that exist."""
         self.get_property(name)
+        frame = self._key_frame(frame)
         frames = self.keyframes.get(name, {})
         if frame not in frames:
             raise KeyError(f"{self.uid} has no keyframe of {name!r} at frame {frame}; "

@@ -3,7 +3,8 @@
 * :func:`to_torch` — a ``torch.utils.data.Dataset`` (works in ``DataLoader(num_workers=...)``);
   :func:`torch_collate` batches items whose arrays agree in shape and keeps the rest as lists;
 * :func:`to_grain` — a Grain ``MapDataset`` (random access, shuffling, batching for JAX);
-* :func:`to_tf` — a ``tf.data.Dataset`` through TFDS, only when TensorFlow is installed.
+* :func:`to_tf` — a ``tf.data.Dataset`` decoded by TFDS's feature connectors in TensorFlow (needs
+  TensorFlow: the ``tf`` extra).
 
 Each imports its framework only when called.
 """
@@ -58,11 +59,34 @@ def to_grain(source, shuffle_seed: int | None = None, batch_size: int | None = N
     return dataset
 
 
-def to_tf(dataset_dir, split: str):
-    """``split`` as a ``tf.data.Dataset`` (TFDS's reader). Needs TensorFlow, which kubric does
-    not depend on: without it, a one-line :class:`DatasetError`."""
+def to_tf(dataset_dir, split: str = "train"):
+    """``split`` as a ``tf.data.Dataset`` of examples decoded in TensorFlow by the dataset's own
+    TFDS feature connectors (``FeaturesDict.deserialize_example``), as ``tfds.load`` gives them:
+    nested dicts of tensors; text is ``tf.string``; the per-instance ragged features
+    (``instances/bboxes``, ``instances/bbox_frames``) are ``tf.RaggedTensor`` (N, None, ...).
+    The values are those of :func:`kubric.datasets.load` (tested example by example).
+
+    TFDS 4.9.10's ``builder.as_dataset`` refuses ArrayRecord shards, so the serialised records
+    are read with the loader's shard reader (a fresh one per pass over the data, in the thread
+    tf.data asks from) and decoded in the graph. Needs TensorFlow, which kubric's core does not
+    depend on (``pip install 'kubric[tf]'``): without it, a one-line :class:`DatasetError`."""
     if importlib.util.find_spec("tensorflow") is None:
         raise DatasetError("tf.data needs TensorFlow, which is not installed (pip install "
-                           "tensorflow); kubric.datasets.load, to_torch and to_grain need none")
-    import tensorflow_datasets as tfds
-    return tfds.builder_from_directory(str(dataset_dir)).as_dataset(split=split)
+                           "'kubric[tf]' or tensorflow); kubric.datasets.load, to_torch and "
+                           "to_grain need none")
+    import tensorflow as tf
+
+    from kubric.datasets.source import load
+    source = load(dataset_dir, split)  # checks the directory and split now (one-line errors)
+    source._open()
+    features, count = source._features, len(source.scenes)
+
+    def records():
+        reader = load(source.dataset_dir, split)  # its own shard readers, opened in this thread
+        for index in range(count):
+            yield reader._records([index])[0]
+
+    data = tf.data.Dataset.from_generator(records,
+                                          output_signature=tf.TensorSpec((), tf.string))
+    data = data.apply(tf.data.experimental.assert_cardinality(count))
+    return data.map(features.deserialize_example, num_parallel_calls=tf.data.AUTOTUNE)

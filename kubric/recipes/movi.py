@@ -334,6 +334,10 @@ class MoviC(MoviBase, name="movi_c"):
 
     def write_outputs(self, scene, layers, collisions, seed, out_dir, background,
                       render_settings) -> list:
+        for obj in scene.foreground_assets:  # instances/category (upstream's GSO names)
+            if isinstance(obj, kb.PhysicalObject):
+                obj.metadata = {**obj.metadata, movi_schema.MOVI_CATEGORY:
+                                movi_schema.movi_category(obj.metadata)}
         if self.characters:
             from kubric.annotations.keypoints import annotate_keypoints
             annotate_keypoints(scene, layers)
@@ -463,3 +467,10 @@ class MoviF(MoviE, name="movi_f"):
 
     def motion_blur(self, rng):
         return float(rng.uniform(0.0, self.max_motion_blur))
+
+    def populate(self, scene, simulator, rng, sources):
+        """As E's, and the shutter length is recorded as ``metadata.motion_blur`` (frames;
+        upstream MOVi-F's ``metadata/motion_blur``), besides ``metadata.renderer``."""
+        background, blur = super().populate(scene, simulator, rng, sources)
+        scene.metadata["motion_blur"] = blur
+        return background, blur

@@ -138,8 +138,29 @@ MOVI_B = register_schema(MOVI_BASE.extend("movi_b", (
       doc="dome colour"),
 ), description="MOVi-B: 11 KuBasic shapes, random hue, random scale."))
 
+#: upstream MOVi-C–F's ``instances/category`` class names (the Google Scanned Objects
+#: categories, "None" for an uncategorised object), in label order
+GSO_CATEGORIES = ("Action Figures", "Bag", "Board Games", "Bottles and Cans and Cups", "Camera",
+                  "Car Seat", "Consumer Goods", "Hat", "Headphones", "Keyboard", "Legos",
+                  "Media Cases", "Mouse", "None", "Shoe", "Stuffed Toys", "Toys")
+#: the instance metadata field (metadata.json) holding an instance's GSO_CATEGORIES name
+MOVI_CATEGORY = "movi_category"
+
+
+def movi_category(metadata) -> str:
+    """An instance's ``instances/category`` name: its asset's ``category`` (or else the first of
+    its ``categories``) that is one of :data:`GSO_CATEGORIES`; "None" when neither is (an
+    uncategorised asset, or one of another collection, e.g. pybullet_data's "random_urdfs")."""
+    extra = metadata.get("categories")
+    candidates = [metadata.get("category"), *(extra if isinstance(extra, list | tuple) else ())]
+    return next((str(c) for c in candidates if str(c) in GSO_CATEGORIES), "None")
+
+
 _C_EXTRAS = (
     F("background", "str", (), "meta:background", "text", doc="HDRI id"),
+    F("instances/category", "int64", (), f"instance:{MOVI_CATEGORY}", "class_label",
+      names=GSO_CATEGORIES, doc="upstream's GSO category of the asset (the asset source's "
+      "category; \"None\" where that is not one of these)"),
     F("instances/scale", "float32", (), "instance:scale", unit="m", doc="largest extent"),
     F("instances/is_dynamic", "bool", (), "instance:is_dynamic",
       doc="moves in the simulation (false for settled static objects)"),
@@ -149,7 +170,10 @@ MOVI_C = register_schema(MOVI_BASE.extend("movi_c", _C_EXTRAS,
 MOVI_D = register_schema(MOVI_C.extend("movi_d", description="MOVi-D: settled static objects "
                                        "and a few dynamic ones."))
 MOVI_E = register_schema(MOVI_C.extend("movi_e", description="MOVi-E: as D, moving camera."))
-MOVI_F = register_schema(MOVI_C.extend("movi_f", description="MOVi-F: as E, motion blur."))
+MOVI_F = register_schema(MOVI_C.extend("movi_f", (
+    F("metadata/motion_blur", "float32", (), "meta:motion_blur", unit="frames",
+      doc="shutter length (0 = no motion blur), drawn U(0, max_motion_blur)"),
+), description="MOVi-F: as E, motion blur."))
 
 #: Point tracks (``tracks.npz``, written with ``--set tracks=N``; docs/tracks.md). Every MOVi
 #: variant has a ``<name>_tracks`` schema with these features: pack with
