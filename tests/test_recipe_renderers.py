@@ -130,6 +130,8 @@ def test_a_recipe_asks_its_backend_and_refuses_in_one_line(recipe, options, requ
         get_recipe(recipe).from_assignments(["renderer=raycast", *options])
     assert str(err.value) == (f"{recipe}: renderer=raycast cannot {request_}; backends that "
                               "can: blender")
+    if recipe == "movi_f":  # the line docs/renderers.md shows
+        assert f"kubric worker: error: {err.value}\n" in (ROOT / "docs" / "renderers.md").read_text()
     get_recipe(recipe).from_assignments(["renderer=blender", *options])  # the backend that can
 
 

@@ -8,8 +8,7 @@ import argparse
 import sys
 
 from kubric.datasets.exports import FORMATS, exporter
-from kubric.datasets.exports.scenes import ExportError
-from kubric.errors import InputError
+from kubric.errors import KubricError
 
 SCENES_HELP = "a folder of scene_* directories, or one scene directory"
 
@@ -23,7 +22,7 @@ def _run(name: str, args, **kwargs):
     """``FORMATS[name](SCENES, OUT, **kwargs)`` with its expected errors as one line (exit 2)."""
     try:
         return exporter(name)(args.scenes_dir, args.out, **kwargs), 0
-    except (ExportError, InputError, FileNotFoundError, FileExistsError, ValueError) as err:
+    except (KubricError, OSError) as err:  # ExportError is one
         return None, _error(name, err)
 
 
