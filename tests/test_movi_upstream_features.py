@@ -73,10 +73,10 @@ SCENES = {
 
 @pytest.fixture(scope="module")
 def packed(tmp_path_factory):
-    from kubric import assets
+    from kubric import asset_tools
     from kubric.recipes.klevr import with_categories
     root = tmp_path_factory.mktemp("upstream_movi")
-    objects = with_categories(assets.ensure_kubasic(), CATEGORIES, root / "objects")
+    objects = with_categories(asset_tools.ensure_kubasic(), CATEGORIES, root / "objects")
     out = {}
     for variant, options in SCENES.items():
         sets = [a for o in options + [f"objects_source={objects}"] for a in ("--set", o)]
