@@ -7,7 +7,8 @@
   a backend's settings or scene, and from ``save_state``.
 * A few recipes make tiny scenes with ``renderer=raycast`` and bpy blocked (CPU is scarce: MOVi-A
   is covered by tests/test_renderer_raycast.py): klevr (multi-view, then ``kubric export nerf``
-  read back through the transforms files) and vbr (video with its LASR sequence).
+  read back through the transforms files), vbr (video with its LASR sequence) and svr (a
+  transparent film).
 """
 
 import inspect
@@ -204,3 +205,15 @@ def test_vbr_with_raycast_writes_its_lasr_sequence(tmp_path):
     assert refused.returncode == 2 and refused.stderr.count("\n") == 1
     assert "transforms_train.json does not exist (not a multi-view scene" in refused.stderr
     assert not (tmp_path / "nerf").exists()
+
+
+def test_svr_with_raycast_has_a_transparent_film(tmp_path):
+    """svr asks its backend for a transparent film: with raycast, alpha is 0 exactly where the
+    segmentation sees no object and 255 on the object."""
+    from kubric import file_io
+
+    scene, _ = _worker("svr", tmp_path, "resolution=24x16", "num_views=3", "split_ratio=1,1,1")
+    layers = file_io.read_image_dict(scene)
+    alpha, seg = layers["rgba"][..., 3], layers["segmentation"][..., 0]
+    assert 0 < (seg > 0).mean() < 1
+    assert set(np.unique(alpha[seg == 0])) == {0} and set(np.unique(alpha[seg > 0])) == {255}
