@@ -150,3 +150,20 @@ def test_the_architecture_page_shows_this_table():
     assert list(table) == list(ALLOWED), "the page's rows, in order, are ALLOWED's layers"
     for layer, value in ALLOWED.items():
         assert table[layer] == value, (layer, table[layer], value)
+
+
+def test_the_exports_load_without_the_packer_or_the_pipeline():
+    """kubric.datasets resolves its names lazily, so a recipe importing an export (nerf, lasr)
+    does not load the packer or the pipeline through the package's __init__."""
+    import subprocess
+    import sys
+
+    code = ("import sys, kubric.datasets.exports.nerf, kubric.datasets.exports.lasr, "
+            "kubric.datasets.exports.tapvid; print(sorted(m for m in sys.modules if "
+            "m.startswith(('kubric.pipeline', 'kubric.recipes', 'kubric.datasets.packer', "
+            "'kubric.datasets.source'))))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert out.stdout.strip() == "[]"
+    from kubric.datasets import load, pack  # the names still resolve
+    assert callable(load) and callable(pack)
