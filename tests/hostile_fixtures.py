@@ -44,10 +44,11 @@ class Tiny(Recipe, name=NAME):
     def generate(self, seed, out_dir):
         rng = np.random.RandomState(seed)
         rgba = rng.randint(0, 256, size=(T, H, W, 4)).astype(np.uint8)
-        np.savez(out_dir / "toy_points.npz", target_points=rng.rand(3, T, 2).astype(np.float32))
+        points = {"target_points": rng.rand(3, T, 2).astype(np.float32)}
         metadata = {"flags": self.flags(seed),
                     "metadata": {"resolution": [W, H], "num_frames": T, "seed": seed}}
-        write_scene(self.schema, out_dir, {"rgba": rgba}, metadata)
+        write_scene(self.schema, out_dir, {"rgba": rgba}, metadata,
+                    files={"toy_points.npz": points})
 
 
 def make_scenes(root, count: int = 6) -> pathlib.Path:

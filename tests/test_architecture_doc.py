@@ -1,13 +1,18 @@
 """docs/architecture.md's worked examples, run as written: the recipe (with its extra layer) makes
-a scene without Blender that packs, loads through the example task and shows in the viewer; the
-backend, added to a copy of the package, changes exactly the files the page says and renders a
-MOVi-A scene; the page's file counts are the ones measured here."""
+a scene without Blender; the page's own commands then inspect, pack and view it in fresh
+processes that cannot import the recipe (its file is gone: the scene's schema.json says it all);
+the dataset loads through the example task; the backend, added to a copy of the package, changes
+exactly the files the page says and renders a MOVi-A scene; the page's file counts are the ones
+measured here."""
 
+import contextlib
 import filecmp
+import http.client
 import json
 import os
 import pathlib
 import re
+import shlex
 import shutil
 import subprocess
 import sys
@@ -34,12 +39,48 @@ def files_touched(section: str) -> int:
     return int(re.search(r"\*\*Files touched: (\d+)\*\*", text).group(1))
 
 
+def example_commands() -> list[list[str]]:
+    """The ``kubric ...`` command lines of Example 1's shell block, split into arguments."""
+    text = DOC.read_text().split("## Example 1", 1)[1].split("## Example 2", 1)[0]
+    block = re.search(r"```sh\n(.*?)```", text, re.S).group(1)
+    return [shlex.split(line) for line in block.splitlines() if line.strip()]
+
+
+def _env(pythonpath) -> dict:
+    return dict(os.environ, PYTHONPATH=os.pathsep.join(map(str, pythonpath)))
+
+
 def kubric(*args, cwd, pythonpath):
-    env = dict(os.environ, PYTHONPATH=os.pathsep.join(map(str, pythonpath)))
-    proc = subprocess.run([sys.executable, "-m", "kubric", *map(str, args)], cwd=cwd, env=env,
-                          capture_output=True, text=True, timeout=600)
+    proc = subprocess.run([sys.executable, "-m", "kubric", *map(str, args)], cwd=cwd,
+                          env=_env(pythonpath), capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, (args, proc.stdout[-2000:], proc.stderr[-3000:])
     return proc
+
+
+@contextlib.contextmanager
+def kubric_view(*args, cwd, pythonpath):
+    """A ``kubric view ARGS --port 0`` server in a fresh process; yields (host, port)."""
+    proc = subprocess.Popen([sys.executable, "-m", "kubric", *map(str, args), "--port", "0"],
+                            cwd=cwd, env=_env(pythonpath), stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    try:
+        line = proc.stdout.readline()
+        match = re.search(r"http://([^:/]+):(\d+)/", line)
+        assert match, (line, proc.stderr.read() if proc.poll() is not None else "")
+        yield match.group(1), int(match.group(2))
+    finally:
+        proc.terminate()
+        proc.wait(timeout=30)
+
+
+def http_get(host: str, port: int, path: str) -> tuple[int, str, bytes]:
+    conn = http.client.HTTPConnection(host, port, timeout=60)
+    try:
+        conn.request("GET", path)
+        response = conn.getresponse()
+        return response.status, response.getheader("Content-Type"), response.read()
+    finally:
+        conn.close()
 
 
 def test_the_page_marks_every_example():
@@ -54,22 +95,39 @@ def test_recipe_layer_and_task_examples_run_as_written(tmp_path, monkeypatch):
     code = blocks()
     for name in ("spheres.py", "height_task.py"):
         (tmp_path / name).write_text(code[("file", name)])
-    # Example 1 + 2: one module; the scene is made with bpy blocked, then packed from the CLI
-    kubric("worker", "spheres.py:Spheres", "--seed", 1, "--out", "out", cwd=tmp_path,
-           pythonpath=[NO_BPY, ROOT])
+    worker, inspect, pack, view = example_commands()
+    assert [c[:2] for c in (worker, inspect, pack, view)] == [
+        ["kubric", "worker"], ["kubric", "inspect"], ["kubric", "pack"], ["kubric", "view"]]
+    assert "--schema" not in pack  # the scenes carry their schema
+    # Example 1 + 2: one module; the scene is made with bpy blocked
+    kubric(*worker[1:], cwd=tmp_path, pythonpath=[NO_BPY, ROOT])
     scene = tmp_path / "out" / scene_dir.scene_name(1)
     assert scene_dir.is_complete(scene)
     assert sorted(p.name for p in scene.glob("height_*.tiff")) == [
         f"height_{i:05d}.tiff" for i in range(4)]
-    kubric("pack", "out", "--out", "ds", "--schema", "spheres.py:Spheres", "--splits", "train=1",
-           "--verify", cwd=tmp_path, pythonpath=[ROOT])
+    stored = json.loads((scene / scene_dir.SCHEMA_FILE).read_text())
+    assert stored["name"] == "spheres" and stored["layers"]["height"]["kind"] == "tiff"
+    assert stored["options"]["num_spheres"] == 3
+    # from here on no process can import the recipe: its file is gone
+    (tmp_path / "spheres.py").unlink()
+    report = kubric(*inspect[1:], cwd=tmp_path, pythonpath=[ROOT]).stdout
+    assert re.search(r"^  height +\(4, 48, 64, 1\) +float32", report, re.M), report
+    assert "schema spheres (from schema.json): 7 features, every source present" in report
+    packed = kubric(*pack[1:], cwd=tmp_path, pythonpath=[ROOT]).stdout
+    assert "schema: spheres, stored by the scenes (schema.json)" in packed, packed
+    with kubric_view(*view[1:], cwd=tmp_path, pythonpath=[ROOT]) as (host, port):
+        status, _, body = http_get(host, port, "/api/scenes")
+        assert status == 200
+        row, = json.loads(body)["scenes"]
+        assert row["layers"] == ["rgba", "depth", "segmentation", "height"], row
+        status, kind, png = http_get(host, port, f"/api/frame/{scene.name}/height/2.png")
+        assert (status, kind) == (200, "image/png") and png.startswith(b"\x89PNG")
     # Example 4: the task reads the new layer, equal to the files the recipe wrote
     monkeypatch.syspath_prepend(str(tmp_path))
     import height_task  # noqa: F401  (registers the task)
-    import spheres
 
     from kubric.datasets import load
-    frames = load(tmp_path / "ds", "train", task="height_maps")
+    frames = load(tmp_path / "spheres_ds", "train", task="height_maps")
     assert len(frames) == 4
     for t in range(4):
         item = frames[t]
@@ -78,11 +136,8 @@ def test_recipe_layer_and_task_examples_run_as_written(tmp_path, monkeypatch):
     meta = json.loads((scene / scene_dir.METADATA_FILE).read_text())
     top = max(p[2] for inst in meta["instances"] for p in inst["positions"]) + 0.4
     assert 0.3 < float(frames[0]["height"].max()) <= top + 1e-3  # a sphere's top, radius 0.4
-    # the viewer lists and draws the layer through the recipe's schema
-    from kubric.viewer.source import DirectorySource
-    assert spheres.Spheres.schema.name == "spheres"
-    source = DirectorySource(tmp_path / "out")
-    assert source.summary(scene.name)["layers"] == ["rgba", "depth", "segmentation", "height"]
+    assert "spheres" not in sys.modules and not any(
+        getattr(m, "__file__", None) == str(tmp_path / "spheres.py") for m in list(sys.modules.values()))
 
 
 def test_backend_example_touches_two_files_and_renders(tmp_path):

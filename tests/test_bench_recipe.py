@@ -24,7 +24,7 @@ def test_bench_scene_is_complete_documented_and_deterministic(tmp_path):
     c = run_scene(Bench(), 6, tmp_path / "c").path
     names = sorted(p.name for p in a.iterdir())
     assert names == [SUCCESS, "events.json", "metadata.json", "rgba_00000.png", "rgba_00001.png",
-                     "segmentation_00000.png", "segmentation_00001.png"]
+                     "schema.json", "segmentation_00000.png", "segmentation_00001.png"]
     same = [n for n in names if n != SUCCESS]
     assert all((a / n).read_bytes() == (b / n).read_bytes() for n in same)
     assert (a / "rgba_00000.png").read_bytes() != (c / "rgba_00000.png").read_bytes()

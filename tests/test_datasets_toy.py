@@ -42,11 +42,11 @@ class ToyLayers(Recipe, name="test_toy_layers"):
 
     def generate(self, seed, out_dir):
         rgba, albedo, weights, tracks = toy_layers(seed)
-        np.savez(out_dir / "toy_points.npz", target_points=tracks)
         metadata = {"flags": self.flags(seed),
                     "metadata": {"resolution": [W, H], "num_frames": T, "seed": seed},
                     "instances": [{"weight": w} for w in weights]}
-        write_scene(self.schema, out_dir, {"rgba": rgba, "albedo": albedo}, metadata)
+        write_scene(self.schema, out_dir, {"rgba": rgba, "albedo": albedo}, metadata,
+                    files={"toy_points.npz": {"target_points": tracks}})
 
 
 def test_toy_layer_flows_from_schema_to_loader(tmp_path):

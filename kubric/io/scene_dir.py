@@ -7,7 +7,10 @@ A recipe writes one scene per seed into ``ROOT/scene_{seed:08d}/`` (docs: ``docs
         data_ranges.json             min / max of every scaled layer
         metadata.json                flags, metadata, camera, instances
         events.json                  collisions
+        schema.json                  the scene's schema: what every reader needs to read it
         tracks.npz                   point tracks (optional)
+        scene.blend, scene.bullet    saved Blender / PyBullet state (optional)
+        lasr/                        vbr's LASR sequence (optional)
         _SUCCESS                     written last: the scene is complete
 
 Work in progress lives in ``ROOT/.scene_{seed:08d}.incomplete-{pid}/`` and becomes the final name
@@ -31,6 +34,13 @@ from kubric.io.layers import DATA_RANGES_FILE
 METADATA_FILE = "metadata.json"
 EVENTS_FILE = "events.json"
 TRACKS_FILE = "tracks.npz"
+#: the scene's schema document (:mod:`kubric.io.stored_schema`): written by the one writer, read
+#: by the packer, viewer, exports and ``kubric inspect`` (no recipe import needed)
+SCHEMA_FILE = "schema.json"
+#: optional outputs some recipes declare through the writer (``save_state``, ``lasr_export``)
+BLEND_FILE = "scene.blend"
+BULLET_FILE = "scene.bullet"
+LASR_DIR = "lasr"
 SUCCESS_FILE = "_SUCCESS"
 LOGS_DIR = "logs"
 SCENE_PREFIX = "scene_"
@@ -136,7 +146,8 @@ def looks_like_scene(path: pathlib.Path) -> bool:
         path.name.startswith(SCENE_PREFIX)
 
 
-__all__ = ["DATA_RANGES_FILE", "EVENTS_FILE", "LOGS_DIR", "METADATA_FILE", "SCENE_PREFIX",
-           "SCENE_RE", "SUCCESS_FILE", "TRACKS_FILE", "WORK_RE", "complete_scenes",
+__all__ = ["BLEND_FILE", "BULLET_FILE", "DATA_RANGES_FILE", "EVENTS_FILE", "LASR_DIR",
+           "LOGS_DIR", "METADATA_FILE", "SCENE_PREFIX", "SCENE_RE", "SCHEMA_FILE", "SUCCESS_FILE",
+           "TRACKS_FILE", "WORK_RE", "complete_scenes",
            "is_complete", "is_scene_name", "looks_like_scene", "parse_work_dir", "scene_name",
            "scenes_under", "seed_of", "survey", "work_dir_name", "write_success"]

@@ -7,9 +7,13 @@
    there (a layer the schema reads but the recipe did not render, a missing metadata field: a
    one-line :class:`~kubric.io.schema.SchemaError`);
 2. it writes the layers with the schema's layer formats (standard and the recipe's own),
-   ``data_ranges.json``, ``metadata.json``, ``events.json`` and the recipe's other files
-   (``files``: JSON documents, numpy archives such as ``tracks.npz``, or bytes);
-3. it then reads the written directory back through :class:`~kubric.io.scene_reader.SceneReader`
+   ``data_ranges.json``, ``metadata.json``, ``events.json``, the recipe's other files
+   (``files``, see :func:`write_scene`) and ``schema.json``: the scene's schema, recipe,
+   options and declared files (:mod:`kubric.io.stored_schema`), from which every reader learns
+   how to read the scene without importing its recipe;
+3. it checks that the directory holds nothing undeclared (a file a recipe wrote around the
+   writer fails here, by name);
+4. it then reads the written directory back through :class:`~kubric.io.scene_reader.SceneReader`
    — the packer's own reader, every conversion and cast it applies — so a scene that would not
    pack fails when it is written, naming the feature, not when it is packed.
 
@@ -19,6 +23,8 @@
 from __future__ import annotations
 
 import io
+import pathlib
+import shutil
 from collections.abc import Mapping
 
 import numpy as np
@@ -26,9 +32,10 @@ import numpy as np
 from kubric.io.json_io import write_json
 from kubric.io.layers import write_image_dict
 from kubric.io.paths import PathLike, as_path, atomic_write_bytes
-from kubric.io.scene_dir import EVENTS_FILE, METADATA_FILE
+from kubric.io.scene_dir import EVENTS_FILE, METADATA_FILE, SCHEMA_FILE
 from kubric.io.scene_reader import SceneError, SceneReader, element_value, lookup
 from kubric.io.schema import Schema, SchemaError, get_schema
+from kubric.io.stored_schema import OWN_FILES, schema_document, undeclared_files, undeclared_message
 
 
 def check_scene_content(schema: Schema, layers: Mapping[str, np.ndarray], metadata: Mapping,
@@ -71,10 +78,18 @@ def check_scene_content(schema: Schema, layers: Mapping[str, np.ndarray], metada
                               f"collision {k}")
 
 
-def _write_file(path, content) -> None:
-    """One of a recipe's other files: a dict / list → JSON; a dict of arrays for a ``.npz``
-    name → a numpy archive; bytes as they are."""
-    if isinstance(content, bytes | bytearray):
+def _write_file(path: pathlib.Path, content) -> None:
+    """One of a recipe's other files (see :func:`write_scene`'s ``files``)."""
+    if isinstance(content, pathlib.Path):
+        if not content.exists():
+            raise SchemaError(f"write_scene: file {path.name!r}: {str(content)!r} does not exist")
+        shutil.move(str(content), str(path))
+    elif callable(content):
+        content(path)
+        if not path.exists():
+            raise SchemaError(f"write_scene: file {path.name!r}: its writer "
+                              f"{getattr(content, '__name__', content)!r} wrote nothing there")
+    elif isinstance(content, bytes | bytearray):
         atomic_write_bytes(bytes(content), path)
     elif path.suffix == ".npz":
         buffer = io.BytesIO()
@@ -83,8 +98,17 @@ def _write_file(path, content) -> None:
     elif isinstance(content, Mapping | list):
         write_json(content, path)
     else:
-        raise TypeError(f"write_scene: file {path.name!r}: expected bytes, a JSON document or "
-                        f"(for .npz) a dict of arrays, got {type(content).__name__}")
+        raise TypeError(f"write_scene: file {path.name!r}: expected bytes, a JSON document, "
+                        "(for .npz) a dict of arrays, a pathlib.Path to move in or a function "
+                        f"of the path, got {type(content).__name__}")
+
+
+def _check_names(schema: Schema, files: Mapping[str, object]) -> None:
+    for name in files:
+        if not isinstance(name, str) or not name or name in OWN_FILES or name.startswith(".") \
+                or "/" in name or "\\" in name:
+            raise SchemaError(f"schema {schema.name!r}: write_scene file name {name!r} must be "
+                              f"a plain name, not hidden, not one of {list(OWN_FILES)}")
 
 
 def resolved_for_check(schema: Schema, reader: SceneReader) -> Schema:
@@ -117,17 +141,33 @@ def write_scene(schema: Schema | str, out_dir: PathLike, layers: Mapping[str, np
                 files: Mapping[str, object] | None = None, max_write_threads: int = 16) -> dict:
     """Write one scene directory as ``schema`` declares it (see the module doc) into
     ``out_dir``: layers, ``data_ranges.json``, ``metadata.json``, ``events.json`` (default: no
-    collisions) and ``files`` ({file name: content}); then check it in full.
-    Returns the ranges written to ``data_ranges.json``."""
+    collisions), ``files`` and ``schema.json``; then check it in full.
+
+    ``files`` ({name: content}) are the scene's other files and folders, each one a plain name
+    recorded in ``schema.json``: a dict / list → JSON; a dict of arrays for a ``.npz`` name → a
+    numpy archive; bytes as they are; a ``pathlib.Path`` → that file or folder, made elsewhere
+    (e.g. a saved ``scene.bullet``), moved in; a function ``f(path)`` → called, after the layers
+    and documents are in place, to write the file or folder at ``path`` (an export that reads
+    the scene, e.g. vbr's ``lasr/``). Returns the ranges written to ``data_ranges.json``."""
     schema = get_schema(schema)
     events = {"collisions": []} if events is None else events
+    files = dict(files or {})
+    _check_names(schema, files)
     check_scene_content(schema, layers, metadata, events)
     out_dir = as_path(out_dir)
     ranges = write_image_dict(layers, out_dir, max_write_threads=max_write_threads,
                               formats=schema.layers)
     write_json(metadata, out_dir / METADATA_FILE)
     write_json(events, out_dir / EVENTS_FILE)
-    for name, content in (files or {}).items():
+    later = {k: v for k, v in files.items() if callable(v) and not isinstance(v, pathlib.Path)}
+    for name, content in files.items():
+        if name not in later:
+            _write_file(out_dir / name, content)
+    for name, content in later.items():  # these may read the scene written so far
         _write_file(out_dir / name, content)
+    write_json(schema_document(schema, metadata, files), out_dir / SCHEMA_FILE)
+    extra = undeclared_files(out_dir, schema, metadata["metadata"]["num_frames"], files)
+    if extra:
+        raise SchemaError(undeclared_message(schema.name, extra, files))
     check_written(schema, out_dir)
     return ranges

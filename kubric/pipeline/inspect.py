@@ -29,7 +29,7 @@ from kubric.io.palette import label_palette
 from kubric.io.scene_dir import EVENTS_FILE, METADATA_FILE, is_complete
 from kubric.io.scene_writer import check_scene_content
 from kubric.io.schema import SchemaError
-from kubric.pipeline.recipe import schema_of
+from kubric.pipeline.recipe import scene_schema
 
 COLUMNS = ("rgba", "segmentation", "depth", "forward_flow", "normal")
 MAX_DRAWN_TRACKS = 64
@@ -165,7 +165,7 @@ def inspect_scene(scene_dir, sheet=None) -> str:
     metadata = file_io.read_json(meta_path) if meta_path.exists() else {}
     events_path = scene_dir / EVENTS_FILE
     events = file_io.read_json(events_path) if events_path.exists() else {}
-    schema = _schema_of(metadata)
+    schema, origin = _schema_of(scene_dir)
     layers = file_io.read_image_dict(scene_dir, formats=schema.layers if schema else None)
     if not layers:
         raise InputError(f"{str(scene_dir)!r} holds no image layers")
@@ -179,7 +179,7 @@ def inspect_scene(scene_dir, sheet=None) -> str:
                  f"point-frames; {len(drawn_tracks(len(tracks['target_points'])))} drawn")
     contact_sheet(layers, background, sheet, tracks=tracks)
     return (summarise(scene_dir, layers, metadata, events) + "\n" + schema_line(
-        schema, layers, metadata, events) + extra + f"\n  contact sheet: {sheet}")
+        schema, layers, metadata, events, origin) + extra + f"\n  contact sheet: {sheet}")
 
 
 def inspect_url(scene_url: str, sheet=None) -> str:
@@ -201,21 +201,24 @@ def inspect_url(scene_url: str, sheet=None) -> str:
     return report.replace(str(local), scene_url, 1)
 
 
-def _schema_of(metadata: dict):
-    """The recipe schema named by ``flags.recipe`` (None when unknown)."""
-    recipe = metadata.get("flags", {}).get("recipe")
+def _schema_of(scene_dir: pathlib.Path):
+    """(the scene's schema or None, where it came from or why there is none): the schema the
+    scene stores, else its recipe's (:func:`~kubric.pipeline.recipe.scene_schema`)."""
     try:
-        return schema_of(recipe) if recipe else None
-    except SchemaError:
-        return None
+        found = scene_schema(scene_dir)
+    except (SchemaError, OSError, ValueError) as err:
+        return None, str(err)
+    return found.schema, found.origin
 
 
-def schema_line(schema, layers: dict, metadata: dict, events: dict) -> str:
-    """One line: does the scene hold every source of its recipe schema's features?"""
+def schema_line(schema, layers: dict, metadata: dict, events: dict, origin: str = "") -> str:
+    """One line: does the scene hold every source of its schema's features?"""
     if schema is None:
-        return "  schema: none known for recipe " + repr(metadata.get("flags", {}).get("recipe"))
+        return f"  schema: none known: {origin}"
+    where = f" (from {origin})" if origin else ""
     try:
         check_scene_content(schema, layers, metadata, events)
     except SchemaError as err:
-        return f"  schema {schema.name}: {len(schema.features)} features; NOT satisfied: {err}"
-    return f"  schema {schema.name}: {len(schema.features)} features, every source present"
+        return (f"  schema {schema.name}{where}: {len(schema.features)} features; NOT "
+                f"satisfied: {err}")
+    return f"  schema {schema.name}{where}: {len(schema.features)} features, every source present"

@@ -30,6 +30,7 @@ determines the scene: ``generate`` must draw every random number from
 from __future__ import annotations
 
 import abc
+import dataclasses
 import importlib
 import importlib.util
 import pathlib
@@ -38,7 +39,10 @@ import types
 from collections.abc import Callable, Mapping
 from typing import Any, ClassVar
 
+from kubric.io import scene_dir
+from kubric.io.json_io import read_json
 from kubric.io.schema import Schema, SchemaError, get_schema, register_schema
+from kubric.io.stored_schema import document_schema, read_document, register_variants
 from kubric.pipeline.options import Option, OptionError, convert_all, parse_assignments
 
 #: registered recipes by name.
@@ -137,6 +141,7 @@ def _register_schemas(cls: type[Recipe]) -> None:
                         "Schema.extend)")
     for schema in (cls.schema, *cls.variants):
         register_schema(schema)
+    register_variants(cls.schema.name, [v.name for v in cls.variants])
 
 
 def schema_of(spec: Schema | str) -> Schema:
@@ -156,6 +161,60 @@ def schema_of(spec: Schema | str) -> Schema:
         if schema is None:
             raise missing from None
         return schema
+
+
+class SceneSchemaError(SchemaError):
+    """A scene directory whose schema is neither stored nor known here (one line)."""
+
+
+@dataclasses.dataclass(frozen=True)
+class SceneSchema:
+    """The schema of one scene directory and where it came from.
+
+    ``origin``: ``schema.json`` (stored by the writer), or the fallback for scenes written
+    before scenes stored their schema: ``recipe 'NAME' (no schema.json)``. ``variants``: the
+    names of further schemas over the same scenes (``--schema`` may ask for them)."""
+
+    schema: Schema
+    origin: str
+    variants: tuple[str, ...] = ()
+
+    @property
+    def stored(self) -> bool:
+        return self.origin == scene_dir.SCHEMA_FILE
+
+
+def scene_schema(scene) -> SceneSchema:
+    """The schema of scene directory ``scene`` (a local path): the one it stores
+    (``schema.json``: no recipe is imported), else — a scene written before scenes stored their
+    schema — that of the recipe its ``metadata.json`` names (``flags.recipe``; the built-in
+    recipes are imported). :class:`SceneSchemaError` (one line) when neither gives one; a
+    malformed ``schema.json`` is a :class:`SchemaError` naming it; an unreadable
+    ``metadata.json`` an :class:`~kubric.errors.InputError` / OSError."""
+    doc = read_document(scene)
+    if doc is not None:
+        variants = doc.get("variants", [])
+        return SceneSchema(document_schema(doc, scene), scene_dir.SCHEMA_FILE,
+                           tuple(variants) if isinstance(variants, list) else ())
+    meta = read_json(pathlib.Path(scene) / scene_dir.METADATA_FILE)
+    flags = meta.get("flags") if isinstance(meta, dict) else None
+    recipe = flags.get("recipe") if isinstance(flags, dict) else None
+    if not isinstance(recipe, str) or not recipe:
+        raise SceneSchemaError(f"{str(scene)!r} stores no {scene_dir.SCHEMA_FILE} and its "
+                               f"{scene_dir.METADATA_FILE} names no recipe (flags.recipe): its "
+                               "schema is unknown")
+    try:
+        schema = schema_of(recipe)
+        cls = REGISTRY.get(recipe)
+    except SchemaError:
+        load_builtin()
+        raise SceneSchemaError(
+            f"{str(scene)!r} stores no {scene_dir.SCHEMA_FILE} (written before scenes stored "
+            f"their schema) and its recipe {recipe!r} is not known here (recipes: "
+            f"{', '.join(sorted(REGISTRY))}): its schema is unknown") from None
+    variants = tuple(v.name for v in cls.variants) if cls is not None and \
+        cls.schema is schema else ()
+    return SceneSchema(schema, f"recipe {recipe!r} (no {scene_dir.SCHEMA_FILE})", variants)
 
 
 def builtin_schemas() -> dict[str, Schema]:

@@ -33,6 +33,7 @@ from kubric.io.scene_dir import (
     work_dir_name,
     write_success,
 )
+from kubric.io.stored_schema import check_declared
 from kubric.pipeline.cleanup import own, pid_alive, release
 
 SUCCESS = SUCCESS_FILE  # the completion marker's name (kubric.io.scene_dir)
@@ -91,6 +92,7 @@ def run_scene(recipe, seed: int, out_root) -> SceneResult:
         with randomness.explicit_rng_only(f"recipe {recipe.name!r}"):  # rng= always explicit
             try:
                 recipe.generate(seed, work)
+                check_declared(work)  # nothing written around write_scene after it ran
                 faults.point("worker.generated")
             except OSError as err:
                 if err.filename is None and err.errno in (errno.ENOSPC, errno.EDQUOT):

@@ -2,13 +2,14 @@
 
 It writes what every recipe writes — ``rgba_{i:05d}.png`` and ``segmentation_{i:05d}.png`` per
 frame, ``metadata.json`` (flags, resolution, frame count, seed, instances with their
-positions), an empty ``events.json`` (no float layers, so no ``data_ranges.json``) — from the
+positions), an empty ``events.json``, ``schema.json`` (no float layers, so no
+``data_ranges.json``) — from the
 seed alone (numpy's ``RandomState``), through the same writer
 (:func:`kubric.io.scene_writer.write_scene`) and worker (atomic work directory, ``_SUCCESS``
 last) as the rendering recipes, so it exercises runners, resume, object storage and packing at
 sizes no rendering budget allows (``benchmarks/bench_scale.py``: 10⁴ scenes). The images are
 random noise with random labels: packable (schema ``bench``), not a dataset to learn from. A
-scene is 7 files, ~3.5 KB, at the defaults.
+scene is 8 files, ~6 KB, at the defaults.
 """
 
 from __future__ import annotations

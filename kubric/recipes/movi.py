@@ -333,7 +333,7 @@ class MoviC(MoviBase, name="movi_c"):
                 obj.metadata = {**obj.metadata, "dropped_on": person.uid}
 
     def write_outputs(self, scene, layers, collisions, seed, out_dir, background,
-                      render_settings) -> list:
+                      render_settings, files=None) -> list:
         for obj in scene.foreground_assets:  # instances/category (upstream's GSO names)
             if isinstance(obj, kb.PhysicalObject):
                 obj.metadata = {**obj.metadata, movi_schema.MOVI_CATEGORY:
@@ -342,7 +342,7 @@ class MoviC(MoviBase, name="movi_c"):
             from kubric.annotations.keypoints import annotate_keypoints
             annotate_keypoints(scene, layers)
         return super().write_outputs(scene, layers, collisions, seed, out_dir, background,
-                                     render_settings)
+                                     render_settings, files)
 
     def add_articulated_objects(self, scene, simulator, rng) -> None:
         """``articulated_objects`` dynamic multi-link models (no random draw when 0): model,

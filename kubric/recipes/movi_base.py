@@ -31,7 +31,7 @@ import numpy as np
 import kubric as kb
 from kubric.annotations.track_files import tracks_archive
 from kubric.annotations.tracks import scene_tracks
-from kubric.io.scene_dir import TRACKS_FILE
+from kubric.io.scene_dir import BLEND_FILE, BULLET_FILE, TRACKS_FILE
 from kubric.io.scene_writer import write_scene
 from kubric.pipeline import Option, OptionError, Recipe, resolution
 from kubric.recipes.common import (
@@ -218,17 +218,19 @@ class MoviBase(RenderQuality, Recipe):
         with tempfile.TemporaryDirectory(prefix="kubric_movi_") as scratch:
             simulator = kb.simulator.PyBullet(scene, scratch)
             background, blur = self.populate(scene, simulator, rng, sources)
+            state = pathlib.Path(scratch) / "state"  # saved here, moved in by write_scene
+            files = {}
             if self.save_state:  # the initial state, before the simulation (as upstream)
-                simulator.save_state(out_dir / "scene.bullet")
+                files[BULLET_FILE] = simulator.save_state(state / BULLET_FILE)
             _, collisions = simulator.run(frame_start=0, frame_end=scene.frame_end + 1)
             renderer = kb.renderer.create(self.renderer, scene, scratch,
                                           **self.renderer_settings(motion_blur=blur))
             layers = renderer.render()
             if self.save_state:
-                renderer.save_state(out_dir / "scene.blend")
+                files[BLEND_FILE] = renderer.save_state(state / BLEND_FILE)
             render_settings = self.render_metadata(renderer)
             self.write_outputs(scene, layers, collisions, seed, out_dir, background,
-                               render_settings)
+                               render_settings, files=files)
             simulator.close()
 
     def track_archive(self, scene, layers, visible, seed) -> dict:
@@ -242,12 +244,14 @@ class MoviBase(RenderQuality, Recipe):
         return tracks_archive(tracks)
 
     def write_outputs(self, scene, layers, collisions, seed, out_dir, background,
-                      render_settings) -> list:
-        """Annotations + files; returns the instance list (sorted by visible pixels)."""
+                      render_settings, files=None) -> list:
+        """Annotations + files (``files``: more of the scene's files, e.g. the saved state, as
+        :func:`~kubric.io.scene_writer.write_scene` takes them); returns the instance list
+        (sorted by visible pixels)."""
         candidates = [a for a in scene.foreground_assets if isinstance(a, kb.PhysicalObject)]
         if "uv" in layers:
             render_settings = {**render_settings, "uv": "wrapped modulo 1 (textures repeat)"}
-        files = {}
+        files = dict(files or {})
         if self.tracks or self.track_queries is not None:
             def add_tracks(visible):
                 files[TRACKS_FILE] = self.track_archive(scene, layers, visible, seed)

@@ -144,8 +144,8 @@ class PoseEstimation(MoviBase, name="pose_estimation"):
         scene.camera = camera
 
     def write_outputs(self, scene, layers, collisions, seed, out_dir, background,
-                      render_settings) -> list:
+                      render_settings, files=None) -> list:
         annotate_keypoints(scene, layers)
         scene.metadata.pop("room_half_width", None)
         return super().write_outputs(scene, layers, collisions, seed, out_dir, background,
-                                     render_settings)
+                                     render_settings, files)

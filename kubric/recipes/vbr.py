@@ -44,6 +44,7 @@ import tempfile
 import numpy as np
 
 import kubric as kb
+from kubric.io.scene_dir import LASR_DIR
 from kubric.io.scene_writer import write_scene
 from kubric.pipeline import Option, OptionError, Recipe, float_range, resolution
 from kubric.recipes import vbr_schema
@@ -103,6 +104,15 @@ def by_visible_pixels(parts) -> list:
     """Every part (hidden ones too: an articulated object keeps all its links), most visible
     pixels first, ties in model order."""
     return sorted(parts, key=lambda p: -int(np.sum(p.metadata["visibility"])))
+
+
+def lasr_writer(scene_dir: pathlib.Path, sequence: str, root: int):
+    """The writer of a scene's ``lasr/`` folder, for ``write_scene``'s ``files``: the LASR
+    export (:mod:`kubric.datasets.exports.lasr`) of the layers written before it."""
+    def write_lasr(path: pathlib.Path) -> None:
+        from kubric.datasets.exports.lasr import export_lasr
+        export_lasr(scene_dir, path, sequence=sequence, root=root)
+    return write_lasr
 
 
 class Vbr(RenderQuality, Recipe, name="vbr"):
@@ -297,9 +307,8 @@ class Vbr(RenderQuality, Recipe, name="vbr"):
                 self, scene, seed, order, collisions, background=background, renderer=settings,
                 object_type=kind, object_model=model,
                 lasr_sequence=sequence if self.lasr_export else None)
-            write_scene(self.schema, out_dir, layers, metadata, events)
+            files = {}
+            if self.lasr_export:  # an export of the written layers: the writer calls it
+                files[LASR_DIR] = lasr_writer(out_dir, sequence, order.index(base))
+            write_scene(self.schema, out_dir, layers, metadata, events, files=files)
             simulator.close()
-        if self.lasr_export:
-            from kubric.datasets.exports.lasr import export_lasr
-            export_lasr(out_dir, out_dir / "lasr", sequence=sequence,
-                        root=order.index(base))

@@ -13,7 +13,6 @@ URL can reach a file outside the served folder. Every read is read-only.
 from __future__ import annotations
 
 import abc
-import functools
 import pathlib
 import re
 import time
@@ -24,10 +23,10 @@ from kubric.annotations.track_files import read_tracks
 from kubric.errors import KubricError
 from kubric.io.json_io import read_json
 from kubric.io.layers import LAYERS, LayerFormat, frame_filename, read_frame
-from kubric.io.scene_dir import EVENTS_FILE, METADATA_FILE, SUCCESS_FILE, TRACKS_FILE
+from kubric.io.scene_dir import EVENTS_FILE, METADATA_FILE, SCHEMA_FILE, SUCCESS_FILE, TRACKS_FILE
 from kubric.io.scene_dir import looks_like_scene as _looks_like_scene
 from kubric.io.schema import SchemaError
-from kubric.pipeline.recipe import schema_of
+from kubric.pipeline.recipe import scene_schema
 
 #: a scene name: letters, digits, ``_ . -``, not starting with a dot (no separators, no ``..``)
 NAME_PATTERN = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.\-]{0,199}\Z")
@@ -101,7 +100,8 @@ class DirectorySource(SceneSource):
         self.single = _looks_like_scene(root)
         self._names: list[str] = []
         self._scanned = -np.inf
-        self._recipes: dict[str, tuple] = {}  # name → (metadata.json mtime, its flags.recipe)
+        # name → ((schema.json, metadata.json) mtimes, the layers its schema declares)
+        self._own_layers: dict[str, tuple] = {}
 
     def names(self) -> list[str]:
         """Rescanned at most every :data:`RESCAN_SECONDS`: scenes a running ``kubric generate``
@@ -174,22 +174,14 @@ class DirectorySource(SceneSource):
 
     def formats(self, name: str) -> dict[str, LayerFormat]:
         """The layers a scene may hold: the standard ones the viewer draws, then those its
-        recipe's schema declares (klevr's semantic labels, texture_nerf's bands, ...)."""
-        path = self.directory(name) / METADATA_FILE
-        try:
-            stamp = path.stat().st_mtime_ns
-        except OSError:
-            stamp = None
-        cached = self._recipes.get(name)
-        if cached is None or cached[0] != stamp:  # metadata.json read again only when it changed
-            try:
-                recipe = self.metadata(name).get("flags", {}).get("recipe")
-            except SceneError:
-                recipe = None
-            cached = self._recipes[name] = (stamp, recipe)
-        recipe = cached[1]
-        own = _recipe_layers(recipe) if isinstance(recipe, str) else {}
-        return {**super().formats(name), **own}
+        schema declares (klevr's semantic labels, texture_nerf's bands, a file recipe's own):
+        the schema the scene stores, else its recipe's; none when neither is known."""
+        directory = self.directory(name)
+        stamp = tuple(_mtime(directory / f) for f in (SCHEMA_FILE, METADATA_FILE))
+        cached = self._own_layers.get(name)
+        if cached is None or cached[0] != stamp:  # read again only when a file changed
+            cached = self._own_layers[name] = (stamp, _scene_layers(directory))
+        return {**super().formats(name), **cached[1]}
 
     def frame(self, name: str, layer: str, index: int) -> np.ndarray:
         formats = self.formats(name)
@@ -212,11 +204,17 @@ class DirectorySource(SceneSource):
             raise SceneError(f"{name}/tracks.npz is unreadable: {err}") from None
 
 
-@functools.lru_cache(maxsize=64)
-def _recipe_layers(recipe: str) -> dict[str, LayerFormat]:
-    """The layers the schema of ``recipe`` declares beyond the standard ones ({} when the recipe
-    is unknown here: its scenes show their standard layers)."""
+def _mtime(path: pathlib.Path) -> int | None:
     try:
-        return dict(schema_of(recipe).layers)
-    except (SchemaError, ValueError, ImportError):
+        return path.stat().st_mtime_ns
+    except OSError:
+        return None
+
+
+def _scene_layers(directory: pathlib.Path) -> dict[str, LayerFormat]:
+    """The layers the scene's schema declares beyond the standard ones ({} when its schema is
+    unknown here or unreadable: the scene shows its standard layers)."""
+    try:
+        return dict(scene_schema(directory).schema.layers)
+    except (SchemaError, ValueError, OSError):
         return {}
