@@ -6,6 +6,7 @@ A new built-in recipe must declare a schema (registration refuses it otherwise) 
 in TINY below (the first test fails until it has one).
 """
 
+import json
 import pathlib
 import subprocess
 import sys
@@ -41,10 +42,13 @@ TINY = {
 }
 TOY_CATEGORIES = {"cube": "boxy", "sponge": "boxy", "sphere": "round", "cylinder": "round",
                   "torus": "round", "teapot": "kitchen"}
-#: files of a scene directory beside its layers (multi-view: NeRF transforms; vbr: LASR folder)
+#: a recipe's own files beside its layers, which it declares to the writer (multi-view: NeRF
+#: transforms, points)
+RECIPE_FILES = {"transforms_train.json", "transforms_val.json", "transforms_test.json",
+                "points.npz"}
+#: files of a scene directory beside its layers
 OTHER_FILES = {scene_dir.METADATA_FILE, scene_dir.EVENTS_FILE, scene_dir.DATA_RANGES_FILE,
-               scene_dir.SUCCESS_FILE, "transforms_train.json", "transforms_val.json",
-               "transforms_test.json", "points.npz"}
+               scene_dir.SCHEMA_FILE, scene_dir.SUCCESS_FILE} | RECIPE_FILES
 
 
 def test_every_builtin_recipe_has_a_schema_and_a_tiny_row():
@@ -99,13 +103,17 @@ def test_recipe_scene_is_declared_checked_and_packs(name, tmp_path, toys):
     schema = get_recipe(name).schema
     check_written(schema, scene)  # what write_scene checked, again from the final directory
     templates = [fmt.template for fmt in schema.layer_formats.values()]
+    stored = json.loads((scene / scene_dir.SCHEMA_FILE).read_text())
+    assert stored["name"] == name and stored["features"] == schema.to_json()["features"]
     for path in scene.iterdir():
-        if path.is_dir():
-            assert name == "vbr" and path.name == "lasr", path
+        if path.is_dir():  # vbr's LASR folder, written by the writer and declared to it
+            assert name == "vbr" and path.name == scene_dir.LASR_DIR, path
+            assert stored["files"] == [scene_dir.LASR_DIR]
             continue
         declared = path.name in OTHER_FILES or any(
             path.name == t.format(i) for t in templates for i in range(64))
         assert declared, f"{name}: {path.name} is not declared by its schema or the scene dir"
+        assert path.name not in RECIPE_FILES or path.name in stored["files"], path
     _kubric("pack", tmp_path / "scenes", "--out", tmp_path / "dataset", "--splits", "train=1",
             "--verify", timeout=900)
     assert (tmp_path / "dataset").is_dir()

@@ -244,7 +244,11 @@ def test_saved_state_goes_through_the_writer(tmp_path):
     doc = json.loads((scene / scene_dir.SCHEMA_FILE).read_text())
     assert doc["files"] == ["scene.blend", "scene.bullet"] and doc["options"]["save_state"]
     check_declared(scene)
-    assert (scene / "scene.blend").read_bytes()[:7] == b"BLENDER"
+    import bpy
+    meta = json.loads((scene / scene_dir.METADATA_FILE).read_text())
+    with bpy.data.libraries.load(str(scene / "scene.blend")) as (src, _):
+        assert {i["asset_id"] for i in meta["instances"]} <= {o.split(".")[0]
+                                                              for o in src.objects}
     import pybullet as pb
     client = pb.connect(pb.DIRECT)
     try:

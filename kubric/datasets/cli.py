@@ -128,7 +128,8 @@ def add_parser(subparsers) -> None:
                    "scene's split is a fixed function of its seed")
     p.add_argument("--workers", type=int, default=None, help="encoding processes (default 1; "
                    "with --cluster local: the LocalCluster's worker processes)")
-    p.add_argument("--schema", default=None, help="recipe schema (default: the scenes' recipe)")
+    p.add_argument("--schema", default=None, help="schema or recipe name, or FILE.py:Class "
+                   "(default: the schema the scenes store in schema.json)")
     p.add_argument("--examples-per-shard", type=int, default=256)
     p.add_argument("--verify", action="store_true",
                    help="re-read every example and compare it with its scene directory")

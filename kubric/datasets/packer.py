@@ -8,7 +8,8 @@
   then each scene must be of that schema or name it among its variants). A scene written before
   scenes stored their schema falls back to the recipe its ``metadata.json`` names (the result
   says so). Every scene must have the same schema: a scene whose schema is neither stored nor
-  known here, or two scenes that disagree, fail the pack in one line before anything is written.
+  known here, or two scenes that disagree, fail the pack in one line before anything is written
+  (:mod:`kubric.datasets.pack_schema`).
 * A class label whose names come from the scenes (:data:`~kubric.io.schema.NAMES_FROM_SCENES`,
   e.g. ``svr``'s ``instances/category``) gets the sorted distinct values of its source over all
   complete scenes, found before anything is written; the dataset stores them (``features.json``,
@@ -50,13 +51,12 @@ from collections.abc import Mapping, Sequence
 from kubric import faults
 from kubric.datasets import layout, tfds_io
 from kubric.datasets.layout import DatasetError, DatasetUsageError
+from kubric.datasets.pack_schema import check_scene_schema, schema_origin_and_dims
 from kubric.io import scene_dir
 from kubric.io.json_io import read_json, write_json
 from kubric.io.output_lock import OutputBusy, OutputLock
 from kubric.io.scene_reader import SceneError, SceneReader
 from kubric.io.schema import Schema, SchemaError
-from kubric.io.stored_schema import read_document
-from kubric.pipeline.recipe import SceneSchema, get_recipe, scene_schema, schema_of
 
 PROGRESS_FILE = "progress.json"
 DEFAULT_SPLITS = "train=0.9,validation=0.1"
@@ -104,7 +104,7 @@ def encode_scene(scene_dir: str) -> tuple[str, bytes | None, str | None]:
     path = pathlib.Path(scene_dir)
     try:
         faults.point("pack.encode_scene")
-        _check_recipe(path, schema)
+        check_scene_schema(path, schema)
         reader = SceneReader(path, schema)
         if reader.dims != dims:
             raise SceneError(f"frames / resolution {reader.dims} differ from the dataset's {dims}")
@@ -125,35 +125,6 @@ def _die_with(parent: int) -> None:
         ctypes.CDLL(None, use_errno=True).prctl(1, int(signal.SIGKILL))  # PR_SET_PDEATHSIG
     if os.getppid() != parent:
         os._exit(1)
-
-
-def _check_recipe(scene: pathlib.Path, schema: Schema) -> None:
-    """A scene of another schema than the dataset's is a mismatch, said as such: its stored
-    schema (and variants) must name the dataset's; a scene that stores none is judged by its
-    recipe's (imported: the fallback for scenes written before scenes stored their schema)."""
-    try:
-        doc = read_document(scene)
-    except SchemaError as err:
-        raise SceneError(str(err)) from None
-    if doc is not None:
-        own = [doc["name"], *(doc.get("variants") or [])]
-        recipe = doc.get("recipe", doc["name"])
-    else:
-        try:
-            recipe = read_json(scene / scene_dir.METADATA_FILE)["flags"]["recipe"]
-        except (OSError, ValueError, KeyError, TypeError):
-            return  # no recipe named: the reader reports what is wrong with the file
-        if not isinstance(recipe, str) or recipe == schema.name:
-            return
-        try:
-            cls = get_recipe(recipe)
-        except (ValueError, ImportError):
-            return  # a recipe unknown here: the reader reports what does not fit
-        own = [s.name for s in (cls.schema, *cls.variants) if s is not None]
-    if own and schema.name not in own:
-        raise SceneError(f"{str(scene)!r} is a scene of recipe {recipe!r}, not of the dataset's "
-                         f"schema {schema.name!r} (its schemas: {sorted(own)}; pack it "
-                         "separately or pass --schema)")
 
 
 # ------------------------------------------------------------------------ planning
@@ -192,76 +163,10 @@ def scene_seed(scene: pathlib.Path) -> int:
 
 
 def schema_and_dims(complete: list[pathlib.Path], schema) -> tuple[Schema, dict]:
-    """The schema (given, or the one every scene has: :func:`scenes_schema`) and the frame
-    count / resolution of the first scene that has them."""
+    """The schema (given, or the one every scene has:
+    :func:`~kubric.datasets.pack_schema.scenes_schema`) and the frame count / resolution of the
+    first scene that has them."""
     return schema_origin_and_dims(complete, schema)[:2]
-
-
-def schema_origin_and_dims(complete: list[pathlib.Path], schema) -> tuple[Schema, dict, str]:
-    """:func:`schema_and_dims` and a line saying where the schema came from."""
-    if schema is not None:
-        try:
-            schema = schema_of(schema)
-        except SchemaError as err:  # --schema names no schema: a bad option
-            raise DatasetUsageError(str(err)) from None
-        origin = f"{schema.name} (given)"
-    else:
-        found = scenes_schema(complete)
-        schema = found.schema
-        origin = (f"{schema.name}, stored by the scenes ({scene_dir.SCHEMA_FILE})"
-                  if found.stored else
-                  f"{schema.name}, from the {found.origin} the scenes name: they store no "
-                  f"{scene_dir.SCHEMA_FILE} (written by an older kubric)")
-    errors = []
-    for scene in complete:
-        try:
-            return schema, SceneReader(scene, schema).dims, origin
-        except (SceneError, DatasetError, OSError) as err:
-            errors.append(err)
-    raise DatasetError(f"no complete scene has a readable metadata.json (first: {errors[0]})")
-
-
-def scenes_schema(complete: list[pathlib.Path]) -> SceneSchema:
-    """The one schema of the ``complete`` scenes (:func:`~kubric.pipeline.recipe.scene_schema`:
-    stored, else their recipe's). :class:`DatasetError` (one line) when a scene's schema is
-    unknown or malformed, or two scenes disagree; a scene whose ``metadata.json`` cannot be
-    read (and that stores no schema) is left to the encoder, which reports it as corrupt."""
-    first: tuple[pathlib.Path, SceneSchema] | None = None
-    for scene in complete:
-        try:
-            found = scene_schema(scene)
-        except SchemaError as err:
-            raise DatasetError(f"{err} (pass --schema to pack it anyway)") from None
-        except (OSError, ValueError):
-            continue
-        if first is None:
-            first = (scene, found)
-        elif found.schema.to_json() != first[1].schema.to_json():
-            raise DatasetError(f"the scenes disagree on their schema: {str(first[0])!r} has "
-                               f"{_differs(first[1], found)}, {str(scene)!r} has "
-                               f"{_differs(found, first[1])}: pack them separately")
-    if first is None:
-        raise DatasetError(f"no complete scene has a readable {scene_dir.METADATA_FILE} or "
-                           f"{scene_dir.SCHEMA_FILE} (first: {str(complete[0])!r})")
-    return first[1]
-
-
-def _differs(a: SceneSchema, b: SceneSchema) -> str:
-    """How ``a`` differs from ``b``, in a few words (its name, else its first differing part)."""
-    where = f"from {a.origin}"
-    if a.schema.name != b.schema.name:
-        return f"{a.schema.name!r} ({where})"
-    if a.schema.version != b.schema.version:
-        return f"{a.schema.name!r} version {a.schema.version} ({where})"
-    theirs = {f.name: f for f in b.schema.features}
-    for f in a.schema.features:
-        if theirs.get(f.name) != f:
-            return f"{a.schema.name!r} with feature {f.name!r} " + \
-                ("declared otherwise" if f.name in theirs else "added") + f" ({where})"
-    extra = sorted(set(theirs) - set(a.schema.names))
-    if extra:
-        return f"{a.schema.name!r} without features {extra} ({where})"
-    return f"{a.schema.name!r} with other layers or description ({where})"
 
 
 def resolve_names(schema: Schema, scenes: list[pathlib.Path],

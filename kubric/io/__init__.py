@@ -11,4 +11,6 @@ Modules, one concept each:
 * :mod:`kubric.io.layers` — the renderer's layer dict ↔ a scene directory (``write_image_dict``).
 * :mod:`kubric.io.schema` — a recipe's output contract (layers + example features), declared once.
 * :mod:`kubric.io.scene_writer` — ``write_scene``: a scene directory checked against its schema.
+* :mod:`kubric.io.stored_schema` — a scene's ``schema.json`` (how every reader reads the scene)
+  and the check that every file of a scene is declared.
 """
