@@ -87,11 +87,19 @@ def test_older_scenes_pack_by_recipe_name_identically(tmp_path):
                             "--verify", "--no-progress", cwd=tmp_path)
         assert runs[kind].returncode == 0, runs[kind].stderr
     assert "schema: bench, stored by the scenes (schema.json)" in runs["new"].stdout
-    assert "schema: bench, from the recipe 'bench' (no schema.json) the scenes name: they " \
-        "store no schema.json" in runs["old"].stdout
+    assert "schema: bench, from the scenes' recipe 'bench' (no schema.json): written by an " \
+        "older kubric, they do not store their schema, so their recipe was imported" in \
+        runs["old"].stdout
     shards = sorted(p.name for p in (tmp_path / "ds_new").iterdir() if "array_record" in p.name)
     assert shards and all((tmp_path / "ds_new" / n).read_bytes()
                           == (tmp_path / "ds_old" / n).read_bytes() for n in shards)
+    # an older scene whose metadata.json is broken is a corrupt scene, skipped by name
+    (tmp_path / "old" / scene_dir.scene_name(1) / scene_dir.METADATA_FILE).write_text("[]")
+    proc = kubric("pack", "old", "--out", "ds_broken", "--splits", "train=1", "--no-progress",
+                  cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    assert "packed 2 scenes" in proc.stdout
+    assert "skipped corrupt scene old/scene_00000001: " in proc.stdout
 
 
 def test_unknown_schema_fails_in_one_line_and_inspect_and_view_say_so(tmp_path):

@@ -39,8 +39,8 @@ def schema_origin_and_dims(complete: list[pathlib.Path], schema) -> tuple[Schema
         schema = found.schema
         origin = (f"{schema.name}, stored by the scenes ({scene_dir.SCHEMA_FILE})"
                   if found.stored else
-                  f"{schema.name}, from the {found.origin} the scenes name: they store no "
-                  f"{scene_dir.SCHEMA_FILE} (written by an older kubric)")
+                  f"{schema.name}, from the scenes' {found.origin}: written by an older "
+                  "kubric, they do not store their schema, so their recipe was imported")
     errors = []
     for scene in complete:
         try:

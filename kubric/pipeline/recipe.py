@@ -39,6 +39,7 @@ import types
 from collections.abc import Callable, Mapping
 from typing import Any, ClassVar
 
+from kubric.errors import InputError
 from kubric.io import scene_dir
 from kubric.io.json_io import read_json
 from kubric.io.schema import Schema, SchemaError, get_schema, register_schema
@@ -189,16 +190,18 @@ def scene_schema(scene) -> SceneSchema:
     (``schema.json``: no recipe is imported), else — a scene written before scenes stored their
     schema — that of the recipe its ``metadata.json`` names (``flags.recipe``; the built-in
     recipes are imported). :class:`SceneSchemaError` (one line) when neither gives one; a
-    malformed ``schema.json`` is a :class:`SchemaError` naming it; an unreadable
+    malformed ``schema.json`` is a :class:`SchemaError` naming it; an unreadable or misshapen
     ``metadata.json`` an :class:`~kubric.errors.InputError` / OSError."""
     doc = read_document(scene)
     if doc is not None:
         variants = doc.get("variants", [])
         return SceneSchema(document_schema(doc, scene), scene_dir.SCHEMA_FILE,
                            tuple(variants) if isinstance(variants, list) else ())
-    meta = read_json(pathlib.Path(scene) / scene_dir.METADATA_FILE)
-    flags = meta.get("flags") if isinstance(meta, dict) else None
-    recipe = flags.get("recipe") if isinstance(flags, dict) else None
+    path = pathlib.Path(scene) / scene_dir.METADATA_FILE
+    meta = read_json(path)
+    if not isinstance(meta, dict) or not isinstance(meta.get("flags", {}), dict):
+        raise InputError(f"{str(path)!r} is not a JSON object with an object 'flags'")
+    recipe = meta.get("flags", {}).get("recipe")
     if not isinstance(recipe, str) or not recipe:
         raise SceneSchemaError(f"{str(scene)!r} stores no {scene_dir.SCHEMA_FILE} and its "
                                f"{scene_dir.METADATA_FILE} names no recipe (flags.recipe): its "
