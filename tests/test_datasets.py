@@ -117,10 +117,13 @@ def test_load_reads_every_feature_back(packed):
     _check_against_scene(load(out, "validation")[0], scenes / "scene_00000002")
 
 
-def test_tfds_reads_the_directory_without_tensorflow(packed):
+def test_tfds_reads_the_directory_without_tensorflow(packed, monkeypatch):
     import tensorflow_datasets as tfds
     scenes, out = packed
-    assert importlib.util.find_spec("tensorflow") is None  # not in the environment at all
+    # the `tf` extra installs TensorFlow: simulate its absence (find_spec and import see none);
+    # a fresh process that never imports it is checked in test_no_tensorflow_after_load_and_decode
+    monkeypatch.setitem(sys.modules, "tensorflow", None)
+    assert importlib.util.find_spec("tensorflow") is None
     builder = tfds.builder_from_directory(str(out))
     assert builder.info.splits["train"].num_examples == 3
     source = builder.as_data_source("train")
@@ -133,7 +136,7 @@ def test_tfds_reads_the_directory_without_tensorflow(packed):
             assert np.array_equal(np.stack(theirs[name]), mine[name]), name
         assert np.array_equal(np.stack(theirs["instances/positions"]),
                               mine["instances/positions"])
-    assert "tensorflow" not in sys.modules
+    assert sys.modules["tensorflow"] is None
 
 
 def test_torch_dataloader_two_workers(packed):
