@@ -117,10 +117,13 @@ def test_load_reads_every_feature_back(packed):
     _check_against_scene(load(out, "validation")[0], scenes / "scene_00000002")
 
 
-def test_tfds_reads_the_directory_without_tensorflow(packed):
+def test_tfds_reads_the_directory_without_tensorflow(packed, monkeypatch):
     import tensorflow_datasets as tfds
     scenes, out = packed
-    assert importlib.util.find_spec("tensorflow") is None  # not in the environment at all
+    # the `tf` extra installs TensorFlow: simulate its absence (find_spec and import see none);
+    # a fresh process that never imports it is checked in test_no_tensorflow_after_load_and_decode
+    monkeypatch.setitem(sys.modules, "tensorflow", None)
+    assert importlib.util.find_spec("tensorflow") is None
     builder = tfds.builder_from_directory(str(out))
     assert builder.info.splits["train"].num_examples == 3
     source = builder.as_data_source("train")
@@ -133,13 +136,14 @@ def test_tfds_reads_the_directory_without_tensorflow(packed):
             assert np.array_equal(np.stack(theirs[name]), mine[name]), name
         assert np.array_equal(np.stack(theirs["instances/positions"]),
                               mine["instances/positions"])
-    assert "tensorflow" not in sys.modules
+    assert sys.modules["tensorflow"] is None
 
 
 def test_torch_dataloader_two_workers(packed):
     import torch.utils.data
 
     from kubric.datasets.adapters import to_torch, torch_collate
+    had_tf = "tensorflow" in sys.modules  # imported by an earlier test (test_datasets_tf)
     scenes, out = packed
     source = load(out, "train")
     # spawn: this pytest process has read ArrayRecord shards with torch imported, after which
@@ -167,13 +171,14 @@ def test_torch_dataloader_two_workers(packed):
     assert [tuple(b["video"].shape) for b in batches] == [(2, T, H, W, 3), (1, T, H, W, 3)]
     assert batches[0]["video_name"] == ["scene_00000003", "scene_00000004"]
     assert np.array_equal(batches[1]["video"][0].numpy(), source[2]["video"])
-    assert "tensorflow" not in sys.modules
+    assert had_tf or "tensorflow" not in sys.modules
 
 
 def test_grain_source(packed):
     import grain
 
     from kubric.datasets.adapters import to_grain
+    had_tf = "tensorflow" in sys.modules  # imported by an earlier test (test_datasets_tf)
     scenes, out = packed
     source = load(out, "train")
     dataset = to_grain(source)
@@ -187,7 +192,7 @@ def test_grain_source(packed):
     loader = grain.DataLoader(data_source=source, sampler=grain.samplers.IndexSampler(
         len(source), shuffle=False, num_epochs=1, seed=0), worker_count=0)
     assert [ex["metadata"]["video_name"] for ex in loader] == source.scenes
-    assert "tensorflow" not in sys.modules
+    assert had_tf or "tensorflow" not in sys.modules
 
 
 def test_no_tensorflow_after_load_and_decode(packed):
