@@ -253,11 +253,19 @@ def test_layers_and_error_card(browser, server, dataset):
     url, address = server
     open_scene(browser, url)
     from selenium.webdriver.support.ui import Select
-    Select(browser.find_element("id", "layer-select")).select_by_value("depth")
+    _, scene = get_json(address, f"/api/scene/{SCENE}")
+    # the selector's entries are the server's vocabulary (kubric.io.layers), rgb not twice
+    select = Select(browser.find_element("id", "layer-select"))
+    from kubric.io.layers import LAYER_LABELS
+    assert [(o.get_attribute("value"), o.text) for o in select.options] == \
+        [(name, LAYER_LABELS[name]) for name in scene["summary"]["layers"]]
+    assert not browser.find_element("id", "depth-lo").is_displayed()
+    select.select_by_value("depth")
     wait_for(lambda: "/depth/0.png?lo=" in browser.find_element("id", "main-img")
              .get_attribute("src") and browser.execute_script(
                  "return document.getElementById('main-img').complete"), "the depth picture")
-    _, scene = get_json(address, f"/api/scene/{SCENE}")
+    lo = float(browser.find_element("id", "depth-lo").get_attribute("value"))
+    assert lo == pytest.approx(scene["layers"]["depth"]["range"][0], abs=0.006)
     command = browser.find_element("id", "worker-command").text
     assert command == scene["worker_command"]
     args = shlex.split(command)

@@ -47,7 +47,8 @@ def test_scene_list_and_metadata(dataset):
         assert (row["recipe"], row["seed"], row["num_instances"], row["num_frames"]) == \
             ("movi_a", 3, 1, 3)
         assert row["resolution"] == [W, H] and row["error"] is None
-        assert row["layers"] == ["rgba", "depth", "forward_flow", "normal", "segmentation"]
+        # in the order of the one layer vocabulary (kubric.io.layers.LAYERS)
+        assert row["layers"] == ["rgba", "depth", "segmentation", "forward_flow", "normal"]
         assert "_SUCCESS" in rows["scene_00000009"]["error"]
         status, scene = get_json(addr, "/api/scene/scene_00000003")
         assert status == 200 and scene["metadata"] == meta
@@ -57,6 +58,15 @@ def test_scene_list_and_metadata(dataset):
             "--set kubasic_source=none --set resolution=16,12 --set samples=2")  # keys sorted
         hit = layers["depth"][0][layers["depth"][0] < 1000]
         assert scene["depth_range"] == pytest.approx([hit.min(), hit.max()])
+        # the page's layer vocabulary comes from the server: labels, kinds, the depth-like
+        # layers' first ranges (the page keeps no list of its own)
+        from kubric.io.layers import LAYER_LABELS, LAYERS
+        assert set(scene["layers"]) == set(LAYERS)
+        for name, info in scene["layers"].items():
+            assert (info["label"], info["kind"]) == (LAYER_LABELS[name], LAYERS[name].kind)
+            assert info["adjustable_range"] == (LAYERS[name].kind == "tiff")
+        assert scene["layers"]["depth"]["range"] == pytest.approx([hit.min(), hit.max()])
+        assert "range" not in scene["layers"]["z"]  # the scene has no z layer
         # the page and its scripts
         status, ctype, html = request(addr, "/")
         assert status == 200 and ctype.startswith("text/html") and b"sceneview.js" in html

@@ -1,16 +1,19 @@
 """Decoded layer frames → RGB(A) pictures: the one colouriser of layers, used by ``kubric view``
-and by ``kubric inspect``'s contact sheets.
+and by ``kubric inspect``'s contact sheets. Each layer is drawn by its layer kind
+(:class:`kubric.io.encodings.LayerKind`, the colour maps of :mod:`kubric.io.colour_maps`):
 
-* ``rgba`` / ``rgb``: as stored (alpha kept).
-* ``depth`` / ``z``: a perceptual colour map (viridis-like: near = dark purple, far = yellow)
-  over ``[lo, hi]`` metres; background (no surface, ≥ 0.999 · background depth) black.
-* flows: the Middlebury colour wheel (Baker et al. 2011): hue = direction of (Δcol, Δrow),
-  saturation = magnitude / ``max_flow`` (the largest magnitude of the frame unless given),
-  beyond ``max_flow`` the colour darkens.
-* ``normal``: (n + 1) / 2 as RGB; ``object_coordinates`` and ``uv``: the values as RGB.
-* ``segmentation``: the label palette (:mod:`kubric.io.palette`: the colours of segmentation
-  PNGs; 0 black, then distinct hues);
-  :func:`outline` draws only the label boundaries, transparent elsewhere, for the overlay.
+* ``image8`` (``rgba`` / ``rgb``): as stored (alpha kept; composited over black on sheets);
+* ``tiff`` (``depth`` / ``z``, and e.g. texture_nerf's cut-offs): a perceptual colour map
+  (viridis-like: near = dark purple, far = yellow) over ``[lo, hi]`` (default: the frame's
+  surfaces); background (no surface, ≥ 0.999 · background depth) black;
+* ``scaled`` (flows): the Middlebury colour wheel (Baker et al. 2011): hue = direction of
+  (Δcol, Δrow), saturation = magnitude / ``hi`` (the largest magnitude of the frame unless
+  given), beyond ``hi`` the colour darkens;
+* ``signed_unit`` (``normal``): (n + 1) / 2 as RGB; ``unit`` (``object_coordinates``, ``uv``):
+  the values as RGB;
+* ``labels`` (``segmentation``): the label palette (:mod:`kubric.io.palette`: the colours of
+  segmentation PNGs; 0 black, then distinct hues); :func:`outline` draws only the label
+  boundaries, transparent elsewhere, for the overlay.
 """
 
 from __future__ import annotations
@@ -18,61 +21,22 @@ from __future__ import annotations
 import numpy as np
 
 from kubric.core.camera_geometry import BACKGROUND_DEPTH
+from kubric.io.colour_maps import (  # noqa: F401  (this module's public names before)
+    DEPTH_ANCHORS,
+    WHEEL_SEGMENTS,
+    colour_wheel,
+    depth_picture,
+    depth_range,
+    flow_picture,
+    segmentation_picture,
+)
+from kubric.io.encodings import LAYER_KINDS, LayerKind, layer_kind
+from kubric.io.layers import LAYERS
 from kubric.io.palette import label_palette  # the colours of segmentation PNGs and sheets
 from kubric.io.png_io import encode_png
 
-#: colour-map anchors (sRGB 0..1) at evenly spaced positions, viridis-like
-DEPTH_ANCHORS = np.array([[0.267, 0.005, 0.329], [0.283, 0.141, 0.458], [0.254, 0.265, 0.530],
-                          [0.207, 0.372, 0.553], [0.164, 0.471, 0.558], [0.128, 0.567, 0.551],
-                          [0.135, 0.659, 0.518], [0.267, 0.749, 0.441], [0.478, 0.821, 0.318],
-                          [0.741, 0.873, 0.150], [0.993, 0.906, 0.144]])
-#: Middlebury colour wheel: (number of hues, from colour, to colour) per segment
-WHEEL_SEGMENTS = ((15, (255, 0, 0), (255, 255, 0)), (6, (255, 255, 0), (0, 255, 0)),
-                  (4, (0, 255, 0), (0, 255, 255)), (11, (0, 255, 255), (0, 0, 255)),
-                  (13, (0, 0, 255), (255, 0, 255)), (6, (255, 0, 255), (255, 0, 0)))
-
-
-def colour_wheel() -> np.ndarray:
-    """(55, 3) float colours of the Middlebury flow wheel, starting at red (direction +x)."""
-    rows = []
-    for count, start, end in WHEEL_SEGMENTS:
-        t = np.arange(count)[:, None] / count
-        rows.append(np.asarray(start) * (1 - t) + np.asarray(end) * t)
-    return np.concatenate(rows) / 255.0
-
-
-def depth_picture(depth: np.ndarray, lo: float, hi: float,
-                  background: float = BACKGROUND_DEPTH) -> np.ndarray:
-    d = depth[..., 0].astype(np.float64)
-    t = np.clip((d - lo) / max(hi - lo, 1e-9), 0.0, 1.0) * (len(DEPTH_ANCHORS) - 1)
-    t = np.where(np.isfinite(t), t, 0.0)  # NaN samples: drawn as background below
-    i = np.minimum(np.floor(t).astype(int), len(DEPTH_ANCHORS) - 2)
-    f = (t - i)[..., None]
-    rgb = DEPTH_ANCHORS[i] * (1 - f) + DEPTH_ANCHORS[i + 1] * f
-    rgb[~(d < background * 0.999)] = 0.0  # also NaN
-    return (rgb * 255 + 0.5).astype(np.uint8)
-
-
-def flow_picture(flow: np.ndarray, max_flow: float | None = None) -> np.ndarray:
-    """(H, W, 2) (Δrow, Δcol) → (H, W, 3) uint8 on the Middlebury wheel."""
-    dy, dx = flow[..., 0].astype(np.float64), flow[..., 1].astype(np.float64)
-    mag = np.hypot(dx, dy)
-    scale = max_flow if max_flow else max(float(mag.max()), 1e-9)
-    r = mag / scale
-    wheel = colour_wheel()
-    k = (np.arctan2(-dy, -dx) / np.pi + 1) / 2 * (len(wheel) - 1)
-    k0 = np.floor(k).astype(int)
-    k1 = (k0 + 1) % len(wheel)
-    f = (k - k0)[..., None]
-    col = wheel[k0] * (1 - f) + wheel[k1] * f
-    inside = (r <= 1)[..., None]
-    col = np.where(inside, 1 - r[..., None] * (1 - col), col * 0.75)
-    return (np.clip(col, 0, 1) * 255 + 0.5).astype(np.uint8)
-
-
-def segmentation_picture(labels: np.ndarray) -> np.ndarray:
-    lab = labels[..., 0].astype(np.int64)
-    return label_palette(max(int(lab.max()) + 1, 2))[lab]
+#: the standard layers, drawn by their kind
+STANDARD_PICTURES = tuple(LAYERS)
 
 
 def outline(labels: np.ndarray) -> np.ndarray:
@@ -91,76 +55,36 @@ def outline(labels: np.ndarray) -> np.ndarray:
     return rgba
 
 
-#: the picture of each layer kind (kubric.io.layers.LayerFormat.kind) for layers a recipe
-#: declares beyond the standard ones (e.g. klevr's semantic labels, texture_nerf's cut-offs)
-KIND_PICTURES = {"image8": "rgba", "labels": "segmentation", "tiff": "depth",
-                 "signed_unit": "normal", "unit": "uv", "scaled": "flow"}
+def kind_of(layer: str, kind: str | LayerKind | None = None) -> LayerKind:
+    """The layer kind that draws ``layer``: a standard layer's own, else ``kind`` (a layer a
+    recipe declares); KeyError (one line) when there is none."""
+    if layer in LAYERS:
+        return LAYERS[layer].type
+    if kind is None:
+        raise KeyError(f"no picture for layer {layer!r}; allowed: {', '.join(STANDARD_PICTURES)}, "
+                       "or a layer of a known kind")
+    try:
+        return layer_kind(kind)
+    except ValueError:
+        raise KeyError(f"no picture for layer kind {kind!r}; allowed: "
+                       f"{sorted(LAYER_KINDS)}") from None
 
 
 def picture(layer: str, frame: np.ndarray, lo: float | None = None,
-            hi: float | None = None, kind: str | None = None) -> np.ndarray:
+            hi: float | None = None, kind: str | LayerKind | None = None) -> np.ndarray:
     """The (H, W, 3|4) uint8 picture of one decoded frame (module doc); ``lo`` / ``hi``: the
-    depth range (metres) or, for flows, ``hi`` = the magnitude shown fully saturated. A layer a
-    recipe declares is drawn by its ``kind`` (:data:`KIND_PICTURES`): labels like the
-    segmentation, float TIFFs with the depth colour map over their own range."""
-    own = kind is not None and layer not in STANDARD_PICTURES
-    if own:
-        if kind not in KIND_PICTURES:
-            raise KeyError(f"no picture for layer kind {kind!r}; allowed: {sorted(KIND_PICTURES)}")
-        if kind == "tiff" and (lo is None or hi is None):
-            finite = frame[np.isfinite(frame)]
-            lo, hi = (float(finite.min()), float(finite.max())) if finite.size else (0.0, 1.0)
-            if hi <= lo:
-                hi = lo + 1.0
-        layer = KIND_PICTURES[kind]
-        if kind == "scaled" and frame.shape[-1] != 2:
-            frame, layer = np.clip((frame - frame.min()) / max(np.ptp(frame), 1e-9), 0, 1), "uv"
-    if layer in ("rgba", "rgb"):
-        return frame
-    if layer in ("depth", "z"):
-        if lo is None or hi is None:
-            lo, hi = depth_range(frame)
-        return depth_picture(frame, lo, hi, background=np.inf if own else BACKGROUND_DEPTH)
-    if layer.endswith("flow"):
-        return flow_picture(frame, hi)
-    if layer == "normal":
-        return ((np.clip(frame, -1, 1) + 1) / 2 * 255 + 0.5).astype(np.uint8)
-    if layer in ("object_coordinates", "uv"):
-        rgb = np.clip(frame, 0, 1) * 255 + 0.5
-        return np.repeat(rgb, 3, axis=-1).astype(np.uint8) if frame.shape[-1] == 1 else \
-            rgb.astype(np.uint8)
-    if layer == "segmentation":
-        return segmentation_picture(frame)
-    raise KeyError(f"no picture for layer {layer!r}; allowed: {', '.join(STANDARD_PICTURES)}, "
-                   "or a layer of a known kind")
-
-
-STANDARD_PICTURES = ("rgba", "rgb", "depth", "z", "forward_flow", "backward_flow", "flow",
-                     "normal", "object_coordinates", "uv", "segmentation")
-
-
-def depth_range(depth: np.ndarray, background: float = BACKGROUND_DEPTH) -> tuple[float, float]:
-    """(nearest, farthest) surface depth of a frame (background left out); (0, 1) when empty."""
-    hit = depth[depth < background * 0.999]
-    return (float(hit.min()), float(hit.max())) if hit.size else (0.0, 1.0)
+    range of a depth-like layer or, for flows, ``hi`` = the magnitude shown fully saturated. A
+    layer a recipe declares is drawn by its ``kind``."""
+    return kind_of(layer, kind).draw(frame, lo, hi)
 
 
 def to_png(pixels: np.ndarray) -> bytes:
     return encode_png(np.ascontiguousarray(pixels))
 
 
-def layer_pictures(name: str, layer: np.ndarray,
-                   background: float = BACKGROUND_DEPTH) -> np.ndarray:
+def layer_pictures(name: str, layer: np.ndarray, background: float = BACKGROUND_DEPTH,
+                   kind: str | LayerKind | None = None) -> np.ndarray:
     """(T, H, W, C) layer → (T, H, W, 3) uint8 pictures on one scale for all frames (depth over
     the scene's nearest and farthest surface, flows saturated at the scene's largest
     magnitude); RGBA is composited over black."""
-    if name in ("rgba", "rgb"):
-        rgb = layer[..., :3].astype(np.float32)
-        alpha = layer[..., 3:4].astype(np.float32) / 255.0 if layer.shape[-1] == 4 else 1.0
-        return (rgb * alpha).astype(np.uint8)
-    lo = hi = None
-    if name in ("depth", "z"):
-        lo, hi = depth_range(layer, background)
-    elif name.endswith("flow"):
-        hi = max(float(np.hypot(layer[..., 0], layer[..., 1]).max()), 1e-9)
-    return np.stack([picture(name, frame, lo, hi)[..., :3] for frame in layer])
+    return kind_of(name, kind).pictures(layer, background)

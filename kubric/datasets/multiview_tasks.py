@@ -58,6 +58,8 @@ MULTIVIEW_LAYERS = {
     "object_coordinates": ("object_coordinates", "object_coordinates"),
 }
 DEFAULT_LAYERS = ("depth", "segmentation", "semantic", "alpha")
+#: the layers given as float32 decoded by their layer kind, with their channels
+FLOAT_LAYERS = ("normal", "object_coordinates")
 SPLIT_NAMES = ("train", "val", "test")
 #: Blender / OpenGL camera axes → OpenCV camera axes
 BLENDER_TO_OPENCV = np.diag([1.0, -1.0, -1.0, 1.0])
@@ -132,13 +134,9 @@ def multiview_task(example, frame, schema, view_split=None, layers=None):
     for name in _layers(schema, {"layers": layers} if layers is not None else {}):
         feature, key = MULTIVIEW_LAYERS[name]
         value = example[feature][views]
-        if name == "normal":
-            value = (value.astype(np.float32) / 65535.0 * 2.0 - 1.0)
-        elif name == "object_coordinates":
-            value = value.astype(np.float32) / 65535.0
-        else:
-            value = value[..., 0]
-        item[key] = value
+        kind = schema.layer_kind(feature)[1]
+        # float layers (normal, object coordinates) keep C; the others are one channel
+        item[key] = kind.decode(value, None, feature) if name in FLOAT_LAYERS else value[..., 0]
         if name == "semantic":
             item["semantic_classes"] = list(example["metadata"]["semantic_classes"])
     return item

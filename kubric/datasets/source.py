@@ -8,7 +8,13 @@ It reads the split's ArrayRecord shards, parses only the top-level features its 
 An example (task ``None``) is the nested dict TFDS gives (``ex["metadata"]["depth_range"]``,
 ``ex["instances"]["positions"]``), made regular: per-frame features are arrays (T, H, W, C),
 per-instance features are arrays with N first (ragged ``bboxes`` / ``bbox_frames``: a list of N
-arrays), text is ``str``. A source is picklable (readers reopen lazily in each process), so it
+arrays), text is ``str``. ``units`` picks the form of the per-frame layers: ``"raw"`` (the
+default) gives what the dataset stores, upstream Kubric's layout (MOVi's flow, depth, normals and
+object coordinates as uint16 samples, decoded by hand with ``metadata/*_range``);
+``"physical"`` decodes every layer feature by its layer kind (:mod:`kubric.io.encodings`) to
+float32 physical units: flow in pixels and depth in metres (over the scene's range), normals as
+unit vectors, object coordinates and UV in [0, 1]; RGB and labels stay integers. Tasks see the
+decoded example. A source is picklable (readers reopen lazily in each process), so it
 works in ``DataLoader(num_workers=...)`` and Grain worker processes. It is also safe across
 ``fork``: a reader opened in the parent (e.g. by looking at ``source[0]`` first) is never used in a
 forked child; the child opens its own (the process id is checked on every read).
@@ -33,7 +39,10 @@ from kubric.datasets.layout import DatasetError
 from kubric.datasets.tasks import check_servable, get_task
 from kubric.datasets.tfds_io import flatten, unflatten
 from kubric.io import storage
-from kubric.io.schema import Feature, Schema
+from kubric.io.schema import Feature, Schema, SchemaError
+
+#: what ``load(..., units=...)`` accepts (module doc)
+UNITS = ("raw", "physical")
 
 
 def _regular(f: Feature, value, dims: dict):
@@ -43,12 +52,12 @@ def _regular(f: Feature, value, dims: dict):
         if f.sequence and f.shape:
             return [[as_str(x) for x in v] for v in value]
         return [as_str(v) for v in value] if f.sequence or f.shape else as_str(value)
-    dtype = np.int64 if f.encoding == "class_label" else np.dtype(f.dtype)
+    dtype = f.type.value_dtype(f)
     if f.shape and f.shape[0] == "V":
         rest = tuple(d for d in f.shape[1:])
         fix = lambda v: np.asarray(v, dtype=dtype).reshape((-1, *rest))
         return [fix(v) for v in value] if f.sequence else fix(value)
-    if f.sequence or f.encoding in ("png", "zlib"):
+    if f.sequence or f.type.per_frame:
         if isinstance(value, np.ndarray):
             return value.astype(dtype, copy=False)
         if len(value) == 0:
@@ -56,6 +65,18 @@ def _regular(f: Feature, value, dims: dict):
             return np.zeros((0, *shape), dtype=dtype)
         return np.stack([np.asarray(v, dtype=dtype) for v in value])
     return np.asarray(value, dtype=dtype)[()] if not f.shape else np.asarray(value, dtype=dtype)
+
+
+def _with_ranges(schema: Schema, keys: tuple[str, ...]) -> tuple[str, ...]:
+    """``keys`` (top-level features to decode) plus those holding the ranges that decode the
+    quantised layer features among them to physical units."""
+    top = lambda name: name.split("/", 1)[0]
+    extra = []
+    for f in schema.features:
+        source = schema.layer_kind(f) if top(f.name) in keys else None
+        if source and source[1].needs_range(f.dtype):
+            extra += [top(r) for r in [schema.range_feature(source[0])] if r]
+    return tuple(dict.fromkeys(keys + tuple(extra)))
 
 
 class _ShardReader:
@@ -92,7 +113,7 @@ _INHERITED: list = []
 class DataSource:
     """A map-style source of one split (see module doc). Build with :func:`load`."""
 
-    def __init__(self, dataset_dir, split: str, task=None, **task_options):
+    def __init__(self, dataset_dir, split: str, task=None, units: str = "raw", **task_options):
         #: the dataset as given: a directory or a URL (read through a local cache)
         remote = storage.is_url(str(dataset_dir))
         self.location = str(dataset_dir) if remote else str(pathlib.Path(dataset_dir))
@@ -111,7 +132,12 @@ class DataSource:
         self.task = get_task(task)
         self.task_options = self.task.check_options(task_options)
         check_servable(self.task, self.schema, repr(self.location))
+        if units not in UNITS:
+            raise DatasetError(f"units {units!r} is not one of {UNITS}")
+        self.units = units
         self._keys = self.task.decode_keys(self.schema, self.task_options)
+        if units == "physical" and self._keys is not None:
+            self._keys = _with_ranges(self.schema, self._keys)
         self.scenes: list[str] = list(self.info["scenes"][split])
         self._frames = self.task.per_frame and int(self.dims["T"])
         self._reader = None
@@ -211,6 +237,11 @@ class DataSource:
         for name, value in flat.items():
             f = by_name.get(name)
             out[name] = _regular(f, value, self.dims) if f is not None else value
+        if self.units == "physical":
+            try:
+                out = self.schema.physical(out)
+            except SchemaError as err:
+                raise DatasetError(f"{self.location!r}: {err}") from None
         return unflatten(out)
 
     def _scene_example(self, scene: int, record: bytes | None = None) -> dict:
@@ -247,7 +278,9 @@ def _one_line(err: BaseException) -> str:
     return " ".join(str(err).split())[:300] or type(err).__name__
 
 
-def load(dataset_dir, split: str = "train", task: str | None = None, **task_options) -> DataSource:
+def load(dataset_dir, split: str = "train", task: str | None = None, units: str = "raw",
+         **task_options) -> DataSource:
     """A :class:`DataSource` over ``split`` of a packed dataset; ``task`` (see
-    :mod:`kubric.datasets.tasks`) picks the features and transforms each example."""
-    return DataSource(dataset_dir, split, task, **task_options)
+    :mod:`kubric.datasets.tasks`) picks the features and transforms each example; ``units``:
+    ``"raw"`` (stored samples, upstream's layout) or ``"physical"`` (module doc)."""
+    return DataSource(dataset_dir, split, task, units, **task_options)

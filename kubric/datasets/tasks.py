@@ -49,7 +49,7 @@ from kubric.datasets.task_registry import (  # noqa: F401  (the registry's publi
     register_task,
     servable_tasks,
 )
-from kubric.io.scene_reader import dequantise
+from kubric.io.layers import LAYERS
 
 
 def resize_frames(frames: np.ndarray, size) -> np.ndarray:
@@ -107,12 +107,12 @@ def pixel_rays(intrinsics_pixels: np.ndarray, camera_to_world: np.ndarray, heigh
 
 
 def metric_depth(example: dict, frame) -> np.ndarray:
-    """Depth (H, W) float32 metres of one frame: the stored float32 samples (multi-view
-    datasets), or uint16 samples scaled by ``metadata/depth_range`` (MOVi)."""
+    """Depth (H, W) float32 metres of one frame, decoded by the depth layer's kind: the stored
+    float32 samples (multi-view datasets, or ``units="physical"``), or uint16 samples scaled by
+    ``metadata/depth_range`` (MOVi)."""
     depth = example["depth"][frame, ..., 0]
-    if depth.dtype.kind == "f":
-        return depth.astype(np.float32, copy=True)
-    return dequantise(depth, example["metadata"]["depth_range"])
+    value_range = example["metadata"].get("depth_range") if depth.dtype.kind in "ui" else None
+    return LAYERS["depth"].type.decode(depth, value_range, "feature 'depth'").copy()
 
 
 @register_task("nerf_rays", features=("video", "depth", "camera", "metadata"), per_frame=True,

@@ -7,7 +7,8 @@ only to name a dtype; :func:`serialize` builds the same proto fields (``ragged_f
 ``ragged_row_lengths_0``) from numpy. Per-frame image features are PNG-encoded here (TFDS would
 call ``tf.image.encode_png``); TFDS decodes them with OpenCV.
 
-Feature mapping: ``png`` → ``Sequence(Image((H, W, C), dtype, "png"), length=T)``; ``zlib`` →
+Feature mapping (each encoding's class in :mod:`kubric.io.encodings` makes its connector and its
+serialisable value): ``png`` → ``Sequence(Image((H, W, C), dtype, "png"), length=T)``; ``zlib`` →
 ``Sequence(Tensor((H, W, C), dtype, encoding=zlib), length=T)``; ``text`` → ``Text``;
 ``class_label`` → ``ClassLabel(names)``; a list of text (shape ``("C",)``) →
 ``Sequence(Text())``; ``bbox`` → ``Sequence(BBoxFeature())``; a leading ``V``
@@ -21,7 +22,7 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from kubric.io import png_io
+from kubric.io.encodings import FEATURE_ENCODINGS
 from kubric.io.schema import SEQUENCES, Feature, Schema
 
 
@@ -31,25 +32,9 @@ def _tfds():
 
 
 def _leaf(f: Feature, dims: Mapping[str, int]):
-    tfds = _tfds()
-    shape = f.concrete_shape(dims)
+    """The TFDS connector of one feature: its encoding's (:mod:`kubric.io.encodings`)."""
     dtype = np.bool_ if f.dtype == "bool" else np.dtype(f.dtype) if f.dtype != "str" else None
-    if f.encoding == "text":
-        return tfds.features.Sequence(tfds.features.Text()) if f.shape else tfds.features.Text()
-    if f.encoding == "class_label":
-        return tfds.features.ClassLabel(names=list(f.names))
-    if f.encoding == "bbox":
-        return tfds.features.Sequence(tfds.features.BBoxFeature())
-    if f.encoding == "png":
-        return tfds.features.Sequence(tfds.features.Image(shape=shape[1:], dtype=dtype,
-                                                          encoding_format="png"),
-                                      length=shape[0])
-    if f.encoding == "zlib":
-        return tfds.features.Sequence(tfds.features.Tensor(
-            shape=shape[1:], dtype=dtype, encoding=tfds.features.Encoding.ZLIB), length=shape[0])
-    if f.shape and f.shape[0] == "V":
-        return tfds.features.Sequence(tfds.features.Tensor(shape=shape[1:], dtype=dtype))
-    return tfds.features.Tensor(shape=shape, dtype=dtype)
+    return f.type.connector(_tfds(), f, f.concrete_shape(dims), dtype)
 
 
 def _split_name(f: Feature) -> tuple[tuple[str, ...], str | None]:
@@ -87,8 +72,8 @@ def tfds_features(schema: Schema, dims: Mapping[str, int]):
 
 
 def encode_frames(frames: np.ndarray) -> list[bytes]:
-    """(T, H, W, C) uint8 / uint16 → one PNG per frame."""
-    return [png_io.encode_png(np.ascontiguousarray(frame)) for frame in frames]
+    """(T, H, W, C) uint8 / uint16 → one PNG per frame (the ``png`` encoding's)."""
+    return FEATURE_ENCODINGS["png"].serialisable(None, None, frames)
 
 
 def nested_example(schema: Schema, flat: Mapping) -> dict:
@@ -98,12 +83,7 @@ def nested_example(schema: Schema, flat: Mapping) -> dict:
     root: dict = {}
     groups: dict[str, dict[str, list]] = {}
     for f in schema.features:
-        value = flat[f.name]
-        if f.encoding == "png":
-            value = encode_frames(value)
-        elif f.encoding == "bbox":
-            to_boxes = lambda boxes: [tfds.features.BBox(*(float(c) for c in b)) for b in boxes]
-            value = [to_boxes(v) for v in value] if f.sequence else to_boxes(value)
+        value = f.type.serialisable(tfds, f, flat[f.name])
         if f.sequence:
             groups.setdefault(f.sequence, {})[f.name[len(f.sequence):]] = list(value)
             continue

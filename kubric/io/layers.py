@@ -2,7 +2,10 @@
 
 Input to :func:`write_image_dict`: ``{layer name: (T, H, W, C) array}`` as returned by
 ``Blender.render()``; every layer must share T, H and W. Frame ``i`` (0-based) of a layer goes to
-``<directory>/<template>.format(i)`` with these default templates and encodings:
+``<directory>/<template>.format(i)`` with these default templates and encodings (each encoding
+is a layer kind of :mod:`kubric.io.encodings`, which does the work; the standard layers are
+declared once, here, in :data:`LAYERS` — the renderers' :data:`RENDERED_LAYERS` and the viewer's
+list derive from it):
 
 =====================  ============================  ===  ======================================
 layer                  file                          C    encoding
@@ -48,39 +51,65 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 
 from kubric.errors import InputError
-from kubric.io import png_io, tiff_io
+from kubric.io import encodings, png_io
+from kubric.io.encodings import RANGE_TOLERANCE, LayerKind, layer_kind  # noqa: F401
 from kubric.io.json_io import read_json, write_json
 from kubric.io.paths import PathLike, as_path, atomic_write_bytes, read_bytes
 
 DATA_RANGES_FILE = "data_ranges.json"
-RANGE_TOLERANCE = 1e-4
 
 
 @dataclasses.dataclass(frozen=True)
 class LayerFormat:
-    """How one layer is stored: default file template, channel count, encoding kind."""
+    """How one layer is stored: default file template, channel count, encoding kind (the name
+    of a :class:`kubric.io.encodings.LayerKind`, or the kind or its class: stored as its name)."""
 
     template: str
     channels: int
-    kind: str  # "image8" | "tiff" | "labels" | "scaled" | "signed_unit" | "unit"
+    kind: str  # a name of kubric.io.encodings.LAYER_KINDS
+
+    def __post_init__(self):
+        if isinstance(self.kind, LayerKind) or (isinstance(self.kind, type)
+                                                 and issubclass(self.kind, LayerKind)):
+            object.__setattr__(self, "kind", self.kind.name)
+
+    @property
+    def type(self) -> LayerKind:
+        """The registered :class:`~kubric.io.encodings.LayerKind` of :attr:`kind`."""
+        return layer_kind(self.kind)
 
 
-LAYERS: dict[str, LayerFormat] = {
-    "rgba": LayerFormat("rgba_{:05d}.png", 4, "image8"),
-    "rgb": LayerFormat("rgb_{:05d}.png", 3, "image8"),
-    "depth": LayerFormat("depth_{:05d}.tiff", 1, "tiff"),
-    "z": LayerFormat("z_{:05d}.tiff", 1, "tiff"),
-    "segmentation": LayerFormat("segmentation_{:05d}.png", 1, "labels"),
-    "forward_flow": LayerFormat("forward_flow_{:05d}.png", 2, "scaled"),
-    "backward_flow": LayerFormat("backward_flow_{:05d}.png", 2, "scaled"),
-    "flow": LayerFormat("flow_{:05d}.png", 2, "scaled"),
-    "normal": LayerFormat("normal_{:05d}.png", 3, "signed_unit"),
-    "object_coordinates": LayerFormat("object_coordinates_{:05d}.png", 3, "unit"),
-    "uv": LayerFormat("uv_{:05d}.png", 3, "unit"),
-}
-#: layers whose {"min", "max"} goes to data_ranges.json
-RANGE_KINDS = ("scaled", "tiff")
-LAYER_KINDS = ("image8", "tiff", "labels", "scaled", "signed_unit", "unit")
+#: The standard layers, declared once: name → (file template, channels, kind, what the viewer
+#: calls it, how backends render it: "colour" (path traced), "exact" (one value per pixel
+#: centre, docs/conventions.md) or None: upstream's file names ``rgb`` and ``flow``, read and
+#: written but never rendered).
+_STANDARD = (
+    ("rgba", "rgba_{:05d}.png", 4, "image8", "RGB", "colour"),
+    ("rgb", "rgb_{:05d}.png", 3, "image8", "RGB", None),
+    ("depth", "depth_{:05d}.tiff", 1, "tiff", "depth (m)", "exact"),
+    ("z", "z_{:05d}.tiff", 1, "tiff", "z (m)", "exact"),
+    ("segmentation", "segmentation_{:05d}.png", 1, "labels", "segmentation", "exact"),
+    ("forward_flow", "forward_flow_{:05d}.png", 2, "scaled", "forward flow (px)", "exact"),
+    ("backward_flow", "backward_flow_{:05d}.png", 2, "scaled", "backward flow (px)", "exact"),
+    ("flow", "flow_{:05d}.png", 2, "scaled", "flow (px)", None),
+    ("normal", "normal_{:05d}.png", 3, "signed_unit", "normals", "exact"),
+    ("object_coordinates", "object_coordinates_{:05d}.png", 3, "unit", "object coordinates",
+     "exact"),
+    ("uv", "uv_{:05d}.png", 3, "unit", "UV", "exact"),
+)
+#: the standard layers' formats
+LAYERS: dict[str, LayerFormat] = {name: LayerFormat(template, channels, kind)
+                                  for name, template, channels, kind, _, _ in _STANDARD}
+#: what the viewer calls each standard layer (a recipe's own layers: their name)
+LAYER_LABELS: dict[str, str] = {row[0]: row[4] for row in _STANDARD}
+#: the layers a rendering backend may be asked for (kubric.renderer.base.ALL_LAYERS)
+RENDERED_LAYERS: tuple[str, ...] = tuple(row[0] for row in _STANDARD if row[5])
+#: the exact annotation layers among them (kubric.renderer.base.ANNOTATION_LAYERS)
+EXACT_LAYERS: tuple[str, ...] = tuple(row[0] for row in _STANDARD if row[5] == "exact")
+#: every layer kind, by name (kubric.io.encodings.LAYER_KINDS)
+LAYER_KINDS = encodings.LAYER_KINDS
+#: the kinds whose layers get {"min", "max"} in data_ranges.json
+RANGE_KINDS = tuple(name for name, kind in LAYER_KINDS.items() if kind.records_range)
 
 
 def frame_filename(template: str, index: int) -> str:
@@ -106,8 +135,8 @@ def layer_table(formats: Mapping[str, LayerFormat] | None = None) -> dict[str, L
     table = dict(LAYERS)
     for name, fmt in dict(formats or {}).items():
         if not isinstance(fmt, LayerFormat) or fmt.kind not in LAYER_KINDS:
-            raise ValueError(f"layer {name!r}: expected a LayerFormat with kind in {LAYER_KINDS}, "
-                             f"got {fmt!r}")
+            raise ValueError(f"layer {name!r}: expected a LayerFormat with kind in "
+                             f"{tuple(LAYER_KINDS)}, got {fmt!r}")
         table[name] = fmt
     return table
 
@@ -124,61 +153,18 @@ def _templates(file_templates: Mapping[str, str] | None, table: Mapping[str, Lay
 
 
 # -------------------------------------------------------------------------------- encoding
-def _check_unit_interval(arr: np.ndarray, lo: float, hi: float, what: str) -> None:
-    if arr.dtype.kind != "f":
-        raise TypeError(f"{what}: expected float values in [{lo}, {hi}] or quantised uint8 / "
-                        f"uint16 samples, got dtype {arr.dtype}")
-    if not np.all(np.isfinite(arr)):
-        raise ValueError(f"{what}: values must be finite, found NaN or inf")
-    vmin, vmax = float(arr.min()), float(arr.max())
-    if vmin < lo - RANGE_TOLERANCE or vmax > hi + RANGE_TOLERANCE:
-        raise ValueError(f"{what}: values must lie in [{lo}, {hi}], got range [{vmin}, {vmax}]")
-
-
-def _png_of(quantise: Callable) -> Callable:
-    """Frame encoder quantising one (H, W, C) frame at a time (C = 2 gets a zero third channel):
-    a layer's 16-bit copy and its float64 temporaries never exist whole."""
-    def encode(frame: np.ndarray) -> bytes:
-        q = quantise(frame)
-        if q.shape[-1] == 2:
-            q = np.concatenate([q, np.zeros_like(q[..., :1])], axis=-1)
-        return png_io.encode_png(q)
-    return encode
-
-
 def _prepare_layer(name: str, fmt: LayerFormat, data, ranges: dict
                    ) -> tuple[np.ndarray, Callable]:
-    """Validate one (T, H, W, C) layer; return its per-frame samples and the frame encoder."""
+    """Validate one (T, H, W, C) layer; return its per-frame samples and the frame encoder (its
+    kind's); its range, if it has one, goes to ``ranges``."""
     what = f"write_image_dict: layer {name!r}"
     arr = np.asarray(data)
     if arr.ndim != 4 or arr.shape[-1] != fmt.channels or 0 in arr.shape:
         raise ValueError(f"{what}: expected shape (T, H, W, {fmt.channels}), got {arr.shape}")
-    if fmt.kind == "image8":
-        if arr.dtype != np.uint8:
-            raise TypeError(f"{what}: expected dtype uint8 (8-bit PNG), got {arr.dtype}")
-        return arr, png_io.encode_png
-    if fmt.kind == "tiff":
-        if arr.dtype.kind != "f":
-            raise TypeError(f"{what}: expected float depth values, got dtype {arr.dtype}")
-        finite = arr[np.isfinite(arr)]
-        if finite.size:  # NaN / inf pixels are stored as they are but left out of the range
-            ranges[name] = {"min": float(finite.min()), "max": float(finite.max())}
-        return arr, tiff_io.encode_tiff
-    if fmt.kind == "labels":
-        labels, max_label = png_io.check_labels(arr.reshape(-1, arr.shape[2], 1), what)
-        bitdepth = 8 if max_label <= 255 else 16
-        encode = lambda frame: png_io.encode_labels(frame, max_label, None, bitdepth, what)
-        return arr, encode
-    if fmt.kind == "scaled":
-        value_range = png_io.float_range(arr, what)
+    encode, value_range = fmt.type.encoder(arr, what)
+    if value_range is not None:
         ranges[name] = value_range
-        lo, hi = value_range["min"], value_range["max"]
-        return arr, _png_of(lambda frame: png_io.scale_to_uint16(frame, lo, hi))
-    if arr.dtype in (np.uint8, np.uint16):  # normal / uv / object coordinates, quantised
-        return arr, png_io.encode_png        # already: stored as they are (see module doc)
-    lo = -1.0 if fmt.kind == "signed_unit" else 0.0
-    _check_unit_interval(arr, lo, 1.0, what)
-    return arr, _png_of(lambda frame: png_io.scale_to_uint16(frame, lo, 1.0))
+    return arr, encode
 
 
 def write_image_dict(data_dict: Mapping[str, np.ndarray], directory: PathLike,
@@ -250,32 +236,21 @@ def _frame_paths(directory, template: str) -> list:
 
 def _decode_frame(name: str, fmt: LayerFormat, path, value_range, raw: bool = False
                   ) -> np.ndarray:
-    data = read_bytes(path)
-    if fmt.kind == "tiff":
-        arr = tiff_io.decode_tiff(data, repr(str(path))).astype(np.float32, copy=False)
-    else:
-        arr, _ = png_io.decode_png(data, repr(str(path)))
-        if fmt.kind == "labels":
-            arr = arr if raw else arr.astype(np.uint32)
-        elif fmt.kind != "image8":
-            if raw:
-                return arr[..., :fmt.channels]
-            lo, hi = {"scaled": value_range, "signed_unit": (-1.0, 1.0)}.get(fmt.kind, (0, 1))
-            if arr.dtype == np.uint8 and fmt.kind != "scaled":  # written from uint8 samples
-                arr = (lo + arr.astype(np.float64) * ((hi - lo) / 255.0)).astype(np.float32)
-            elif arr.dtype != np.uint16:
-                raise InputError(f"{str(path)!r}: layer {name!r} must be a 16-bit PNG")
-            else:
-                arr = png_io.unscale_from_uint16(arr, lo, hi)
-    if arr.shape[-1] < fmt.channels:
-        raise InputError(f"{str(path)!r}: layer {name!r} needs {fmt.channels} channels, the "
-                         f"file has {arr.shape[-1]}")
-    return arr[..., :fmt.channels]
+    """One file's samples (``raw``: as stored) or their decode by the layer's kind."""
+    what = repr(str(path))
+    samples = fmt.type.read(read_bytes(path), what)
+    if samples.shape[-1] < fmt.channels:
+        raise InputError(f"{what}: layer {name!r} needs {fmt.channels} channels, the file has "
+                         f"{samples.shape[-1]}")
+    samples = samples[..., :fmt.channels]  # (a 2-channel layer's zero third channel dropped)
+    return samples if raw else fmt.type.from_file(samples, value_range,
+                                                  f"{what}: layer {name!r}")
 
 
 def _layer_range(directory, name: str, value_range, fmt: LayerFormat):
-    """The (min, max) that decodes a scaled layer: ``value_range`` or data_ranges.json's entry."""
-    if fmt.kind != "scaled":
+    """The (min, max) that decodes a layer whose files need one (scaled): ``value_range`` or
+    data_ranges.json's entry."""
+    if not fmt.type.range_in_file:
         return value_range
     if value_range is None:
         range_path = directory / DATA_RANGES_FILE
@@ -320,7 +295,7 @@ def read_layer(directory: PathLike, name: str, file_templates: Mapping[str, str]
     paths = _frame_paths(directory, _templates(file_templates, table)[name])
     if not paths:
         raise FileNotFoundError(f"{str(directory)!r} has no frames of layer {name!r}")
-    if fmt.kind == "scaled" and not raw:
+    if not raw:
         value_range = _layer_range(directory, name, value_range, fmt)
     frames = [_decode_frame(name, fmt, p, value_range, raw) for p in paths]
     if len({f.shape for f in frames}) > 1:

@@ -17,11 +17,11 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from kubric.errors import KubricError
-from kubric.io import json_io, layers, png_io
+from kubric.errors import InputError, KubricError
+from kubric.io import encodings, json_io, layers, png_io
 from kubric.io.scene_dir import EVENTS_FILE, METADATA_FILE, is_complete
 from kubric.io.scene_dir import SUCCESS_FILE as SUCCESS
-from kubric.io.schema import UINT16_MAX, Feature, Schema, SchemaError, convert, layer_channels
+from kubric.io.schema import Feature, Schema, SchemaError, convert, layer_channels
 
 
 class SceneError(KubricError, ValueError):
@@ -58,9 +58,11 @@ quantise = png_io.scale_to_uint16
 
 
 def dequantise(q: np.ndarray, value_range) -> np.ndarray:
-    """The inverse of :func:`quantise` (float32): ``q / 65535 · (max − min) + min``."""
+    """The inverse of :func:`quantise` (float32): ``q / 65535 · (max − min) + min`` with
+    ``value_range`` = (min, max) — :func:`kubric.io.encodings.dequantise`, the decode of the
+    scaled and quantised-depth layer kinds."""
     lo, hi = (float(v) for v in np.asarray(value_range).reshape(2))
-    return (q.astype(np.float64) / UINT16_MAX * (hi - lo) + lo).astype(np.float32)
+    return encodings.dequantise(q, lo, hi)
 
 
 def _cast(feature: Feature, value, dims: Mapping[str, int], what: str):
@@ -72,14 +74,14 @@ def _cast(feature: Feature, value, dims: Mapping[str, int], what: str):
                 raise SchemaError(f"{what}: expected a list of strings, got {value!r}"[:300])
             return [as_str(v) for v in value]
         return as_str(value)
-    if feature.encoding == "class_label":
-        if value not in feature.names:
-            raise SchemaError(f"{what}: {value!r} is not one of {feature.names}")
-        return np.int64(feature.names.index(value))
+    try:
+        value = feature.type.stored(feature, value, what)
+    except ValueError as err:
+        raise SchemaError(str(err)) from None
     arr = np.asarray(value)
     if arr.dtype == object:
         raise SchemaError(f"{what}: ragged value")
-    target = np.dtype(feature.dtype)
+    target = feature.type.value_dtype(feature)
     if target.kind in "ui" and arr.size:
         if arr.dtype.kind == "f" and not np.all(np.isfinite(arr)):
             raise SchemaError(f"{what}: NaN / inf in an integer feature")
@@ -156,33 +158,24 @@ class SceneReader:
         return arr
 
     def layer_range(self, name: str) -> np.ndarray:
-        """[min, max] of a layer: ``data_ranges.json`` for scaled layers, the finite samples
-        otherwise (the range its uint16 quantisation uses)."""
-        fmt = self.schema.layer_formats[name]
-        if fmt.kind == "scaled":
-            entry = self.data_ranges.get(name)
-            if entry is None:
-                raise SceneError(f"{str(self.scene_dir)!r}: data_ranges.json has no {name!r}")
-            return np.array([entry["min"], entry["max"]], dtype=np.float32)
-        arr = self.layer(name)
-        finite = arr[np.isfinite(arr)]
-        if finite.size != arr.size:
-            raise SceneError(f"{str(self.scene_dir)!r}: layer {name!r} has NaN / inf samples")
-        return np.array([finite.min(), finite.max()], dtype=np.float32)
+        """[min, max] of a layer as its kind packs it: ``data_ranges.json`` for scaled layers,
+        the finite samples otherwise (the range its uint16 quantisation uses)."""
+        try:
+            return self.schema.layer_formats[name].type.value_range(
+                lambda: self.layer(name), self.data_ranges.get(name),
+                f"{str(self.scene_dir)!r}: layer {name!r}")
+        except InputError as err:
+            raise SceneError(str(err)) from None
 
     def _layer_feature(self, f: Feature) -> np.ndarray:
         name, channels = layer_channels(f.source_arg, f.name)
-        arr = self.layer(name)[..., channels]
-        target = np.dtype(f.dtype)
-        if arr.dtype.kind == "f" and target == np.uint16:
-            lo, hi = (float(v) for v in self.layer_range(name))
-            arr = quantise(arr, lo, hi)
-        elif arr.dtype != target:
-            if arr.dtype.kind in "ui" and target.kind in "ui" and arr.size and \
-                    arr.max() > np.iinfo(target).max:
-                raise SceneError(f"{str(self.scene_dir)!r}: layer {name!r} holds values up to "
-                                 f"{arr.max()}, feature {f.name!r} is {target}")
-            arr = arr.astype(target)
+        kind = self.schema.layer_formats[name].type
+        try:
+            arr = kind.packed(self.layer(name)[..., channels], np.dtype(f.dtype),
+                              lambda: self.layer_range(name),
+                              f"{str(self.scene_dir)!r}: layer {name!r} (feature {f.name!r})")
+        except InputError as err:
+            raise SceneError(str(err)) from None
         return _cast(f, arr, self.dims, f"{str(self.scene_dir)!r} feature {f.name!r}")
 
     def _elements(self, kind: str) -> list:
@@ -241,8 +234,7 @@ class SceneReader:
             return values
         if not values:
             shape = tuple(d if isinstance(d, int) else self.dims.get(d, 0) for d in f.shape)
-            dtype = np.int64 if f.encoding == "class_label" else np.dtype(f.dtype)
-            return np.zeros((0, *shape), dtype=dtype)
+            return np.zeros((0, *shape), dtype=f.type.value_dtype(f))
         return np.stack(values)
 
     def _read(self, f: Feature):

@@ -59,6 +59,7 @@ from collections.abc import Callable, Iterable, Mapping
 import numpy as np
 
 from kubric.errors import KubricError
+from kubric.io.encodings import FEATURE_ENCODINGS, LayerKind
 from kubric.io.layers import LAYERS, LayerFormat, layer_table
 
 #: named dimensions and what they count
@@ -68,7 +69,8 @@ DIMS = {"T": "frames", "H": "image height (pixels)", "W": "image width (pixels)"
         "B": "bands (e.g. texture frequency bands)"}
 #: feature name prefixes that hold one value per element of a sequence, and its dimension
 SEQUENCES = {"instances/": "N", "events/collisions/": "K"}
-ENCODINGS = ("none", "png", "zlib", "text", "class_label", "bbox")
+#: feature encodings by name (the classes of :mod:`kubric.io.encodings`)
+ENCODINGS = FEATURE_ENCODINGS
 DTYPES = ("uint8", "uint16", "int32", "int64", "float32", "bool", "str")
 SOURCE_KINDS = ("scene_name", "layer", "range", "meta", "camera", "instance", "collision", "npz")
 #: the splits of a multi-view scene's views (NeRF's transforms_{split}.json), in index order
@@ -155,7 +157,8 @@ class Feature:
         if self.dtype not in DTYPES:
             raise SchemaError(f"{what}: dtype {self.dtype!r} is not one of {DTYPES}")
         if self.encoding not in ENCODINGS:
-            raise SchemaError(f"{what}: encoding {self.encoding!r} is not one of {ENCODINGS}")
+            raise SchemaError(f"{what}: encoding {self.encoding!r} is not one of "
+                              f"{tuple(ENCODINGS)}")
         for dim in self.shape:
             if not (isinstance(dim, int) and dim > 0) and dim not in DIMS:
                 raise SchemaError(f"{what}: shape entry {dim!r} must be a positive int or one of "
@@ -167,11 +170,10 @@ class Feature:
         if self.convert and self.convert not in CONVERSIONS:
             raise SchemaError(f"{what}: convert {self.convert!r} is not one of "
                               f"{sorted(CONVERSIONS)}")
-        if (self.encoding == "class_label") != bool(self.names):
-            raise SchemaError(f"{what}: class labels need names and encoding 'class_label'")
-        if self.encoding == "png" and (self.shape[:1] != ("T",) or len(self.shape) != 4
-                                       or self.dtype not in ("uint8", "uint16")):
-            raise SchemaError(f"{what}: png features are (T, H, W, C) uint8 / uint16")
+        try:
+            self.type.check(self, what)
+        except ValueError as err:
+            raise SchemaError(str(err)) from None
         if self.dtype == "str" and (len(self.shape) > 1 or self.shape[:1] not in
                                     ((), *((d,) for d in DIMS))):
             raise SchemaError(f"{what}: text features have shape () or one named dimension")
@@ -190,6 +192,11 @@ class Feature:
                 "float32": number}.get(self.dtype, number and isinstance(value, int))
         if not fits:
             raise SchemaError(f"{what}: default {value!r} is not a value of dtype {self.dtype}")
+
+    @property
+    def type(self):
+        """The :class:`~kubric.io.encodings.FeatureEncoding` of :attr:`encoding`."""
+        return ENCODINGS[self.encoding]
 
     @property
     def sequence(self) -> str | None:
@@ -259,6 +266,45 @@ class Schema:
     def layer_formats(self) -> dict[str, LayerFormat]:
         """Every layer this schema may read: the standard table plus its own."""
         return layer_table(self.layers)
+
+    def layer_kind(self, feature: Feature | str) -> tuple[str, LayerKind] | None:
+        """(layer name, its :class:`~kubric.io.encodings.LayerKind`) of a ``layer:`` feature;
+        None for a feature of another source."""
+        f = self[feature] if isinstance(feature, str) else feature
+        if f.source_kind != "layer":
+            return None
+        layer = layer_channels(f.source_arg, f.name)[0]
+        return layer, self.layer_formats[layer].type
+
+    def range_feature(self, layer: str) -> str | None:
+        """The name of the feature holding layer ``layer``'s [min, max] (source
+        ``range:LAYER``), or None."""
+        return next((f.name for f in self.features
+                     if f.source_kind == "range" and f.source_arg == layer), None)
+
+    def physical(self, flat: Mapping) -> dict:
+        """``flat`` (feature name → packed value) with every ``layer:`` feature decoded by its
+        layer kind to physical units, float32 (flow in pixels, depth in metres, normals as unit
+        vectors, object coordinates and UV in [0, 1]; colour and labels unchanged). Quantised
+        samples use the per-scene range of the layer's ``range:`` feature in ``flat``."""
+        out = dict(flat)
+        for f in self.features:
+            source = self.layer_kind(f) if f.name in flat else None
+            if source is None:
+                continue
+            layer, kind = source
+            value = np.asarray(flat[f.name])
+            value_range = None
+            if kind.needs_range(value.dtype):
+                name = self.range_feature(layer)
+                if name is None or name not in flat:
+                    raise SchemaError(f"feature {f.name!r}: decoding layer {layer!r} needs its "
+                                      f"range, a feature with source 'range:{layer}'"
+                                      + (f" ({name!r} was not read)" if name else
+                                         f" (schema {self.name!r} has none)"))
+                value_range = flat[name]
+            out[f.name] = kind.decode(value, value_range, f"feature {f.name!r}")
+        return out
 
     def image_layers(self) -> list[str]:
         """The scene-directory layers its features read."""

@@ -39,12 +39,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from kubric.errors import UsageError
+from kubric.io.layers import EXACT_LAYERS, RENDERED_LAYERS
 
-#: the exact annotation layers (one value per pixel centre; docs/conventions.md)
-ANNOTATION_LAYERS = ("depth", "z", "segmentation", "forward_flow", "backward_flow", "normal",
-                     "object_coordinates", "uv")
-#: every layer a backend may be asked for
-ALL_LAYERS = ("rgba",) + ANNOTATION_LAYERS
+#: the exact annotation layers (one value per pixel centre; docs/conventions.md) and every layer
+#: a backend may be asked for: declared once, in kubric.io.layers
+ANNOTATION_LAYERS = EXACT_LAYERS
+ALL_LAYERS = RENDERED_LAYERS
 
 #: exposure effects a backend may render into RGB (the annotation layers stay exact): motion
 #: blur over a shutter, thin-lens depth of field (the camera's ``use_dof``), rolling shutter

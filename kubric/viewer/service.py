@@ -117,14 +117,16 @@ class ViewerService:
             command = worker_command(meta.get("flags", {}), self.source.output_root(name))
         except SceneError as err:
             command = f"# {err}"
-        depth_range = None
-        if "depth" in summary["layers"]:
-            try:
-                depth_range = list(render.depth_range(self.frame(name, "depth", 0)))
-            except SceneError:
-                depth_range = None
+        layers = self.source.vocabulary(name)
+        for layer in summary["layers"]:  # the range a depth-like layer is first drawn over
+            if layers[layer]["adjustable_range"]:
+                try:
+                    layers[layer]["range"] = list(render.depth_range(self.frame(name, layer, 0)))
+                except SceneError:
+                    layers[layer]["range"] = None
+        depth_range = layers.get("depth", {}).get("range")
         return {"summary": summary, "metadata": meta, "events": self.source.events(name),
-                "worker_command": command, "depth_range": depth_range,
+                "worker_command": command, "depth_range": depth_range, "layers": layers,
                 "palette": render.label_palette(len(meta.get("instances", [])) + 1).tolist()}
 
     def tracks(self, name: str) -> dict | None:
@@ -150,9 +152,8 @@ class ViewerService:
             if layer == "outline":
                 return render.to_png(render.outline(self.frame(name, "segmentation", index)))
             fmt = self.source.formats(name).get(layer)
-            kind = fmt.kind if fmt is not None else None
             return render.to_png(render.picture(layer, self.frame(name, layer, index), lo, hi,
-                                                kind))
+                                                fmt.kind if fmt is not None else None))
         return self.cache.get_or_make(("png", name, layer, index, lo, hi), make)
 
     def probe(self, name: str, index: int, col: int, row: int) -> dict:

@@ -22,7 +22,7 @@ import numpy as np
 from kubric.annotations.track_files import read_tracks
 from kubric.errors import KubricError
 from kubric.io.json_io import read_json
-from kubric.io.layers import LAYERS, LayerFormat, frame_filename, read_frame
+from kubric.io.layers import LAYER_LABELS, LAYERS, LayerFormat, frame_filename, read_frame
 from kubric.io.scene_dir import EVENTS_FILE, METADATA_FILE, SCHEMA_FILE, SUCCESS_FILE, TRACKS_FILE
 from kubric.io.scene_dir import looks_like_scene as _looks_like_scene
 from kubric.io.schema import SchemaError
@@ -30,9 +30,8 @@ from kubric.pipeline.recipe import scene_schema
 
 #: a scene name: letters, digits, ``_ . -``, not starting with a dot (no separators, no ``..``)
 NAME_PATTERN = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.\-]{0,199}\Z")
-#: layers the viewer shows, in the selector's order
-VIEW_LAYERS = ("rgba", "rgb", "depth", "z", "forward_flow", "backward_flow", "normal",
-               "object_coordinates", "uv", "segmentation")
+#: the standard layers the viewer shows, in the selector's order (kubric.io.layers.LAYERS)
+VIEW_LAYERS = tuple(LAYERS)
 #: how often a folder is rescanned for new scenes (seconds)
 RESCAN_SECONDS = 2.0
 
@@ -76,6 +75,14 @@ class SceneSource(abc.ABC):
     def formats(self, name: str) -> dict[str, LayerFormat]:
         """The layers a scene may hold and how they are stored (default: the standard ones)."""
         return {n: LAYERS[n] for n in VIEW_LAYERS}
+
+    def vocabulary(self, name: str) -> dict[str, dict]:
+        """What the page needs to know of each layer the scene may hold (it keeps no list of
+        its own): ``label`` (the selector's text), ``kind`` (its layer kind) and
+        ``adjustable_range`` (the page offers a [lo, hi] to draw it over)."""
+        return {n: {"label": LAYER_LABELS.get(n, n), "kind": fmt.kind,
+                    "adjustable_range": fmt.type.adjustable_range}
+                for n, fmt in self.formats(name).items()}
 
     def check_name(self, name: str) -> str:
         """``name`` when it is a scene of this source; KeyError otherwise."""

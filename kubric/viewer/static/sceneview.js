@@ -1,12 +1,9 @@
 "use strict";
 // One scene: main layer + overlays with a frame scrubber and play/pause, a hover readout of what
 // the files hold at a pixel, instance details on click, a 3D view and the reproducing command.
+// The layers' names and how they are drawn come from the server (scene.layers: label, kind,
+// adjustable_range and its first range), which derives them from kubric.io.layers.
 const KVScene = (function () {
-  const LAYER_NAMES = {
-    rgba: "RGB", rgb: "RGB", depth: "depth (m)", z: "z (m)", forward_flow: "forward flow",
-    backward_flow: "backward flow", normal: "normals", object_coordinates: "object coordinates",
-    uv: "UV", segmentation: "segmentation",
-  };
   let s = null;  // the open scene's state
 
   function stop() {
@@ -18,10 +15,20 @@ const KVScene = (function () {
     return scene.summary.num_frames || (scene.metadata.metadata || {}).num_frames || 1;
   }
 
+  function layerInfo(layer) {
+    return (s.scene.layers || {})[layer] || { label: layer, adjustable_range: false };
+  }
+
   function mainUrl() {
-    const depthLike = s.layer === "depth" || s.layer === "z";
-    return KV.frameUrl(s.name, s.layer, s.frame, depthLike ? s.lo.value : undefined,
-      depthLike ? s.hi.value : undefined);
+    const ranged = layerInfo(s.layer).adjustable_range;
+    return KV.frameUrl(s.name, s.layer, s.frame, ranged ? s.lo.value : undefined,
+      ranged ? s.hi.value : undefined);
+  }
+
+  function showRange() {  // a depth-like layer: its [lo, hi] box, at the layer's own range
+    const info = layerInfo(s.layer), range = info.range || [0, 10];
+    s.depthBox.style.display = info.adjustable_range ? "" : "none";
+    if (info.adjustable_range) { s.lo.value = range[0].toFixed(2); s.hi.value = range[1].toFixed(2); }
   }
 
   function setFrame(frame) {
@@ -179,17 +186,19 @@ const KVScene = (function () {
   }
 
   function buildControls(scene) {
-    const layers = scene.summary.layers.filter((l) => l !== "rgb" || !scene.summary.layers.includes("rgba"));
+    // a layer another one before it shows under the same label (rgb beside rgba) is listed once
+    const labels = scene.summary.layers.map((l) => layerInfo(l).label);
+    const layers = scene.summary.layers.filter((l, i) => labels.indexOf(labels[i]) === i);
     s.layer = layers[0];
     const select = KV.el("select", { id: "layer-select", onchange: (e) => {
       s.layer = e.target.value;
-      s.depthBox.style.display = s.layer === "depth" || s.layer === "z" ? "" : "none";
+      showRange();
       setFrame(s.frame);
-    } }, layers.map((l) => KV.el("option", { value: l }, LAYER_NAMES[l] || l)));
-    const range = scene.depth_range || [0, 10];
-    s.lo = KV.el("input", { type: "number", step: "0.1", id: "depth-lo", value: range[0].toFixed(2), onchange: () => setFrame(s.frame) });
-    s.hi = KV.el("input", { type: "number", step: "0.1", id: "depth-hi", value: range[1].toFixed(2), onchange: () => setFrame(s.frame) });
-    s.depthBox = KV.el("span", { style: "display:none" }, "range ", s.lo, " – ", s.hi, " m");
+    } }, layers.map((l) => KV.el("option", { value: l }, layerInfo(l).label)));
+    s.lo = KV.el("input", { type: "number", step: "0.1", id: "depth-lo", onchange: () => setFrame(s.frame) });
+    s.hi = KV.el("input", { type: "number", step: "0.1", id: "depth-hi", onchange: () => setFrame(s.frame) });
+    s.depthBox = KV.el("span", { style: "display:none" }, "range ", s.lo, " – ", s.hi);
+    showRange();
     const check = (id, label, disabled) => {
       const box = KV.el("input", { type: "checkbox", id, disabled, onchange: drawOverlay });
       return [box, KV.el("label", { for: id }, label)];
