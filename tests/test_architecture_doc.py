@@ -86,9 +86,10 @@ def http_get(host: str, port: int, path: str) -> tuple[int, str, bytes]:
 def test_the_page_marks_every_example():
     found = blocks()
     assert {("file", "spheres.py"), ("file", "kubric/renderer/labels.py"),
-            ("row", "kubric/renderer/base.py"), ("file", "height_task.py")} <= set(found)
-    assert [files_touched(s) for s in ("Example 1", "Example 2", "Example 3", "Example 4")] == \
-        [1, 1, 2, 1]
+            ("row", "kubric/renderer/base.py"), ("file", "height_task.py"),
+            ("file", "kubric/datasets/exports/yolo.py"),
+            ("row", "kubric/datasets/exports/__init__.py")} <= set(found)
+    assert [files_touched(f"Example {i}") for i in range(1, 6)] == [1, 1, 2, 1, 2]
 
 
 def test_recipe_layer_and_task_examples_run_as_written(tmp_path, monkeypatch):
@@ -179,6 +180,56 @@ def test_backend_example_touches_two_files_and_renders(tmp_path):
                               "blender\n")
     assert "`complex_brdf: renderer=labels cannot render photoreal RGB (the complex_brdf " \
         "recipe); backends\nthat can: blender`" in DOC.read_text()
+
+
+def test_export_example_touches_two_files_and_matches_the_segmentation(tmp_path):
+    from kubric.asset_tools import ensure_kubasic
+    from kubric.io.layers import read_layer
+    ensure_kubasic()
+    code = blocks()
+    package = tmp_path / "pkg"
+    shutil.copytree(ROOT / "kubric", package / "kubric",
+                    ignore=shutil.ignore_patterns("__pycache__"))
+    exports = package / "kubric" / "datasets" / "exports"
+    (exports / "yolo.py").write_text(code[("file", "kubric/datasets/exports/yolo.py")])
+    registry = exports / "__init__.py"
+    text = registry.read_text()
+    anchor = '        "the LASR folder to create"),\n'
+    assert text.count(anchor) == 1
+    registry.write_text(text.replace(anchor, anchor + code[("row", "kubric/datasets/exports/__init__.py")]))
+    changed = _changed_files(ROOT / "kubric", package / "kubric")
+    assert changed == ["datasets/exports/__init__.py", "datasets/exports/yolo.py"]
+    assert len(changed) == files_touched("Example 5")
+    kubric("worker", "movi_a", "--seed", 5, "--out", tmp_path / "out", "--set", "renderer=raycast",
+           "--set", "resolution=32", "--set", "frame_end=2", "--set", "max_num_objects=5",
+           cwd=tmp_path, pythonpath=[NO_BPY, package])
+    assert "yolo" in kubric("export", "--help", cwd=tmp_path, pythonpath=[package]).stdout
+    kubric("export", "yolo", "out", "--out", "yolo", cwd=tmp_path, pythonpath=[package])
+    scene = tmp_path / "out" / scene_dir.scene_name(5)
+    meta = json.loads((scene / scene_dir.METADATA_FILE).read_text())
+    names = sorted({inst["asset_id"] for inst in meta["instances"]})
+    assert f"names: {json.dumps(names)}" in (tmp_path / "yolo" / "data.yaml").read_text()
+    seg = read_layer(scene, "segmentation")[..., 0]
+    t, h, w = seg.shape
+    seen = 0
+    for frame in range(t):
+        stem = f"{scene.name}_{frame:05d}"
+        assert filecmp.cmp(tmp_path / "yolo" / "images" / f"{stem}.png",
+                           scene / f"rgba_{frame:05d}.png", shallow=False)
+        lines = (tmp_path / "yolo" / "labels" / f"{stem}.txt").read_text().splitlines()
+        expected = []
+        for k, inst in enumerate(meta["instances"]):   # label k + 1, independently of the boxes
+            rows, cols = np.nonzero(seg[frame] == k + 1)
+            if rows.size:
+                x0, x1, y0, y1 = cols.min() / w, (cols.max() + 1) / w, rows.min() / h, (rows.max() + 1) / h
+                expected.append([names.index(inst["asset_id"]), (x0 + x1) / 2, (y0 + y1) / 2,
+                                 x1 - x0, y1 - y0])
+        got = [[float(v) for v in line.split()] for line in lines]
+        assert len(got) == len(expected)
+        np.testing.assert_allclose(np.array(got).reshape(-1, 5), np.array(expected).reshape(-1, 5),
+                                   atol=2e-6)
+        seen += len(got)
+    assert seen > 0
 
 
 def _changed_files(a: pathlib.Path, b: pathlib.Path) -> list[str]:

@@ -1,27 +1,67 @@
 """Every export of scene directories to another tool's format, one module per format, run as
 ``kubric export FORMAT`` (:mod:`.cli`; conventions: docs/exports.md).
 
-:data:`FORMATS` is the one registry: format name → ``"module:function"`` of its export function.
+:data:`FORMATS` is the one registry: format name → its :class:`ExportFormat` (the export function
+and its command's texts). Adding a format is a module ``exports/<name>.py`` defining
+``export_<name>(scenes, out)`` plus its row here (docs/architecture.md, Example 5).
 The modules import only core, io, annotations and assets (never the packer or the pipeline), so a
 recipe may write an export into its scenes (the multi-view recipes' NeRF transforms, ``vbr``'s
 LASR sequence).
 """
 
-#: format name → "module:function" (the ``kubric export`` sub-commands, in this order)
+import dataclasses
+import importlib
+
+
+@dataclasses.dataclass(frozen=True)
+class ExportFormat:
+    """One row of :data:`FORMATS`: the export function and its ``kubric export`` sub-command's
+    texts (options beyond SCENES and --out, if any, are added in :mod:`.cli`)."""
+
+    target: str          # "module:function"; called as function(SCENES, OUT, **options)
+    help: str            # one line in `kubric export --help`
+    description: str     # the sub-command's --help text
+    out_help: str        # what --out names
+
+
+#: format name → its row (the ``kubric export`` sub-commands, in this order)
 FORMATS = {
-    "coco": "kubric.datasets.exports.coco:export_coco",
-    "bop": "kubric.datasets.exports.bop:export_bop",
-    "tapvid": "kubric.datasets.exports.tapvid:export_tapvid",
-    "nerf": "kubric.datasets.exports.nerf:export_nerf",
-    "lasr": "kubric.datasets.exports.lasr:export_lasr",
+    "coco": ExportFormat(
+        "kubric.datasets.exports.coco:export_coco",
+        "COCO instance annotations (one image per frame / view)",
+        "One JSON file: images (file_name relative to SCENES), instance annotations with RLE "
+        "masks, boxes [x, y, w, h] in pixels, areas and categories from the recipe's labels.",
+        "output file (.json)"),
+    "bop": ExportFormat(
+        "kubric.datasets.exports.bop:export_bop",
+        "BOP 6D object-pose dataset (models, poses, masks, depth)",
+        "BOP's layout: OUT/models (PLY in mm, models_info.json) and OUT/SPLIT/SCENE_ID/ with "
+        "rgb, depth, mask, mask_visib, scene_camera.json, scene_gt.json, scene_gt_info.json.",
+        "output folder (the BOP dataset root)"),
+    "tapvid": ExportFormat(
+        "kubric.datasets.exports.tapvid:export_tapvid",
+        "point tracks in TAP-Vid's pickle layout",
+        "Pickle {scene name: {video, points, occluded, target_points, query_points}} "
+        "(TAP-Vid's tapvid_davis.pkl layout) of every scene's tracks.npz.",
+        "output file (.pkl)"),
+    "nerf": ExportFormat(
+        "kubric.datasets.exports.nerf:export_nerf",
+        "multi-view scenes as NeRF / instant-ngp / nerfstudio folders",
+        "OUT/SCENE/ with transforms_{train,val,test}.json and the files their views name "
+        "(RGBA PNGs, depth, segmentation, ...), nothing else.",
+        "output folder (must not exist)"),
+    "lasr": ExportFormat(
+        "kubric.datasets.exports.lasr:export_lasr",
+        "one scene as a LASR / ViSER video sequence (DAVIS layout)",
+        "OUT/DAVIS/{JPEGImages,Annotations,FlowFW,FlowBW,Cameras,CamerasWorld}/"
+        "Full-Resolution/SEQ/ and OUT/configs/SEQ.config for one scene directory.",
+        "the LASR folder to create"),
 }
 
 
 def exporter(name: str):
     """The export function registered as ``name`` (imports its module)."""
-    import importlib
-
     if name not in FORMATS:
         raise ValueError(f"unknown export format {name!r}; allowed: {list(FORMATS)}")
-    module, function = FORMATS[name].split(":")
+    module, function = FORMATS[name].target.split(":")
     return getattr(importlib.import_module(module), function)

@@ -45,17 +45,15 @@ def cmd_bop(args) -> int:
     return code
 
 
-def cmd_tapvid(args) -> int:
-    result, code = _run("tapvid", args)
-    if result:
-        print(f"wrote {result[1]} scene(s) in TAP-Vid layout to {result[0]}")
-    return code
-
-
-def cmd_nerf(args) -> int:
-    result, code = _run("nerf", args)
-    if result:
-        print(f"wrote {result[1]} multi-view scene(s) in NeRF's layout to {result[0]}")
+def cmd_export(args) -> int:
+    """Any format without options of its own: the export function's result is its summary
+    (an object with ``format()``, a (path, count) pair, or None)."""
+    name = args.export_format
+    result, code = _run(name, args)
+    if hasattr(result, "format"):
+        print(result.format())
+    elif isinstance(result, tuple) and len(result) == 2:
+        print(f"wrote {result[1]} scene(s) as {name} to {result[0]}")
     return code
 
 
@@ -73,30 +71,10 @@ def cmd_lasr(args) -> int:
     return code
 
 
-#: format → (help, description, --out help, command)
-COMMANDS = {
-    "coco": ("COCO instance annotations (one image per frame / view)",
-             "One JSON file: images (file_name relative to SCENES), instance annotations with RLE "
-             "masks, boxes [x, y, w, h] in pixels, areas and categories from the recipe's labels.",
-             "output file (.json)", cmd_coco),
-    "bop": ("BOP 6D object-pose dataset (models, poses, masks, depth)",
-            "BOP's layout: OUT/models (PLY in mm, models_info.json) and OUT/SPLIT/SCENE_ID/ with "
-            "rgb, depth, mask, mask_visib, scene_camera.json, scene_gt.json, scene_gt_info.json.",
-            "output folder (the BOP dataset root)", cmd_bop),
-    "tapvid": ("point tracks in TAP-Vid's pickle layout",
-               "Pickle {scene name: {video, points, occluded, target_points, query_points}} "
-               "(TAP-Vid's tapvid_davis.pkl layout) of every scene's tracks.npz.",
-               "output file (.pkl)", cmd_tapvid),
-    "nerf": ("multi-view scenes as NeRF / instant-ngp / nerfstudio folders",
-             "OUT/SCENE/ with transforms_{train,val,test}.json and the files their views name "
-             "(RGBA PNGs, depth, segmentation, ...), nothing else.",
-             "output folder (must not exist)", cmd_nerf),
-    "lasr": ("one scene as a LASR / ViSER video sequence (DAVIS layout)",
-             "OUT/DAVIS/{JPEGImages,Annotations,FlowFW,FlowBW,Cameras,CamerasWorld}/"
-             "Full-Resolution/SEQ/ and OUT/configs/SEQ.config for one scene directory.",
-             "the LASR folder to create", cmd_lasr),
-}
-assert list(COMMANDS) == list(FORMATS), "every registered format has its command"
+#: format → its command, for the formats with options beyond SCENES and --out (the others run
+#: :func:`cmd_export`); the texts of every command are its row of FORMATS
+COMMANDS = {"coco": cmd_coco, "bop": cmd_bop, "lasr": cmd_lasr}
+assert set(COMMANDS) <= set(FORMATS), "every command is a registered format"
 
 
 def cmd_tracks_export(args) -> int:
@@ -111,12 +89,12 @@ def add_parser(subparsers) -> None:
                               "(or one scene) to another tool's format; docs/exports.md.")
     sub = p.add_subparsers(dest="export_format", metavar="FORMAT", required=True)
     parsers = {}
-    for name, (short, description, out_help, func) in COMMANDS.items():
-        f = parsers[name] = sub.add_parser(name, help=short, description=description)
+    for name, row in FORMATS.items():
+        f = parsers[name] = sub.add_parser(name, help=row.help, description=row.description)
         f.add_argument("scenes_dir", metavar="SCENE" if name == "lasr" else "SCENES",
                        help="one scene directory" if name == "lasr" else SCENES_HELP)
-        f.add_argument("--out", required=True, help=out_help)
-        f.set_defaults(func=func)
+        f.add_argument("--out", required=True, help=row.out_help)
+        f.set_defaults(func=COMMANDS.get(name, cmd_export))
     for name, source_help in (("coco", "asset source whose categories name the objects "
                                "(default: the one the scenes' options name; repeatable)"),
                               ("bop", "asset source holding the objects' meshes (default: the "
