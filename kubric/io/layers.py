@@ -24,6 +24,9 @@ normal                 ``normal_{:05d}.png``         3    float in [-1, 1] → `
                                                           * 65535)`` 16-bit RGB
 object_coordinates,    ``uv_{:05d}.png`` ...         3    float in [0, 1] → ``round(x * 65535)``
 uv                                                        16-bit RGB
+defocus                ``defocus_{:05d}.tiff``       1    float → float32 TIFF (pixels: the
+                                                          circle of confusion's diameter,
+                                                          kubric.annotations.exposure)
 =====================  ============================  ===  ======================================
 
 normal / object_coordinates / uv may also be given already quantised, as uint8 or uint16 samples
@@ -96,6 +99,7 @@ _STANDARD = (
     ("object_coordinates", "object_coordinates_{:05d}.png", 3, "unit", "object coordinates",
      "exact"),
     ("uv", "uv_{:05d}.png", 3, "unit", "UV", "exact"),
+    ("defocus", "defocus_{:05d}.tiff", 1, "tiff", "defocus (px)", None),
 )
 #: the standard layers' formats
 LAYERS: dict[str, LayerFormat] = {name: LayerFormat(template, channels, kind)

@@ -49,6 +49,7 @@ from kubric.pipeline import Option, OptionError, float_range
 from kubric.recipes import movi_schema
 from kubric.recipes.articulated_models import MODELS, add_model, model_list
 from kubric.recipes.common import open_existing_source, source_location
+from kubric.recipes.exposure_schema import EXPOSURE_VARIANTS
 from kubric.recipes.movi_base import (
     CAMERA_MIN_HEIGHT,
     DYNAMIC_SPAWN_REGION,
@@ -129,7 +130,7 @@ class MoviA(_ClevrLike, name="movi_a"):
     """MOVi-A: 3–10 CLEVR shapes (metal / rubber, 8 colours, 2 sizes), grey dome, CLEVR lamps."""
 
     schema = movi_schema.MOVI_A
-    variants = (movi_schema.MOVI_TRACKS["movi_a"],)
+    variants = (movi_schema.MOVI_TRACKS["movi_a"], *EXPOSURE_VARIANTS["movi_a"])
 
     def shape_ids(self, sources):
         missing = [s for s in clevr.SHAPES if s not in sources["kubasic"]]
@@ -160,7 +161,7 @@ class MoviB(_ClevrLike, name="movi_b"):
     """MOVi-B: 3–10 KuBasic shapes, size U(0.7, 1.4), random hue, dome of random hue."""
 
     schema = movi_schema.MOVI_B
-    variants = (movi_schema.MOVI_TRACKS["movi_b"],)
+    variants = (movi_schema.MOVI_TRACKS["movi_b"], *EXPOSURE_VARIANTS["movi_b"])
 
     size_range = Option((clevr.SIZES["small"], clevr.SIZES["large"]), "object scale range low,high",
                         type=float_range, low=0.01, limit=100.0)
@@ -182,7 +183,7 @@ class MoviC(MoviBase, name="movi_c"):
     """MOVi-C: 3–10 scanned-like objects with their own textures on an HDRI dome, HDRI light."""
 
     schema = movi_schema.MOVI_C
-    variants = (movi_schema.MOVI_TRACKS["movi_c"],)
+    variants = (movi_schema.MOVI_TRACKS["movi_c"], *EXPOSURE_VARIANTS["movi_c"])
 
     min_num_objects = Option(3, "fewest objects", low=1, high=100)
     max_num_objects = Option(10, "most objects", low=1, high=100)
@@ -369,7 +370,7 @@ class MoviD(MoviC, name="movi_d"):
     """MOVi-D: 10–20 static objects that settle first, then 1–3 dynamic ones thrown in."""
 
     schema = movi_schema.MOVI_D
-    variants = (movi_schema.MOVI_TRACKS["movi_d"],)
+    variants = (movi_schema.MOVI_TRACKS["movi_d"], *EXPOSURE_VARIANTS["movi_d"])
 
     min_num_objects = Option(10, "fewest static objects", low=0, high=100)
     max_num_objects = Option(20, "most static objects", low=0, high=100)
@@ -432,7 +433,7 @@ class MoviE(MoviD, name="movi_e"):
     camera=panning, at a point that moves on a line too)."""
 
     schema = movi_schema.MOVI_E
-    variants = (movi_schema.MOVI_TRACKS["movi_e"],)
+    variants = (movi_schema.MOVI_TRACKS["movi_e"], *EXPOSURE_VARIANTS["movi_e"])
 
     max_camera_movement = Option(4.0, "largest camera path length (m)", low=0.0, limit=100.0)
     camera = Option("linear", "linear: look at the origin; panning: the look-at point moves on "
@@ -460,7 +461,7 @@ class MoviF(MoviE, name="movi_f"):
     """MOVi-F: as E with motion blur U(0, max_motion_blur) frames, 512² by default."""
 
     schema = movi_schema.MOVI_F
-    variants = (movi_schema.MOVI_TRACKS["movi_f"],)
+    variants = (movi_schema.MOVI_TRACKS["movi_f"], *EXPOSURE_VARIANTS["movi_f"])
 
     resolution = Option((512, 512), MoviBase.resolution.help, type=MoviBase.resolution.type)
     max_motion_blur = Option(2.0, "largest shutter length (frames)", low=0.0, high=10.0)

@@ -42,6 +42,7 @@ from kubric.recipes.common import (
     scene_documents,
     source_location,
 )
+from kubric.recipes.exposure_options import ExposureOptions
 from kubric.recipes.render_quality import RenderQuality
 
 DYNAMIC_SPAWN_REGION = ((-5.0, -5.0, 1.0), (5.0, 5.0, 5.0))
@@ -82,7 +83,7 @@ def place_without_overlap(obj, simulator, region, rng, max_trials: int = 1000) -
     return False
 
 
-class MoviBase(RenderQuality, Recipe):
+class MoviBase(ExposureOptions, RenderQuality, Recipe):
     """Common options and steps of the MOVi recipes (not registered itself).
 
     ``schema``: the variant's output contract (:mod:`kubric.recipes.movi_schema`).
@@ -127,7 +128,7 @@ class MoviBase(RenderQuality, Recipe):
             out["save_state"] = "save_state=True"
         if getattr(self, "max_motion_blur", 0.0) > 0:
             out["motion_blur"] = f"max_motion_blur={self.max_motion_blur}"
-        return out
+        return {**out, **self.exposure_requests()}
 
     def check_tracks(self) -> None:
         """Bad track options fail here, before anything renders (one line)."""
@@ -218,6 +219,7 @@ class MoviBase(RenderQuality, Recipe):
         with tempfile.TemporaryDirectory(prefix="kubric_movi_") as scratch:
             simulator = kb.simulator.PyBullet(scene, scratch)
             background, blur = self.populate(scene, simulator, rng, sources)
+            self.sample_lens(scene, seed)  # dof=True (an rng derived from the seed)
             state = pathlib.Path(scratch) / "state"  # saved here, moved in by write_scene
             files = {}
             if self.save_state:  # the initial state, before the simulation (as upstream)
@@ -226,6 +228,8 @@ class MoviBase(RenderQuality, Recipe):
             renderer = kb.renderer.create(self.renderer, scene, scratch,
                                           **self.renderer_settings(motion_blur=blur))
             layers = renderer.render()
+            self.add_defocus(scene, layers)
+            self._subframes = (self.subframe_labels(scene, blur), blur)
             if self.save_state:
                 files[BLEND_FILE] = renderer.save_state(state / BLEND_FILE)
             render_settings = self.render_metadata(renderer)
@@ -258,6 +262,8 @@ class MoviBase(RenderQuality, Recipe):
         else:
             add_tracks = None
         visible = annotate_instances(scene, layers, candidates, before_relabel=add_tracks)
+        subframes, shutter = getattr(self, "_subframes", (None, 0.0))  # coverage_samples=K
+        files.update(self.coverage_files(scene, subframes, visible, shutter))
         metadata, events = scene_documents(self, scene, seed, visible, collisions,
                                            background=background, renderer=render_settings)
         write_scene(self.schema, out_dir, layers, metadata, events, files=files)

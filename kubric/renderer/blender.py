@@ -25,18 +25,20 @@ Options:
   denoising_prefilter ("ACCURATE", "FAST" or "NONE": how OIDN cleans the albedo / normal
   guide passes; default "ACCURATE"; both are Blender's defaults, measured in docs/render-cost.md),
   background_transparency (bool: transparent film, alpha 0 where the background shows),
-  motion_blur (False / 0 = off, True = shutter 0.5 frames, or a shutter length in frames > 0;
-  RGB only — annotations are always sharp), device ("CPU" or "GPU"; default "GPU" when the
-  environment variable KUBRIC_USE_GPU is 1/true, else "CPU"), max_bounces (None = Blender's
-  defaults, or an int ≥ 0 limiting every bounce kind), light_tree (bool, default False: faster on
-  small lamp-lit scenes), verbose (bool: show Blender's console output), scratch_dir (where frames
-  are written; default a new temporary directory), custom_scene (upstream's option: the path of a
-  ``.blend`` file that Blender opens instead of an empty scene; its objects are rendered with the
-  model's assets — background (label 0) in segmentation, unknown to the model and the simulator —
-  while its world is replaced by the scene's background / ambient settings), keep_freed_memory
-  (bool, default False: raise glibc's malloc thresholds for the rest of the process so that the
-  buffers freed after each frame are reused — about 0.5 CPU-s less per 24-frame 256² scene for
-  40–100 MiB more peak RSS, worth it at low sample counts; :mod:`kubric.renderer.allocator`).
+  motion_blur (False / 0 = off, True = shutter 0.5 frames, or a shutter length in frames > 0; the
+  shutter is centred on the frame time (``motion_blur_position = 'CENTER'``, a box shutter curve),
+  so the sharp annotation layers show the shutter's centre; RGB only), device ("CPU" or "GPU";
+  default "GPU" when the environment variable KUBRIC_USE_GPU is 1/true, else "CPU"), max_bounces
+  (None = Blender's defaults, or an int ≥ 0 limiting every bounce kind), light_tree (bool, default
+  False: faster on small lamp-lit scenes), verbose (bool: show Blender's console output),
+  scratch_dir (where frames are written; default a new temporary directory), custom_scene
+  (upstream's option: the path of a ``.blend`` file that Blender opens instead of an empty scene;
+  its objects are rendered with the model's assets — background (label 0) in segmentation, unknown
+  to the model and the simulator — while its world is replaced by the scene's background / ambient
+  settings), keep_freed_memory (bool, default False: raise glibc's malloc thresholds for the rest
+  of the process so that the buffers freed after each frame are reused — about 0.5 CPU-s less per
+  24-frame 256² scene for 40–100 MiB more peak RSS, worth it at low sample counts;
+  :mod:`kubric.renderer.allocator`).
 Render threads: Blender's automatic count (all cores), or exactly N when the environment variable
 KUBRIC_RENDER_THREADS is N ≥ 1 (set by ``kubric generate --threads-per-scene`` on Dask).
 Depth of field comes from the perspective camera's ``use_dof`` / ``focus_distance`` /
@@ -403,8 +405,9 @@ class Blender(TableView, Renderer):
         c.filter_width = 1.5
         s.render.film_transparent = self.background_transparency
         s.render.use_motion_blur = self.motion_blur > 0
-        if self.motion_blur > 0:
+        if self.motion_blur > 0:  # centred: the exact layers mean the shutter's centre
             s.render.motion_blur_shutter = self.motion_blur
+            s.render.motion_blur_position = "CENTER"
         self._camera_dof(restore=True)
         layer = s.view_layers[0]
         layer.material_override = None

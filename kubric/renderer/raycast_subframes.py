@@ -1,0 +1,48 @@
+"""Exact layers at sub-frame times with the raycast backend (no bpy): what an exposure sees
+between two frames (:mod:`kubric.annotations.exposure`, docs/conventions.md).
+
+The scene model interpolates every keyframed property at fractional frames (linear vectors,
+slerped quaternions; :mod:`kubric.core.assets`), so a ray cast at frame ``f + δ`` sees the
+objects and the camera where they are at that instant. The raycast backend's ``render`` takes
+whole frames only; this module casts the same pixel-centre rays at any finite time.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from kubric.annotations.exposure import shutter_offsets
+from kubric.renderer.raycast import Raycast
+
+
+def subframe_layers(scene, frames, offsets, layers=("segmentation",)) -> dict[str, np.ndarray]:
+    """{layer: (T, K, H, W, C)} of the exact ``layers`` at times ``frames[i] + offsets[k]``
+    (frames, fractional allowed), each one pixel-centre ray cast per pixel as the raycast
+    backend renders a frame (segmentation: the renderer's labels, before any relabelling)."""
+    renderer = Raycast(scene)
+    camera = scene.camera
+    if camera is None:
+        raise ValueError("subframe_layers: the scene has no camera")
+    frames = [float(f) for f in frames]
+    offsets = np.asarray(offsets, np.float64).reshape(-1)
+    if not frames or not offsets.size or not np.all(np.isfinite(offsets)):
+        raise ValueError(f"subframe_layers: need frames and finite offsets, got {frames!r}, "
+                         f"{offsets.tolist()!r}")
+    geometry = renderer.geometry()
+    out: dict[str, np.ndarray] = {}
+    for i, frame in enumerate(frames):
+        for k, offset in enumerate(offsets):
+            got = renderer.render_frame(camera, geometry, frame + float(offset), tuple(layers))
+            for name, value in got.items():
+                if name not in out:
+                    out[name] = np.empty((len(frames), len(offsets)) + value.shape, value.dtype)
+                out[name][i, k] = value
+    return out
+
+
+def shutter_segmentation(scene, frames, shutter: float, samples: int) -> np.ndarray:
+    """(T, K, H, W) uint32 raw segmentation labels at the K = ``samples`` sub-frame times of a
+    shutter of ``shutter`` frames centred on each of ``frames``
+    (:func:`~kubric.annotations.exposure.shutter_offsets`)."""
+    seg = subframe_layers(scene, frames, shutter_offsets(shutter, samples), ("segmentation",))
+    return seg["segmentation"][..., 0]
