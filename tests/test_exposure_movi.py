@@ -17,7 +17,7 @@ pytest.importorskip("embreex")
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 OPTIONS = ["samples=1", "denoise=false", "resolution=24", "frame_end=2", "min_num_objects=1",
            "max_num_objects=2", "max_num_dynamic=2", "dof=true", "min_fstop=2", "max_fstop=2.5",
-           "coverage_samples=4", "max_motion_blur=1.5"]
+           "coverage_samples=4", "max_motion_blur=1.5", "events=true"]
 
 
 def _kubric(*args):
@@ -61,3 +61,18 @@ def test_movi_f_with_dof_and_coverage_packs_and_loads(tmp_path):
     np.add.at(total, (cov["frame"], cov["y"], cov["x"]), cov["count"])
     assert (total == 4).all()
     assert cov["label"].max() <= len(meta["instances"])
+    # events.h5 from the rendered frames: between frames, polarity × threshold sums to the
+    # change of log luminance of the RGB files (decoded here) within one threshold
+    from kubric.io.event_h5 import read_events
+    events, sensor = read_events(scene), meta["metadata"]["event_camera"]
+    assert sensor["source"] == "rendered frames" and sensor["num_events"] == len(events["t"])
+    rgb = read_layer(scene, "rgba")[..., :3].astype(np.float64) / 255
+    linear = np.where(rgb <= 0.04045, rgb / 12.92, ((rgb + 0.055) / 1.055) ** 2.4)
+    log_i = np.log(linear @ [0.2126, 0.7152, 0.0722] + sensor["eps"])
+    c_pos, c_neg = events["contrast_thresholds"]
+    sign = np.where(events["p"] == 1, c_pos[events["y"], events["x"]],
+                    -c_neg[events["y"], events["x"]])
+    total = np.zeros((h, w))
+    np.add.at(total, (events["y"], events["x"]), sign)  # frames 1 → 2: all events
+    within = np.abs(total - (log_i[1] - log_i[0])) <= np.maximum(c_pos, c_neg)
+    assert within.mean() >= 0.95 and len(events["t"]) > 0

@@ -11,9 +11,18 @@ motion blur (``coverage_samples``); the ground truth is :mod:`kubric.annotations
   ``metadata.motion_blur`` frames, centred on the frame) at which each pixel shows each instance,
   from K raycast sub-frame renders per frame (with any backend: the raycast backend supplies the
   sub-frames).
+* ``events=True``: ``events.h5`` (DSEC's layout, :mod:`kubric.io.event_h5`), the event stream of
+  the sensor model of :mod:`kubric.annotations.event_camera` (``event_threshold`` ±
+  ``event_threshold_spread`` per pixel, drawn from an rng derived from the seed;
+  ``event_refractory_us``), t = 0 µs at frame_start; intensity from the rendered RGB frames
+  (``event_subframes=0``: log intensity linear between frame times) or from K raycast sub-frames
+  per frame (``event_subframes=K``: the raycast backend's Lambert shading, cheap and not
+  photoreal); recorded in ``metadata.event_camera``.
 """
 
 from __future__ import annotations
+
+import dataclasses
 
 import numpy as np
 
@@ -21,8 +30,9 @@ from kubric.annotations.exposure import COVERAGE_FILE, coverage_archive, defocus
 from kubric.annotations.segmentation import adjust_segmentation_idxs
 from kubric.pipeline import Option
 
-#: tag of the rng the lens is drawn from (derived from the seed: RandomState([seed, tag]))
-LENS_RNG_TAG = 0x6C656E73
+#: tags of the rngs the lens and the event thresholds are drawn from (derived from the seed:
+#: RandomState([seed, tag]))
+LENS_RNG_TAG, EVENTS_RNG_TAG = 0x6C656E73, 0x65767473
 
 
 class ExposureOptions:
@@ -39,6 +49,15 @@ class ExposureOptions:
     coverage_samples = Option(0, "sub-frame raycast renders per frame for coverage.npz, the "
                               "fraction of the exposure each pixel shows each instance "
                               "(0 = none)", low=0, high=256)
+    events = Option(False, "write events.h5: an event-camera stream (DSEC layout)")
+    event_subframes = Option(0, "event intensity samples per frame: 0 = the rendered frames, "
+                             "log intensity linear between them; K = K raycast sub-frames",
+                             low=0, high=64)
+    event_threshold = Option(0.2, "event contrast threshold C± (log intensity)", low=0.01,
+                             high=5.0)
+    event_threshold_spread = Option(0.03, "per-pixel standard deviation of the thresholds",
+                                    low=0.0, high=1.0)
+    event_refractory_us = Option(100.0, "event refractory period (µs)", low=0.0, high=1e6)
 
     def exposure_requests(self) -> dict[str, str]:
         """Renderer capabilities the exposure options ask for (see ``renderer_requests``)."""
@@ -71,6 +90,37 @@ class ExposureOptions:
             return None
         from kubric.renderer.raycast_subframes import shutter_segmentation
         return shutter_segmentation(scene, scene.frames, shutter, self.coverage_samples)
+
+    def event_files(self, scene, layers: dict, seed: int) -> dict:
+        """With ``events``: {events.h5: bytes}; the sensor in ``scene.metadata["event_camera"]``."""
+        if not self.events:
+            return {}
+        from kubric.annotations import event_camera as ev
+        from kubric.io.event_h5 import EVENTS_H5_FILE, encode_events
+        model = ev.SensorModel(self.event_threshold, self.event_threshold,
+                               self.event_threshold_spread,
+                               refractory_us=self.event_refractory_us)
+        frames = list(scene.frames)
+        if self.event_subframes:
+            from kubric.renderer.raycast_subframes import subframe_layers
+            k = self.event_subframes
+            rgb = subframe_layers(scene, frames[:-1], np.arange(k) / k, ("rgba",))["rgba"]
+            rgb = np.concatenate([rgb.reshape((-1,) + rgb.shape[2:]),
+                                  subframe_layers(scene, frames[-1:], [0.0], ("rgba",))["rgba"][0]])
+            times = frames[0] + np.arange(len(rgb)) / k
+        else:
+            rgb, times = layers["rgba"], np.asarray(frames, np.float64)
+        h, w = rgb.shape[1:3]
+        thresholds = model.thresholds(h, w, np.random.RandomState([int(seed), EVENTS_RNG_TAG]))
+        events = ev.simulate(ev.srgb_to_log_intensity(rgb[..., :3], model.eps),
+                             ev.frame_times_us(times, scene.frame_start, scene.frame_rate),
+                             thresholds, model)
+        sensor = {**dataclasses.asdict(model), "file": EVENTS_H5_FILE,
+                  "source": f"raycast sub-frames K={self.event_subframes}"
+                  if self.event_subframes else "rendered frames", "num_events": len(events["t"])}
+        scene.metadata["event_camera"] = sensor
+        attrs = {k: v for k, v in sensor.items() if k != "num_events"}
+        return {EVENTS_H5_FILE: encode_events(events, thresholds, attrs)}
 
     @staticmethod
     def coverage_files(scene, labels, instances, shutter: float) -> dict:

@@ -230,6 +230,7 @@ class MoviBase(ExposureOptions, RenderQuality, Recipe):
             layers = renderer.render()
             self.add_defocus(scene, layers)
             self._subframes = (self.subframe_labels(scene, blur), blur)
+            files.update(self.event_files(scene, layers, seed))  # events=True
             if self.save_state:
                 files[BLEND_FILE] = renderer.save_state(state / BLEND_FILE)
             render_settings = self.render_metadata(renderer)

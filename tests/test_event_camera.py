@@ -1,0 +1,109 @@
+"""Event streams (kubric.annotations.event_camera, kubric.io.event_h5) from raycast sub-frames,
+checked against the log-intensity change of frames rendered separately by the raycast backend."""
+
+import numpy as np
+import pytest
+
+import kubric as kb
+from kubric.annotations.event_camera import SensorModel, simulate, srgb_to_log_intensity
+
+pytest.importorskip("embreex")
+pytest.importorskip("h5py")
+
+W, H, RATE = 64, 48, 12
+
+
+def _scene():
+    scene = kb.Scene(resolution=(W, H), frame_start=0, frame_end=4)
+    scene.frame_rate = RATE
+    scene += kb.Cube(name="floor", scale=(8, 8, 0.1), position=(0, 0, -0.1), static=True,
+                     material=kb.FlatMaterial(color=kb.Color(0.3, 0.3, 0.3)))
+    scene += kb.DirectionalLight(position=(1, -1, 3), look_at=(0, 0, 0), intensity=2.0)
+    ball = kb.Sphere(name="ball", scale=0.6, material=kb.PrincipledBSDFMaterial(
+        color=kb.Color(0.9, 0.7, 0.2)))
+    box = kb.Cube(name="box", scale=0.4, material=kb.PrincipledBSDFMaterial(
+        color=kb.Color(0.1, 0.4, 0.9)))
+    scene += ball
+    scene += box
+    for f in range(5):
+        ball.position = (-2.0 + 0.9 * f, 0.3, 0.6)
+        box.position = (1.5 - 0.6 * f, -0.8 + 0.2 * f, 0.4)
+        ball.keyframe_insert("position", f)
+        box.keyframe_insert("position", f)
+    scene.camera = kb.PerspectiveCamera(position=(0, -7, 4), look_at=(0, 0, 0.3))
+    return scene
+
+
+def test_events_sum_to_the_log_intensity_change_between_frames(tmp_path):
+    from kubric.io.event_h5 import encode_events, read_events
+    from kubric.renderer.raycast_subframes import subframe_layers
+    scene, k, model = _scene(), 8, SensorModel(refractory_us=50.0)
+    frames = [1, 2]
+    rgba = subframe_layers(scene, frames, np.arange(k) / k, ("rgba",))["rgba"]
+    last = subframe_layers(scene, [3], [0.0], ("rgba",))["rgba"]
+    samples = np.concatenate([rgba.reshape(-1, H, W, 4), last.reshape(-1, H, W, 4)])
+    times = (np.arange(len(samples)) / k + 1) / RATE * 1e6  # µs, 0 at frame 0
+    thresholds = model.thresholds(H, W, np.random.RandomState(7))
+    events = simulate(srgb_to_log_intensity(samples[..., :3], model.eps), times, thresholds,
+                      model)
+    path = tmp_path / "events.h5"
+    path.write_bytes(encode_events(events, thresholds, {"contrast_pos": model.contrast_pos}))
+    got = read_events(path)
+    np.testing.assert_array_equal(got["x"], events["x"])
+    assert np.abs(got["t"] - events["t"]).max() <= 0.5
+    np.testing.assert_allclose(got["contrast_thresholds"], thresholds, rtol=1e-6)
+    # DSEC's lookup table: ms_to_idx[ms] is the first event at t ≥ 1000·ms
+    idx, t = got["ms_to_idx"].astype(np.int64), got["t"]
+    assert len(idx) == t[-1] // 1000 + 1
+    assert all((t[i:] >= 1000 * ms).all() and (t[:i] < 1000 * ms).all()
+               for ms, i in list(enumerate(idx))[::37])
+    # reference: frames 1, 2, 3 rendered by the backend's own render(), log intensity by hand
+    frames_rgb = kb.renderer.create("raycast", scene).render(
+        frames=[1, 2, 3], return_layers=("rgba",))["rgba"][..., :3].astype(np.float64) / 255
+    linear = np.where(frames_rgb <= 0.04045, frames_rgb / 12.92,
+                      ((frames_rgb + 0.055) / 1.055) ** 2.4)
+    log_i = np.log(linear @ [0.2126, 0.7152, 0.0722] + model.eps)
+    c_pos, c_neg = got["contrast_thresholds"]
+    moving = 0
+    for a in (0, 1):
+        t0, t1 = (a + 1) / RATE * 1e6, (a + 2) / RATE * 1e6
+        sel = (got["t"] > round(t0)) & (got["t"] <= round(t1))
+        x, y, p = got["x"][sel], got["y"][sel], got["p"][sel]
+        total = np.zeros((H, W))
+        np.add.at(total, (y, x), np.where(p == 1, c_pos[y, x], -c_neg[y, x]))
+        change = log_i[a + 1] - log_i[a]
+        within = np.abs(total - change) <= np.maximum(c_pos, c_neg)
+        assert within.mean() >= 0.95, within.mean()
+        moving += (np.abs(change) > 1.0).sum()
+    assert moving > 100  # the objects' motion really makes events
+    # the refractory period holds for every pixel
+    key = got["y"].astype(np.int64) * W + got["x"]
+    order = np.lexsort((got["t"], key))
+    same = np.diff(key[order]) == 0
+    assert (np.diff(got["t"][order])[same] >= 50 - 1).all()
+
+
+def test_sensor_model_refuses_bad_values_and_draws_thresholds_from_the_rng():
+    with pytest.raises(ValueError, match="contrast_pos must be > 0"):
+        SensorModel(contrast_pos=0)
+    with pytest.raises(ValueError, match="refractory_us must be ≥ 0"):
+        SensorModel(refractory_us=-1)
+    model = SensorModel(threshold_spread=0.05)
+    a = model.thresholds(8, 8, np.random.RandomState(1))
+    np.testing.assert_array_equal(a, model.thresholds(8, 8, np.random.RandomState(1)))
+    assert a.shape == (2, 8, 8) and 0.15 < a.mean() < 0.25 and a.std() > 0.02
+
+
+def test_simulate_fires_one_event_per_threshold_crossing_at_the_crossing_time():
+    # one pixel, log intensity 0 → 1 over 1000 µs, C+ = 0.3: crossings at 0.3, 0.6, 0.9
+    thresholds = np.full((2, 1, 1), 0.3)
+    events = simulate(np.array([0.0, 1.0]).reshape(2, 1, 1), [0.0, 1000.0], thresholds,
+                      SensorModel())
+    np.testing.assert_allclose(events["t"], [300.0, 600.0, 900.0])
+    np.testing.assert_array_equal(events["p"], [1, 1, 1])
+    # back down to 0.05: the reference is at 0.9, so OFF at 0.6, 0.3 (not 0.0); a 350 µs
+    # refractory period drops the ON at 600 µs and the OFF at 0.3 (316 µs after the one at 0.6)
+    events = simulate(np.array([0.0, 1.0, 0.05]).reshape(3, 1, 1), [0.0, 1000.0, 2000.0],
+                      thresholds, SensorModel(refractory_us=350.0))
+    np.testing.assert_allclose(events["t"], [300.0, 900.0, 1000.0 + 0.4 / 0.95 * 1000.0])
+    np.testing.assert_array_equal(events["p"], [1, 1, 0])
