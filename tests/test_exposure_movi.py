@@ -33,6 +33,8 @@ def test_movi_f_with_dof_and_coverage_packs_and_loads(tmp_path):
     _kubric("worker", "movi_f", "--seed", 5, "--out", tmp_path / "scenes", *sets)
     scene = tmp_path / "scenes" / "scene_00000005"
     meta = json.loads((scene / "metadata.json").read_text())
+    from kubric.docgen import undocumented_scene_fields
+    assert undocumented_scene_fields(scene) == []  # docs/scene-format.md names every new file
     lens = meta["metadata"]["depth_of_field"]
     assert lens["use_dof"] and 2 <= lens["aperture_fstop"] <= 2.5
     assert 6 <= lens["focus_distance"] <= 14
