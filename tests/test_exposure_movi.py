@@ -47,7 +47,7 @@ def test_movi_f_with_dof_and_coverage_packs_and_loads(tmp_path):
         * f / cam["sensor_width"] * 24
     got = read_layer(scene, "defocus")
     np.testing.assert_allclose(got, want, rtol=1e-4)
-    for variant in ("movi_f_dof", "movi_f_coverage"):
+    for variant in ("movi_f_dof", "movi_f_coverage", "movi_f_events"):
         _kubric("pack", tmp_path / "scenes", "--out", tmp_path / variant, "--splits", "train=1",
                 "--schema", variant, "--verify")
     dof = load(tmp_path / "movi_f_dof", "train")[0]
@@ -78,3 +78,7 @@ def test_movi_f_with_dof_and_coverage_packs_and_loads(tmp_path):
     np.add.at(total, (events["y"], events["x"]), sign)  # frames 1 → 2: all events
     within = np.abs(total - (log_i[1] - log_i[0])) <= np.maximum(c_pos, c_neg)
     assert within.mean() >= 0.95 and len(events["t"]) > 0
+    packed = load(tmp_path / "movi_f_events", "train")[0]["event_stream"]
+    for key in ("x", "y", "t", "p"):
+        np.testing.assert_array_equal(packed[key], events[key])
+    np.testing.assert_array_equal(packed["contrast_thresholds"], events["contrast_thresholds"])

@@ -218,8 +218,13 @@ class SceneReader:
             file, _, key = arg.partition(":")
             path = self.scene_dir / file
             try:
-                with np.load(path, allow_pickle=False) as archive:
-                    value = archive[key]
+                if path.suffix == ".h5":  # an HDF5 file's dataset KEY (events.h5)
+                    import h5py
+                    with h5py.File(path, "r") as h5:
+                        value = np.asarray(h5[key][()])
+                else:
+                    with np.load(path, allow_pickle=False) as archive:
+                        value = archive[key]
             except (OSError, KeyError, ValueError, EOFError, zipfile.BadZipFile) as err:
                 raise SceneError(f"{what}: cannot read {key!r} from {file}: {err}") from None
             return _cast(f, value, self.dims, what)

@@ -33,7 +33,8 @@ Sources (``source`` strings):
 ``camera:PATH``        ``metadata.json["camera"][PATH]``
 ``instance:PATH``      ``metadata.json["instances"][n][PATH]`` for every instance n
 ``collision:PATH``     ``events.json["collisions"][k][PATH]`` for every event k
-``npz:FILE:KEY``       array KEY of the numpy archive FILE in the scene directory
+``npz:FILE:KEY``       array KEY of the numpy archive FILE in the scene directory (a FILE
+                       ending in ``.h5``: its HDF5 dataset KEY, e.g. ``events/x``)
 =====================  =====================================================================
 
 ``convert`` names a conversion applied after reading (:data:`CONVERSIONS`).

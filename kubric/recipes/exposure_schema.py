@@ -1,11 +1,13 @@
 """Schemas of the MOVi scenes made with the exposure options (:mod:`kubric.recipes.exposure_options`):
 for every MOVi variant ``X``, ``X_dof`` (``--set dof=True``: the ``defocus`` layer and the lens)
-and ``X_coverage`` (``--set coverage_samples=K``: ``coverage.npz``), each packed with
-``kubric pack DIR --schema X_dof`` (or ``X_coverage``)."""
+``X_coverage`` (``--set coverage_samples=K``: ``coverage.npz``) and ``X_events`` (``--set
+events=true``: ``events.h5``), each packed with ``kubric pack DIR --schema X_dof`` (or
+``X_coverage``, ``X_events``)."""
 
 from __future__ import annotations
 
 from kubric.annotations.exposure import COVERAGE_FIELDS, COVERAGE_FILE
+from kubric.io.event_h5 import EVENTS_H5_FILE
 from kubric.io.schema import Feature, register_schema
 from kubric.recipes import movi_schema
 
@@ -29,13 +31,31 @@ COVERAGE_FEATURES = (
     *(F(f"coverage/{key}", dtype, shape, f"npz:{COVERAGE_FILE}:{key}", unit=unit, doc=doc)
       for key, dtype, shape, unit, doc in COVERAGE_FIELDS),
 )
+#: the features ``events=true`` adds (one row per event P; events.h5 in DSEC's layout)
+EVENT_FEATURES = (
+    F("event_stream/x", "uint16", ("P",), f"npz:{EVENTS_H5_FILE}:events/x", unit="px",
+      doc="pixel column"),
+    F("event_stream/y", "uint16", ("P",), f"npz:{EVENTS_H5_FILE}:events/y", unit="px",
+      doc="pixel row"),
+    F("event_stream/t", "int64", ("P",), f"npz:{EVENTS_H5_FILE}:events/t", unit="µs",
+      doc="time, 0 at frame_start (events.h5's t_offset is 0)"),
+    F("event_stream/p", "uint8", ("P",), f"npz:{EVENTS_H5_FILE}:events/p",
+      doc="polarity: 1 = ON (brighter), 0 = OFF"),
+    F("event_stream/contrast_thresholds", "float32", (2, "H", "W"),
+      f"npz:{EVENTS_H5_FILE}:contrast_thresholds", doc="per-pixel (C+, C−), log intensity"),
+    F("event_stream/refractory_us", "float32", (), "meta:event_camera.refractory_us", unit="µs",
+      doc="refractory period of the sensor"),
+)
 _BASES = {s.name: s for s in (movi_schema.MOVI_A, movi_schema.MOVI_B, movi_schema.MOVI_C,
                               movi_schema.MOVI_D, movi_schema.MOVI_E, movi_schema.MOVI_F)}
-#: MOVi variant name → (its ``_dof`` schema, its ``_coverage`` schema)
+#: MOVi variant name → (its ``_dof``, ``_coverage`` and ``_events`` schemas)
 EXPOSURE_VARIANTS = {name: (
     register_schema(base.extend(f"{name}_dof", DOF_FEATURES, description=f"{base.description} "
                                 "With depth of field (dof=True): the defocus layer.")),
     register_schema(base.extend(f"{name}_coverage", COVERAGE_FEATURES,
                                 description=f"{base.description} With the exposure coverage "
-                                "(coverage_samples=K): coverage.npz.")))
+                                "(coverage_samples=K): coverage.npz.")),
+    register_schema(base.extend(f"{name}_events", EVENT_FEATURES,
+                                description=f"{base.description} With the event stream "
+                                "(events=true): events.h5.")))
     for name, base in _BASES.items()}
