@@ -121,3 +121,40 @@ def test_shutter_offsets_are_the_midpoints_of_a_centred_shutter():
         shutter_offsets(1.0, 0)
     with pytest.raises(ValueError, match="≥ 0 frames"):
         shutter_offsets(-1.0, 2)
+
+
+def test_exposure_flow_is_the_motion_of_the_seen_point_from_shutter_open_to_close():
+    from kubric.renderer.raycast_subframes import exposure_flow
+    shutter, velocity = 0.6, np.array([0.5, 0.2, 0.1])  # m per frame
+    scene = kb.Scene(resolution=(W, H), frame_start=0, frame_end=3)
+    box = kb.Cube(name="box", scale=0.7, position=(0, 0, 0.7))
+    scene += box
+    for f in range(4):
+        box.position = np.array([-0.8, 0.0, 0.7]) + velocity * f
+        box.keyframe_insert("position", f)
+    scene.camera = kb.PerspectiveCamera(position=(1.0, -6.0, 3.0), look_at=(0, 0, 0.5))
+    flow = exposure_flow(scene, [1, 2], shutter)
+    depth = kb.renderer.create("raycast", scene).render(frames=[1, 2],
+                                                        return_layers=("depth",))["depth"]
+    # by hand: the point seen at a pixel centre at frame f moves by ± velocity · s / 2 (a pure
+    # translation); project both ends with the pinhole K and the (fixed) camera pose
+    k = scene.camera.intrinsics_pixels
+    cam_to_world = scene.camera.matrix_world
+    rot, centre = cam_to_world[:3, :3], cam_to_world[:3, 3]
+    cols, rows = np.meshgrid(np.arange(W) + 0.5, np.arange(H) + 0.5)
+    local = np.stack([(cols - k[0, 2]) / k[0, 0], -(rows - k[1, 2]) / k[1, 1], -np.ones_like(cols)],
+                     -1)
+    dirs = local / np.linalg.norm(local, axis=-1, keepdims=True) @ rot.T
+
+    def pixel(points):
+        cam = (points - centre) @ rot  # camera axes: x right, y up, −z forward
+        return np.stack([k[1, 1] * -cam[..., 1] / -cam[..., 2] + k[1, 2],
+                         k[0, 0] * cam[..., 0] / -cam[..., 2] + k[0, 2]], -1)  # (row, col)
+
+    for i in range(2):
+        on_box = depth[i, ..., 0] < 100
+        seen = centre + dirs * depth[i, ..., :1].astype(np.float64)
+        want = pixel(seen + velocity * shutter / 2) - pixel(seen - velocity * shutter / 2)
+        assert on_box.sum() > 200 and np.abs(want[on_box]).max() > 1.0
+        np.testing.assert_allclose(flow[i][on_box], want[on_box], atol=1e-4)
+        assert (flow[i][~on_box] == 0).all()

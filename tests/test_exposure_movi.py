@@ -63,6 +63,11 @@ def test_movi_f_with_dof_and_coverage_packs_and_loads(tmp_path):
     np.add.at(total, (cov["frame"], cov["y"], cov["x"]), cov["count"])
     assert (total == 4).all()
     assert cov["label"].max() <= len(meta["instances"])
+    # the exposure flow packs as upstream's flows do (uint16 over the scene's range)
+    lo, hi = example["metadata"]["exposure_flow_range"]
+    unpacked = example["exposure_flow"] / 65535 * (hi - lo) + lo
+    np.testing.assert_allclose(unpacked, read_layer(scene, "exposure_flow"),
+                               atol=(hi - lo) / 65535 + 1e-6)
     # events.h5 from the rendered frames: between frames, polarity × threshold sums to the
     # change of log luminance of the RGB files (decoded here) within one threshold
     from kubric.io.event_h5 import read_events

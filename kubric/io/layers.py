@@ -27,6 +27,8 @@ uv                                                        16-bit RGB
 defocus                ``defocus_{:05d}.tiff``       1    float → float32 TIFF (pixels: the
                                                           circle of confusion's diameter,
                                                           kubric.annotations.exposure)
+exposure_flow          ``exposure_flow_{:05d}.png``  2    as forward_flow: the surface's motion
+                                                          from shutter open to close
 =====================  ============================  ===  ======================================
 
 normal / object_coordinates / uv may also be given already quantised, as uint8 or uint16 samples
@@ -100,6 +102,7 @@ _STANDARD = (
      "exact"),
     ("uv", "uv_{:05d}.png", 3, "unit", "UV", "exact"),
     ("defocus", "defocus_{:05d}.tiff", 1, "tiff", "defocus (px)", None),
+    ("exposure_flow", "exposure_flow_{:05d}.png", 2, "scaled", "exposure flow (px)", None),
 )
 #: the standard layers' formats
 LAYERS: dict[str, LayerFormat] = {name: LayerFormat(template, channels, kind)

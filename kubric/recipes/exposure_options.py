@@ -10,7 +10,8 @@ motion blur (``coverage_samples``); the ground truth is :mod:`kubric.annotations
 * ``coverage_samples=K`` (> 0): ``coverage.npz``, the fraction of the exposure (the shutter of
   ``metadata.motion_blur`` frames, centred on the frame) at which each pixel shows each instance,
   from K raycast sub-frame renders per frame (with any backend: the raycast backend supplies the
-  sub-frames).
+  sub-frames), and the ``exposure_flow`` layer: the seen surface point's motion from shutter open
+  to close.
 * ``events=True``: ``events.h5`` (DSEC's layout, :mod:`kubric.io.event_h5`), the event stream of
   the sensor model of :mod:`kubric.annotations.event_camera` (``event_threshold`` ±
   ``event_threshold_spread`` per pixel, drawn from an rng derived from the seed;
@@ -78,10 +79,14 @@ class ExposureOptions:
                                             "aperture_fstop": camera.aperture_fstop,
                                             "focus_distance": camera.focus_distance}
 
-    def add_defocus(self, scene, layers: dict) -> None:
-        """With ``dof``: ``layers["defocus"]`` from the rendered ``z`` layer."""
+    def add_exposure_layers(self, scene, layers: dict, shutter: float) -> None:
+        """With ``dof``: ``layers["defocus"]`` from the rendered ``z`` layer; with
+        ``coverage_samples``: ``layers["exposure_flow"]`` over the shutter (raycast)."""
         if self.dof:
             layers["defocus"] = defocus(scene.camera, layers["z"])
+        if self.coverage_samples:
+            from kubric.renderer.raycast_subframes import exposure_flow
+            layers["exposure_flow"] = exposure_flow(scene, list(scene.frames), shutter)
 
     def subframe_labels(self, scene, shutter: float):
         """With ``coverage_samples``: (T, K, H, W) raw labels at the shutter's sub-frame times

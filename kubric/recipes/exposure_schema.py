@@ -30,6 +30,11 @@ COVERAGE_FEATURES = (
       doc="shutter length, centred on the frame"),
     *(F(f"coverage/{key}", dtype, shape, f"npz:{COVERAGE_FILE}:{key}", unit=unit, doc=doc)
       for key, dtype, shape, unit, doc in COVERAGE_FIELDS),
+    F("exposure_flow", "uint16", ("T", "H", "W", 2), "layer:exposure_flow", "zlib", unit="px",
+      doc="(Δrow, Δcol) of the seen surface point from shutter open to close, scaled by "
+      "metadata/exposure_flow_range"),
+    F("metadata/exposure_flow_range", "float32", (2,), "range:exposure_flow", unit="px",
+      doc="min, max of exposure_flow: v = q / 65535 · (max − min) + min"),
 )
 #: the features ``events=true`` adds (one row per event P; events.h5 in DSEC's layout)
 EVENT_FEATURES = (

@@ -228,7 +228,7 @@ class MoviBase(ExposureOptions, RenderQuality, Recipe):
             renderer = kb.renderer.create(self.renderer, scene, scratch,
                                           **self.renderer_settings(motion_blur=blur))
             layers = renderer.render()
-            self.add_defocus(scene, layers)
+            self.add_exposure_layers(scene, layers, blur)  # dof, coverage_samples
             self._subframes = (self.subframe_labels(scene, blur), blur)
             files.update(self.event_files(scene, layers, seed))  # events=True
             if self.save_state:

@@ -12,6 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from kubric.annotations.exposure import shutter_offsets
+from kubric.core import camera_geometry as geo
 from kubric.renderer.raycast import Raycast
 
 
@@ -46,3 +47,39 @@ def shutter_segmentation(scene, frames, shutter: float, samples: int) -> np.ndar
     (:func:`~kubric.annotations.exposure.shutter_offsets`)."""
     seg = subframe_layers(scene, frames, shutter_offsets(shutter, samples), ("segmentation",))
     return seg["segmentation"][..., 0]
+
+
+def exposure_flow(scene, frames, shutter: float) -> np.ndarray:
+    """(T, H, W, 2) float32 flow over the exposure, (Δrow, Δcol) in pixels: where the surface
+    point seen through each pixel centre at frame f (the shutter's centre) is projected when the
+    shutter closes (f + s/2) minus where it is when it opens (f − s/2), each with that instant's
+    object pose and camera; 0 on background (as the flow layers)."""
+    renderer = Raycast(scene)
+    camera = scene.camera
+    if camera is None:
+        raise ValueError("exposure_flow: the scene has no camera")
+    geometry = renderer.geometry()
+    if len(set(geometry.labels.tolist())) != len(geometry.labels):
+        raise ValueError("exposure_flow: objects share a segmentation_id; every object needs "
+                         "its own label")
+    lut = np.full(int(geometry.labels.max(initial=0)) + 1, -1)
+    lut[geometry.labels] = np.arange(len(geometry.labels))
+    w, h = scene.resolution
+    centres = geo.pixel_centres(h, w).reshape(-1, 2)
+    out = np.zeros((len(frames), h * w, 2), np.float32)
+    half = float(shutter) / 2.0
+    for i, frame in enumerate(frames):
+        got = renderer.render_frame(camera, geometry, frame, ("depth", "segmentation"))
+        labels = got["segmentation"].reshape(-1)
+        hit = np.flatnonzero(labels)
+        owner = lut[labels[hit]]
+        origins, dirs = geo.pixel_rays(camera, centres[hit], frame=frame, resolution=(w, h))
+        world = origins + dirs * got["depth"].reshape(-1)[hit, None].astype(np.float64)
+        rot, trans, scale = geometry.poses(frame)
+        local = np.einsum("nji,nj->ni", rot[owner], world - trans[owner]) / scale[owner]
+        ends = []
+        for t in (frame - half, frame + half):
+            moved = geometry.to_world(local, owner, geometry.poses(t))
+            ends.append(geo.project_to_pixels(camera, moved, frame=t, resolution=(w, h))[0])
+        out[i, hit] = (ends[1] - ends[0])[:, ::-1]
+    return out.reshape(len(frames), h, w, 2)
