@@ -107,3 +107,17 @@ def test_simulate_fires_one_event_per_threshold_crossing_at_the_crossing_time():
                       thresholds, SensorModel(refractory_us=350.0))
     np.testing.assert_allclose(events["t"], [300.0, 900.0, 1000.0 + 0.4 / 0.95 * 1000.0])
     np.testing.assert_array_equal(events["p"], [1, 1, 0])
+
+
+def test_noise_events_are_a_poisson_process_per_pixel():
+    from kubric.annotations.event_camera import add_noise
+    model = SensorModel(noise_rate_hz=50.0)
+    empty = {"x": np.zeros(0, np.uint16), "y": np.zeros(0, np.uint16), "t": np.zeros(0),
+             "p": np.zeros(0, np.uint8)}
+    noisy = add_noise(empty, 40, 50, 0.0, 2e6, model, np.random.RandomState(3))
+    n = len(noisy["t"])  # expected 50 Hz × 2 s × 2000 px = 200000, sd ≈ 447
+    assert abs(n - 200000) < 5 * 447
+    assert (np.diff(noisy["t"]) >= 0).all() and 0.49 < noisy["p"].mean() < 0.51
+    per_pixel = np.bincount(noisy["y"].astype(int) * 50 + noisy["x"], minlength=2000)
+    assert abs(per_pixel.var() / per_pixel.mean() - 1) < 0.1  # Poisson: variance = mean
+    assert add_noise(empty, 4, 4, 0.0, 1e6, SensorModel(), np.random.RandomState(3)) is empty

@@ -12,7 +12,9 @@ linear luminance I (Rec. 709 weights of linear RGB in [0, 1]):
   rng, clipped to ≥ ``min_threshold``;
 * refractory period R µs: an event less than R after the pixel's last *emitted* event is dropped
   (``L_ref`` still moves: the dropped change is not reported later);
-* no noise events (shot / leak noise is not modelled).
+* optional noise (``noise_rate_hz`` > 0): per pixel a Poisson process of that rate over the
+  stream's time span, each noise event ON or OFF with probability ½, from the given rng
+  (:func:`add_noise`); noise events do not move the reference level.
 
 Sources of sub-frame intensity: the rendered frames alone (L interpolated linearly between frame
 times: cheapest, blind to motion inside a frame) or K sub-frame renders per frame (e.g. the
@@ -41,12 +43,13 @@ class SensorModel:
     min_threshold: float = 0.01
     refractory_us: float = 0.0
     eps: float = 1e-3
+    noise_rate_hz: float = 0.0
 
     def __post_init__(self):
         for name in ("contrast_pos", "contrast_neg", "min_threshold", "eps"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"SensorModel: {name} must be > 0, got {getattr(self, name)!r}")
-        for name in ("threshold_spread", "refractory_us"):
+        for name in ("threshold_spread", "refractory_us", "noise_rate_hz"):
             if not getattr(self, name) >= 0:
                 raise ValueError(f"SensorModel: {name} must be ≥ 0, got {getattr(self, name)!r}")
 
@@ -111,6 +114,24 @@ def simulate(log_intensity, times_us, thresholds, model: SensorModel) -> dict[st
     y, x = np.divmod(pix[order], w)
     return {"x": x.astype(np.uint16), "y": y.astype(np.uint16), "t": t[order],
             "p": p[order].astype(np.uint8)}
+
+
+def add_noise(events: dict, height: int, width: int, t0_us: float, t1_us: float,
+              model: SensorModel, rng) -> dict[str, np.ndarray]:
+    """``events`` plus ``model.noise_rate_hz`` Poisson noise events per pixel over [t0, t1] µs
+    (uniform times, random polarity, from ``rng``), sorted by time."""
+    if model.noise_rate_hz <= 0:
+        return events
+    counts = rng.poisson(model.noise_rate_hz * (t1_us - t0_us) * 1e-6, size=height * width)
+    pix = np.repeat(np.arange(height * width), counts)
+    t = rng.uniform(t0_us, t1_us, size=pix.size)
+    p = rng.randint(0, 2, size=pix.size).astype(np.uint8)
+    y, x = np.divmod(pix, width)
+    merged = {"x": np.concatenate([events["x"], x.astype(np.uint16)]),
+              "y": np.concatenate([events["y"], y.astype(np.uint16)]),
+              "t": np.concatenate([events["t"], t]), "p": np.concatenate([events["p"], p])}
+    order = np.argsort(merged["t"], kind="stable")
+    return {k: v[order] for k, v in merged.items()}
 
 
 def frame_times_us(frames, frame_start: int, frame_rate: float) -> np.ndarray:

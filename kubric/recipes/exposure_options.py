@@ -15,10 +15,10 @@ motion blur (``coverage_samples``); the ground truth is :mod:`kubric.annotations
 * ``events=True``: ``events.h5`` (DSEC's layout, :mod:`kubric.io.event_h5`), the event stream of
   the sensor model of :mod:`kubric.annotations.event_camera` (``event_threshold`` ±
   ``event_threshold_spread`` per pixel, drawn from an rng derived from the seed;
-  ``event_refractory_us``), t = 0 µs at frame_start; intensity from the rendered RGB frames
-  (``event_subframes=0``: log intensity linear between frame times) or from K raycast sub-frames
-  per frame (``event_subframes=K``: the raycast backend's Lambert shading, cheap and not
-  photoreal); recorded in ``metadata.event_camera``.
+  ``event_refractory_us``, ``event_noise_rate``), t = 0 µs at frame_start; intensity from the
+  rendered RGB frames (``event_subframes=0``: log intensity linear between frame times) or from K
+  raycast sub-frames per frame (``event_subframes=K``: the raycast backend's Lambert shading,
+  cheap and not photoreal); recorded in ``metadata.event_camera``.
 """
 
 from __future__ import annotations
@@ -59,6 +59,8 @@ class ExposureOptions:
     event_threshold_spread = Option(0.03, "per-pixel standard deviation of the thresholds",
                                     low=0.0, high=1.0)
     event_refractory_us = Option(100.0, "event refractory period (µs)", low=0.0, high=1e6)
+    event_noise_rate = Option(0.0, "noise events per pixel per second (Poisson, random "
+                              "polarity; 0 = none)", low=0.0, high=1e5)
 
     def exposure_requests(self) -> dict[str, str]:
         """Renderer capabilities the exposure options ask for (see ``renderer_requests``)."""
@@ -104,7 +106,8 @@ class ExposureOptions:
         from kubric.io.event_h5 import EVENTS_H5_FILE, encode_events
         model = ev.SensorModel(self.event_threshold, self.event_threshold,
                                self.event_threshold_spread,
-                               refractory_us=self.event_refractory_us)
+                               refractory_us=self.event_refractory_us,
+                               noise_rate_hz=self.event_noise_rate)
         frames = list(scene.frames)
         if self.event_subframes:
             from kubric.renderer.raycast_subframes import subframe_layers
@@ -116,10 +119,12 @@ class ExposureOptions:
         else:
             rgb, times = layers["rgba"], np.asarray(frames, np.float64)
         h, w = rgb.shape[1:3]
-        thresholds = model.thresholds(h, w, np.random.RandomState([int(seed), EVENTS_RNG_TAG]))
-        events = ev.simulate(ev.srgb_to_log_intensity(rgb[..., :3], model.eps),
-                             ev.frame_times_us(times, scene.frame_start, scene.frame_rate),
+        rng = np.random.RandomState([int(seed), EVENTS_RNG_TAG])
+        thresholds = model.thresholds(h, w, rng)
+        times_us = ev.frame_times_us(times, scene.frame_start, scene.frame_rate)
+        events = ev.simulate(ev.srgb_to_log_intensity(rgb[..., :3], model.eps), times_us,
                              thresholds, model)
+        events = ev.add_noise(events, h, w, times_us[0], times_us[-1], model, rng)
         sensor = {**dataclasses.asdict(model), "file": EVENTS_H5_FILE,
                   "source": f"raycast sub-frames K={self.event_subframes}"
                   if self.event_subframes else "rendered frames", "num_events": len(events["t"])}
