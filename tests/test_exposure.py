@@ -158,3 +158,14 @@ def test_exposure_flow_is_the_motion_of_the_seen_point_from_shutter_open_to_clos
         assert on_box.sum() > 200 and np.abs(want[on_box]).max() > 1.0
         np.testing.assert_allclose(flow[i][on_box], want[on_box], atol=1e-4)
         assert (flow[i][~on_box] == 0).all()
+
+
+def test_exposure_options_refuse_what_they_cannot_do():
+    from kubric.pipeline import OptionError
+    from kubric.pipeline.recipe import get_recipe
+    with pytest.raises(OptionError, match="coverage_samples=4 needs a shutter"):
+        get_recipe("movi_e")(coverage_samples=4)
+    with pytest.raises(OptionError, match="renderer=raycast cannot render depth of field"):
+        get_recipe("movi_f")(renderer="raycast", dof=True, max_motion_blur=0.0)
+    with pytest.raises(OptionError, match="min_fstop=8.0 must be ≤ max_fstop=2.0"):
+        get_recipe("movi_e")(dof=True, min_fstop=8.0, max_fstop=2.0)

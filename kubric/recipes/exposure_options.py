@@ -29,7 +29,7 @@ import numpy as np
 
 from kubric.annotations.exposure import COVERAGE_FILE, coverage_archive, defocus
 from kubric.annotations.segmentation import adjust_segmentation_idxs
-from kubric.pipeline import Option
+from kubric.pipeline import Option, OptionError
 
 #: tags of the rngs the lens and the event thresholds are drawn from (derived from the seed:
 #: RandomState([seed, tag]))
@@ -65,6 +65,12 @@ class ExposureOptions:
     def exposure_requests(self) -> dict[str, str]:
         """Renderer capabilities the exposure options ask for (see ``renderer_requests``)."""
         return {"depth_of_field": "dof=True"} if self.dof else {}
+
+    def check_exposure(self) -> None:
+        """``coverage_samples`` needs a shutter: a recipe with ``max_motion_blur`` > 0."""
+        if self.coverage_samples and getattr(self, "max_motion_blur", 0.0) <= 0:
+            raise OptionError(f"{self.name}: option coverage_samples={self.coverage_samples} "
+                              "needs a shutter: a recipe with max_motion_blur > 0 (movi_f)")
 
     def sample_lens(self, scene, seed: int) -> None:
         """With ``dof``: the camera's thin lens, from an rng derived from ``seed``; recorded in

@@ -1,8 +1,8 @@
-"""Schemas of the MOVi scenes made with the exposure options (:mod:`kubric.recipes.exposure_options`):
-for every MOVi variant ``X``, ``X_dof`` (``--set dof=True``: the ``defocus`` layer and the lens)
-``X_coverage`` (``--set coverage_samples=K``: ``coverage.npz``) and ``X_events`` (``--set
-events=true``: ``events.h5``), each packed with ``kubric pack DIR --schema X_dof`` (or
-``X_coverage``, ``X_events``)."""
+"""Schemas of the MOVi scenes made with the exposure options
+(:mod:`kubric.recipes.exposure_options`): for every MOVi variant ``X``, ``X_dof`` (``--set
+dof=True``: the ``defocus`` layer and the lens), ``X_events`` (``--set events=true``:
+``events.h5``) and, for MOVi-F, ``movi_f_coverage`` (``--set coverage_samples=K``:
+``coverage.npz``, ``exposure_flow``), each packed with ``kubric pack DIR --schema NAME``."""
 
 from __future__ import annotations
 
@@ -53,14 +53,16 @@ EVENT_FEATURES = (
 )
 _BASES = {s.name: s for s in (movi_schema.MOVI_A, movi_schema.MOVI_B, movi_schema.MOVI_C,
                               movi_schema.MOVI_D, movi_schema.MOVI_E, movi_schema.MOVI_F)}
-#: MOVi variant name → (its ``_dof``, ``_coverage`` and ``_events`` schemas)
+#: MOVi variant name → its ``_dof`` and ``_events`` schemas, and for MOVi-F (the one with a
+#: shutter) its ``_coverage`` schema
 EXPOSURE_VARIANTS = {name: (
     register_schema(base.extend(f"{name}_dof", DOF_FEATURES, description=f"{base.description} "
                                 "With depth of field (dof=True): the defocus layer.")),
-    register_schema(base.extend(f"{name}_coverage", COVERAGE_FEATURES,
-                                description=f"{base.description} With the exposure coverage "
-                                "(coverage_samples=K): coverage.npz.")),
     register_schema(base.extend(f"{name}_events", EVENT_FEATURES,
                                 description=f"{base.description} With the event stream "
-                                "(events=true): events.h5.")))
+                                "(events=true): events.h5.")),
+    *((register_schema(base.extend(f"{name}_coverage", COVERAGE_FEATURES,
+                                   description=f"{base.description} With the exposure coverage "
+                                   "(coverage_samples=K): coverage.npz and exposure_flow.")),)
+      if name == "movi_f" else ()))
     for name, base in _BASES.items()}

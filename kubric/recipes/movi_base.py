@@ -121,6 +121,7 @@ class MoviBase(ExposureOptions, RenderQuality, Recipe):
         self.check_renderer()
         self.check_tracks()
         check_min_max(self)
+        self.check_exposure()
 
     def renderer_requests(self) -> dict[str, str]:
         out = super().renderer_requests()
