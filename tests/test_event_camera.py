@@ -121,3 +121,37 @@ def test_noise_events_are_a_poisson_process_per_pixel():
     per_pixel = np.bincount(noisy["y"].astype(int) * 50 + noisy["x"], minlength=2000)
     assert abs(per_pixel.var() / per_pixel.mean() - 1) < 0.1  # Poisson: variance = mean
     assert add_noise(empty, 4, 4, 0.0, 1e6, SensorModel(), np.random.RandomState(3)) is empty
+
+
+def test_recipe_event_files_from_raycast_subframes_keep_frame_times(tmp_path):
+    from kubric.io.event_h5 import EVENTS_H5_FILE, read_events
+    from kubric.recipes.exposure_options import ExposureOptions
+
+    class Stub(ExposureOptions):  # the options as a recipe holds them
+        def __init__(self, **values):
+            self.values = {name: opt.default for name, opt in vars(ExposureOptions).items()
+                           if hasattr(opt, "default") and not name.startswith("_")}
+            self.values.update(values)
+
+    scene = _scene()
+    scene.frame_start, scene.frame_end = 1, 3
+    files = Stub(events=True, event_subframes=4, event_refractory_us=0.0).event_files(
+        scene, {}, seed=5)
+    (tmp_path / EVENTS_H5_FILE).write_bytes(files[EVENTS_H5_FILE])
+    out = read_events(tmp_path)
+    sensor = scene.metadata["event_camera"]
+    assert sensor["source"] == "raycast sub-frames K=4" and sensor["num_events"] == len(out["t"])
+    # t = 0 at frame_start; the stream spans frames 1 → 3
+    assert out["t"].min() >= 0 and out["t"].max() <= round(2 / RATE * 1e6)
+    frames_rgb = kb.renderer.create("raycast", scene).render(
+        frames=[1, 2, 3], return_layers=("rgba",))["rgba"][..., :3]
+    log_i = srgb_to_log_intensity(frames_rgb, SensorModel().eps)
+    c_pos, c_neg = out["contrast_thresholds"]
+    for a in (0, 1):
+        sel = (out["t"] > round(a / RATE * 1e6)) & (out["t"] <= round((a + 1) / RATE * 1e6))
+        x, y, p = out["x"][sel], out["y"][sel], out["p"][sel]
+        total = np.zeros((H, W))
+        np.add.at(total, (y, x), np.where(p == 1, c_pos[y, x], -c_neg[y, x]))
+        within = np.abs(total - (log_i[a + 1] - log_i[a])) <= np.maximum(c_pos, c_neg)
+        assert within.mean() >= 0.95 and sel.sum() > 100
+

@@ -115,7 +115,7 @@ class ExposureOptions:
                                refractory_us=self.event_refractory_us,
                                noise_rate_hz=self.event_noise_rate)
         frames = list(scene.frames)
-        if self.event_subframes:
+        if self.event_subframes and len(frames) > 1:  # (one frame: no events either way)
             from kubric.renderer.raycast_subframes import subframe_layers
             k = self.event_subframes
             rgb = subframe_layers(scene, frames[:-1], np.arange(k) / k, ("rgba",))["rgba"]
