@@ -20,7 +20,7 @@ $(BIN)/python:
 # (PyPI's torch wheel brings its CUDA libraries: a fresh install of everything took 5.3 min and
 # 7.5 GB), jax (the README's JAX snippet is run by the tests) and, through dev, the cluster and
 # object-storage extras (Dask, fsspec, s3fs, moto's S3 server).
-EXTRAS := dev,datasets,torch,jax,tf
+EXTRAS := dev,datasets,torch,jax,tf,hub
 
 $(STAMP): pyproject.toml | $(BIN)/python
 	$(BIN)/python -m pip install --quiet -e '.[$(EXTRAS)]'

@@ -11,8 +11,8 @@ ROOT = pathlib.Path(__file__).resolve().parents[1]
 DOC = ROOT / "docs" / "architecture.md"
 ABOVE = "all of the above"
 #: layer → the kubric layers it may import, lowest layer first ("all of the above": every
-#: earlier layer). A layer is a package (``kubric.X``), a top-level module, or
-#: ``datasets.exports``. Entry points (kubric, __main__, cli, docgen, demo, workers, safeimport)
+#: earlier layer). A layer is a package (``kubric.X``), a top-level module, ``datasets.exports``
+#: or ``datasets.exports.hub``. Entry points (kubric, __main__, cli, docgen, demo, workers, safeimport)
 #: are not layers: nothing below imports them.
 ALLOWED = {
     "errors": set(),
@@ -33,6 +33,7 @@ ALLOWED = {
     "recipes": ABOVE,
     "datasets": {"core", "io", "errors", "faults", "pipeline"},
     "viewer": {"core", "io", "errors", "annotations", "pipeline"},
+    "datasets.exports.hub": {"core", "io", "errors", "datasets", "datasets.exports"},
 }
 
 
@@ -68,6 +69,8 @@ def _imports(path: pathlib.Path):
 def _package(module: str) -> str:
     """The layer of a module: ``kubric.X...`` → X (``datasets.exports`` for the exports)."""
     parts = module.split(".")
+    if parts[1:4] == ["datasets", "exports", "hub"]:
+        return "datasets.exports.hub"
     if parts[1:3] == ["datasets", "exports"]:
         return "datasets.exports"
     return parts[1] if len(parts) > 1 else ""

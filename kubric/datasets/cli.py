@@ -111,6 +111,18 @@ def cmd_schema(args) -> int:
     return 0
 
 
+def cmd_card(args) -> int:
+    import importlib
+    card = importlib.import_module("kubric.datasets.exports.hub.card")  # the layer above
+    try:
+        out = card.write_card(args.dataset_dir, args.out, args.scenes,
+                              progress=not args.no_progress)
+    except (KubricError, OSError) as err:
+        return _error("datasets card", err)
+    print(f"wrote the dataset card {out / 'README.md'}")
+    return 0
+
+
 def add_parser(subparsers) -> None:
     p = subparsers.add_parser(
         "pack", help="pack scene directories into a TFDS-layout dataset (no TensorFlow)",
@@ -143,7 +155,7 @@ def add_parser(subparsers) -> None:
                           "LocalCluster, a running scheduler, or Slurm jobs")
     p.set_defaults(func=cmd_pack)
 
-    p = subparsers.add_parser("datasets", help="packed datasets: info, schema")
+    p = subparsers.add_parser("datasets", help="packed datasets: info, schema, card")
     sub = p.add_subparsers(dest="datasets_command", metavar="SUBCOMMAND", required=True)
     q = sub.add_parser("info", help="splits, counts, features with shapes, size on disk")
     q.add_argument("dataset_dir", metavar="DATASET_DIR")
@@ -151,6 +163,14 @@ def add_parser(subparsers) -> None:
     q = sub.add_parser("schema", help="a recipe's output contract as a Markdown table")
     q.add_argument("recipe")
     q.set_defaults(func=cmd_schema)
+    q = sub.add_parser("card", help="the dataset card: counts, histograms, contact sheet, "
+                       "licences (Markdown + PNG)")
+    q.add_argument("dataset_dir", metavar="DATASET_DIR")
+    q.add_argument("--out", required=True, help="the card's folder (README.md, card/*.png)")
+    q.add_argument("--scenes", default=None, metavar="SCENES_DIR", help="the scene folders it "
+                   "was packed from: licences, attribution, command, versions")
+    q.add_argument("--no-progress", action="store_true")
+    q.set_defaults(func=cmd_card)
 
 
 __all__ = ["add_parser"]

@@ -6,7 +6,8 @@ and its command's texts). Adding a format is a module ``exports/<name>.py`` defi
 ``export_<name>(scenes, out)`` plus its row here (docs/architecture.md, Example 5).
 The modules import only core, io, annotations and assets (never the packer or the pipeline), so a
 recipe may write an export into its scenes (the multi-view recipes' NeRF transforms, ``vbr``'s
-LASR sequence).
+LASR sequence). The exports of packed datasets (``hf``, ``webdataset``: :mod:`.hub`, with options
+of their own) read through the loader and form a layer above :mod:`kubric.datasets`.
 """
 
 import dataclasses
@@ -56,6 +57,19 @@ FORMATS = {
         "OUT/DAVIS/{JPEGImages,Annotations,FlowFW,FlowBW,Cameras,CamerasWorld}/"
         "Full-Resolution/SEQ/ and OUT/configs/SEQ.config for one scene directory.",
         "the LASR folder to create"),
+    "hf": ExportFormat(
+        "kubric.datasets.exports.hub.hf:export_hf",
+        "a packed dataset as Hugging Face `datasets` Parquet with its dataset card",
+        "OUT/data/SPLIT-0000k-of-0000n.parquet (one row group per scene), OUT/README.md (the "
+        "Hub's YAML header, the card) and OUT/card/*.png; `datasets.load_dataset(OUT)` reads it "
+        "(docs/hub.md).",
+        "output folder (must not exist, or be empty)"),
+    "webdataset": ExportFormat(
+        "kubric.datasets.exports.hub.wds:export_webdataset",
+        "a packed dataset as WebDataset tar shards",
+        "OUT/SPLIT-00000k.tar (one sample per scene, or per frame), OUT/shards.json and the "
+        "card OUT/README.md (docs/hub.md).",
+        "output folder (must not exist, or be empty)"),
 }
 
 

@@ -11,6 +11,9 @@ from kubric.datasets.exports import FORMATS, exporter
 from kubric.errors import KubricError
 
 SCENES_HELP = "a folder of scene_* directories, or one scene directory"
+DATASET_HELP = "a packed dataset (kubric pack), or a folder of scene_* directories"
+#: the formats exporting a packed dataset (kubric.datasets.exports.hub)
+HUB = ("hf", "webdataset")
 
 
 def _error(what: str, message) -> int:
@@ -71,9 +74,32 @@ def cmd_lasr(args) -> int:
     return code
 
 
+def _hub_summary(name: str, result, out) -> str:
+    if name == "hf":
+        return (f"wrote {sum(result.values())} scene(s) as Hugging Face Parquet ("
+                f"{', '.join(f'{s}: {n}' for s, n in result.items())}) to {out}")
+    splits = result["splits"].values()
+    return (f"wrote {sum(v['samples'] for v in splits)} sample(s) in "
+            f"{sum(len(v['shards']) for v in splits)} WebDataset shard(s) to {out}")
+
+
+def cmd_hub(args) -> int:
+    """``kubric export hf|webdataset`` (the exports of a packed dataset)."""
+    name = args.export_format
+    own = dict(scenes_per_shard=args.scenes_per_shard, license_id=args.license) \
+        if name == "hf" else dict(samples_per_shard=args.samples_per_shard,
+                                  per_frame=args.per_frame)
+    result, code = _run(name, args, splits=args.splits, scenes=args.scenes,
+                        progress=not args.no_progress, **own)
+    if result:
+        print(_hub_summary(name, result, args.out))
+    return code
+
+
 #: format → its command, for the formats with options beyond SCENES and --out (the others run
 #: :func:`cmd_export`); the texts of every command are its row of FORMATS
-COMMANDS = {"coco": cmd_coco, "bop": cmd_bop, "lasr": cmd_lasr}
+COMMANDS = {"coco": cmd_coco, "bop": cmd_bop, "lasr": cmd_lasr, "hf": cmd_hub,
+            "webdataset": cmd_hub}
 assert set(COMMANDS) <= set(FORMATS), "every command is a registered format"
 
 
@@ -92,7 +118,8 @@ def add_parser(subparsers) -> None:
     for name, row in FORMATS.items():
         f = parsers[name] = sub.add_parser(name, help=row.help, description=row.description)
         f.add_argument("scenes_dir", metavar="SCENE" if name == "lasr" else "SCENES",
-                       help="one scene directory" if name == "lasr" else SCENES_HELP)
+                       help="one scene directory" if name == "lasr" else
+                       DATASET_HELP if name in HUB else SCENES_HELP)
         f.add_argument("--out", required=True, help=row.out_help)
         f.set_defaults(func=COMMANDS.get(name, cmd_export))
     for name, source_help in (("coco", "asset source whose categories name the objects "
@@ -108,6 +135,20 @@ def add_parser(subparsers) -> None:
                                 "(default train_pbr)")
     parsers["bop"].add_argument("--depth-scale", type=float, default=1.0, help="millimetres per "
                                 "unit of the 16-bit depth PNGs (default 1.0: up to 65.535 m)")
+    for name in HUB:
+        hub = parsers[name]
+        hub.add_argument("--splits", default="train=0.9,validation=0.1", help="splits of scene "
+                         "folders, packed first (as `kubric pack --splits`)")
+        hub.add_argument("--scenes", default=None, metavar="SCENES_DIR", help="the scene "
+                         "folders a packed dataset was made from: the card's licences, "
+                         "attribution and command")
+        hub.add_argument("--no-progress", action="store_true", help="no progress bar")
+    parsers["hf"].add_argument("--scenes-per-shard", type=int, default=1000)
+    parsers["hf"].add_argument("--license", default=None, help="the Hub licence id (default: "
+                               "the assets' own when all are CC0 / CC-BY 4.0, else other)")
+    parsers["webdataset"].add_argument("--samples-per-shard", type=int, default=1000)
+    parsers["webdataset"].add_argument("--per-frame", action="store_true",
+                                       help="one sample per frame (RGB as PNG)")
     lasr = parsers["lasr"]
     lasr.add_argument("--instances", default=None, help="comma-separated instance indices "
                       "(0-based) forming the object (default: every instance)")

@@ -1,0 +1,269 @@
+"""Issue 38: `kubric export hf` and `kubric export webdataset` read back with the client
+libraries themselves (`datasets.load_dataset`, `webdataset` through a PyTorch DataLoader with
+shuffling across shards, also from moto's S3 server) equal, feature by feature, the loader's
+examples (kubric.datasets.load), for MOVi-A (raycast renderer) and the bench recipe; the output
+appears only when complete; one-line errors."""
+
+import json
+import pathlib
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from hub_helpers import assert_same_example
+
+from kubric.datasets import load
+from kubric.io.schema import Schema
+from kubric.pipeline.worker import run_scene
+
+ROOT = pathlib.Path(__file__).resolve().parents[1]
+MOVI = ["renderer=raycast", "resolution=24", "frame_end=3", "max_num_objects=3"]
+SPLITS = "train=0.5,validation=0.5"
+
+
+def kubric(*args, timeout=600):
+    return subprocess.run([sys.executable, "-m", "kubric", *map(str, args)], cwd=ROOT,
+                          capture_output=True, text=True, timeout=timeout)
+
+
+def ok(proc):
+    assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-3000:]
+    return proc
+
+
+@pytest.fixture(scope="module")
+def movi_a(tmp_path_factory):
+    root = tmp_path_factory.mktemp("hub_movi_a")
+    gen = ["generate", "movi_a", "--out", root / "scenes", "--scenes", 4, "--first-seed", 1,
+           "--workers", 1, "--no-progress"]
+    ok(kubric(*gen, *[a for o in MOVI for a in ("--set", o)]))
+    ok(kubric("pack", root / "scenes", "--out", root / "ds", "--splits", SPLITS, "--no-progress"))
+    return root / "scenes", root / "ds"
+
+
+@pytest.fixture(scope="module")
+def bench(tmp_path_factory):
+    from kubric.recipes.bench import Bench
+    root = tmp_path_factory.mktemp("hub_bench")
+    for seed in range(5):
+        run_scene(Bench(), seed, root / "scenes")
+    ok(kubric("pack", root / "scenes", "--out", root / "ds", "--splits", SPLITS,
+              "--no-progress"))
+    return root / "scenes", root / "ds"
+
+
+DATASETS = ["movi_a", "bench"]
+
+
+def _splits(ds):
+    info = json.loads((ds / "kubric_dataset.json").read_text())
+    return [s for s, n in info["counts"].items() if n]
+
+
+def _check_hf_features(features, schema: Schema, dims: dict):
+    """Each schema feature's `datasets` type, from the schema (not from the export's code)."""
+    import datasets as hd
+    for f in schema.features:
+        node = features
+        for key in f.name.split("/"):
+            node = node[key]
+        if f.sequence:
+            assert isinstance(node, hd.List), f.name
+            node = node.feature
+        if f.encoding == "class_label":
+            assert isinstance(node, hd.ClassLabel) and node.names == list(f.names), f.name
+        elif f.name == "video":
+            assert isinstance(node, hd.List) and isinstance(node.feature, hd.Image), f.name
+            assert node.length == dims["T"]
+        elif f.encoding in ("png", "zlib"):  # the other layers: typed arrays with their shapes
+            assert type(node).__name__ == f"Array{len(f.shape)}D", (f.name, node)
+            assert node.shape == f.concrete_shape(dims) and node.dtype == f.dtype, f.name
+        elif f.dtype == "str" and not f.shape:
+            assert node == hd.Value("string"), f.name
+        elif not f.shape:
+            assert node == hd.Value(f.dtype), f.name
+
+
+@pytest.mark.parametrize("name", DATASETS)
+def test_hf_export_loads_with_datasets_feature_by_feature(name, request, tmp_path):
+    import datasets
+    import pyarrow.parquet as pq
+    scenes, ds = request.getfixturevalue(name)
+    out = tmp_path / "hf"
+    proc = ok(kubric("export", "hf", ds, "--out", out, "--scenes", scenes, "--no-progress"))
+    assert "as Hugging Face Parquet" in proc.stdout
+    loaded = datasets.load_dataset(str(out))
+    assert sorted(loaded) == sorted(_splits(ds))
+    for split in loaded:
+        source = load(ds, split)
+        _check_hf_features(loaded[split].features, source.schema, source.dims)
+        rows = loaded[split].with_format("numpy")
+        assert len(rows) == len(source)
+        for i in range(len(source)):
+            assert_same_example(rows[i], source[i])
+        # streamed: one row group per scene
+        files = sorted((out / "data").glob(f"{split}-*.parquet"))
+        groups = sum(pq.ParquetFile(f).metadata.num_row_groups for f in files)
+        assert groups == len(source)
+    readme = (out / "README.md").read_text()
+    header = readme.split("---\n")[1]
+    import yaml
+    meta = yaml.safe_load(header)
+    assert {s["name"]: s["num_examples"] for s in meta["dataset_info"]["splits"]} == \
+        {s: len(load(ds, s)) for s in _splits(ds)}
+    assert meta["license"] and "greff2022kubric" in readme
+    assert not list(tmp_path.glob(".*incomplete"))
+
+
+def test_hf_export_from_scene_folders_equals_the_packed_one(bench, tmp_path):
+    import datasets
+    scenes, ds = bench
+    ok(kubric("export", "hf", scenes, "--out", tmp_path / "hf", "--splits", SPLITS,
+              "--scenes-per-shard", 2, "--no-progress"))
+    shards = {s: -(-len(load(ds, s)) // 2) for s in _splits(ds)}
+    assert sorted(p.name for p in (tmp_path / "hf" / "data").iterdir()) == sorted(
+        f"{s}-{i:05d}-of-{n:05d}.parquet" for s, n in shards.items() for i in range(n))
+    assert not (tmp_path / "hf" / ".packed").exists()
+    loaded = datasets.load_dataset(str(tmp_path / "hf"))
+    for split in _splits(ds):
+        source = load(ds, split)
+        rows = loaded[split].with_format("numpy")
+        assert [r["metadata"]["video_name"] for r in rows] == source.scenes
+        for i in range(len(source)):
+            assert_same_example(rows[i], source[i])
+
+
+def _wds_examples(pattern, workers=2, seed=7):
+    """Every sample, streamed by webdataset through a PyTorch DataLoader: shards shuffled,
+    samples shuffled in a buffer, numpy decoding."""
+    import torch
+    import webdataset as wds
+    pipeline = wds.WebDataset(pattern, shardshuffle=100, seed=seed,
+                              nodesplitter=wds.split_by_node).shuffle(8, seed=seed).decode("rgb8")
+    loader = torch.utils.data.DataLoader(pipeline, batch_size=None, num_workers=workers,
+                                         collate_fn=lambda x: x)
+    return list(loader)
+
+
+def _as_example(sample: dict, files: dict) -> dict:
+    """A webdataset sample as a flat {feature name: value} dict (``files``: shards.json's map of
+    file suffixes to feature names)."""
+    flat = dict(json.loads(sample["json"]) if isinstance(sample["json"], bytes)
+                else sample["json"])
+    for key, value in sample.items():
+        if key.endswith((".npy", ".png")):
+            flat[files[key[:-4]]] = value
+    return flat
+
+
+@pytest.mark.parametrize("name", DATASETS)
+def test_webdataset_streams_shuffled_through_torch_feature_by_feature(name, request, tmp_path):
+    scenes, ds = request.getfixturevalue(name)
+    out = tmp_path / "wds"
+    ok(kubric("export", "webdataset", ds, "--out", out, "--samples-per-shard", 1,
+              "--scenes", scenes, "--no-progress"))
+    index = json.loads((out / "shards.json").read_text())
+    for split in _splits(ds):
+        source = load(ds, split)
+        assert index["splits"][split]["samples"] == len(source) == len(index["splits"][split]["shards"])
+        samples = _wds_examples(str(out / index["splits"][split]["pattern"]))
+        keys = [s["__key__"] for s in samples]
+        assert sorted(keys) == source.scenes  # each scene once
+        by_key = {s["__key__"]: _as_example(s, index["files"]) for s in samples}
+        for i, scene in enumerate(source.scenes):
+            assert_same_example(by_key[scene], source[i])
+    # the shards are shuffled: some seed's order is not the shards' order
+    import webdataset as wds
+    pattern = str(out / index["splits"]["train"]["pattern"])
+    orders = {tuple(s["__key__"] for s in wds.WebDataset(pattern, shardshuffle=100, seed=k))
+              for k in range(8)}
+    assert len(orders) > 1 and sorted(orders) == sorted(orders)  # deterministic per seed
+    assert (out / "README.md").is_file()
+
+
+def test_webdataset_per_frame_samples(movi_a, tmp_path):
+    from kubric.datasets.tfds_io import flatten
+    scenes, ds = movi_a
+    out = tmp_path / "wds"
+    ok(kubric("export", "webdataset", ds, "--out", out, "--per-frame", "--no-progress"))
+    index = json.loads((out / "shards.json").read_text())
+    source = load(ds, "train")
+    frames = source.dims["T"]
+    samples = _wds_examples(str(out / index["splits"]["train"]["pattern"]), workers=0)
+    assert len(samples) == len(source) * frames == index["splits"]["train"]["samples"]
+    by_key = {s["__key__"]: _as_example(s, index["files"]) for s in samples}
+    per_frame = [f.name for f in source.schema.features
+                 if not f.sequence and f.shape[:1] == ("T",)]
+    assert "video" in per_frame and "depth" in per_frame
+    for i, scene in enumerate(source.scenes):
+        want = flatten(source[i])
+        for t in range(frames):
+            got = by_key[f"{scene}_f{t:06d}"]
+            assert got["frame"] == t
+            assert got["video"].dtype == np.uint8  # decoded from the PNG
+            frame_want = {k: (v[t] if k in per_frame else v) for k, v in want.items()}
+            assert_same_example(got, frame_want)
+
+
+def test_webdataset_from_an_object_store(bench, tmp_path):
+    """Shards uploaded to moto's S3 server stream through fsspec (register_fsspec)."""
+    from dask_helpers import processes, s3_env, start_s3
+    scenes, ds = bench
+    out = tmp_path / "wds"
+    ok(kubric("export", "webdataset", ds, "--out", out, "--samples-per-shard", 1,
+              "--no-progress"))
+    with processes() as procs, pytest.MonkeyPatch.context() as mp:
+        endpoint = start_s3(procs, tmp_path)
+        for key, value in s3_env(endpoint).items():
+            mp.setenv(key, value)
+        import fsspec.config
+        import s3fs
+        mp.setitem(fsspec.config.conf, "s3", {"endpoint_url": endpoint})
+        s3fs.S3FileSystem.clear_instance_cache()
+        fs = s3fs.S3FileSystem()
+        fs.mkdir("shards")
+        fs.put(str(out), "shards/wds", recursive=True)
+        from kubric.datasets.exports.hub.wds import register_fsspec
+        register_fsspec("s3")
+        index = json.loads((out / "shards.json").read_text())
+        samples = _wds_examples("s3://shards/wds/" + index["splits"]["train"]["pattern"], workers=0)
+    source = load(ds, "train")
+    by_key = {s["__key__"]: _as_example(s, index["files"]) for s in samples}
+    assert sorted(by_key) == source.scenes
+    for i, scene in enumerate(source.scenes):
+        assert_same_example(by_key[scene], source[i])
+
+
+def test_bad_outputs_are_one_line_and_leave_nothing(bench, tmp_path):
+    scenes, ds = bench
+    (tmp_path / "full").mkdir()
+    (tmp_path / "full" / "x").write_text("x")
+    for fmt in ("hf", "webdataset"):
+        proc = kubric("export", fmt, ds, "--out", tmp_path / "full", "--no-progress")
+        assert proc.returncode == 2 and len(proc.stderr.strip().splitlines()) == 1, proc.stderr
+        assert "is not empty" in proc.stderr
+        proc = kubric("export", fmt, tmp_path / "nothing", "--out", tmp_path / "o",
+                      "--no-progress")
+        assert proc.returncode == 2 and "is not a directory" in proc.stderr, proc.stderr
+        assert not (tmp_path / "o").exists()
+    proc = kubric("export", "hf", ds, "--out", tmp_path / "o", "--scenes-per-shard", 0)
+    assert proc.returncode == 2 and "--scenes-per-shard must be ≥ 1, got 0" in proc.stderr
+
+
+def test_a_failed_export_leaves_nothing_that_looks_complete(bench, tmp_path, monkeypatch):
+    from kubric.datasets.exports.hub import hf
+    scenes, ds = bench
+    calls = []
+
+    def failing(schema, example):
+        calls.append(1)
+        if len(calls) == 2:
+            raise RuntimeError("killed mid-export")
+        return original(schema, example)
+
+    original = hf.hf_row
+    monkeypatch.setattr(hf, "hf_row", failing)
+    with pytest.raises(RuntimeError, match="killed mid-export"):
+        hf.export_hf(ds, tmp_path / "hf", progress=False)
+    assert sorted(p.name for p in tmp_path.iterdir()) == []
