@@ -267,3 +267,110 @@ def test_a_failed_export_leaves_nothing_that_looks_complete(bench, tmp_path, mon
     with pytest.raises(RuntimeError, match="killed mid-export"):
         hf.export_hf(ds, tmp_path / "hf", progress=False)
     assert sorted(p.name for p in tmp_path.iterdir()) == []
+
+
+# ------------------------------------------------------------------ the dataset card
+
+def _scene_dirs(scenes: pathlib.Path) -> list[pathlib.Path]:
+    return sorted(p for p in scenes.iterdir() if (p / "_SUCCESS").is_file())
+
+
+def test_card_numbers_are_the_scenes_own(movi_a, tmp_path):
+    """stats.json of `kubric datasets card` against the scene directories read independently
+    (file_io's float layers, metadata.json)."""
+    from kubric import file_io
+    from kubric.datasets.exports.hub.card import DEPTH_EDGES, FLOW_EDGES, VISIBILITY_EDGES
+    scenes, ds = movi_a
+    ok(kubric("datasets", "card", ds, "--out", tmp_path / "card", "--scenes", scenes,
+              "--no-progress"))
+    numbers = json.loads((tmp_path / "card" / "card" / "stats.json").read_text(),
+                         parse_constant=float)
+    objects, shapes, attribution = {}, {}, set()
+    visibility = np.zeros(len(VISIBILITY_EDGES) - 1, int)
+    flow = np.zeros(len(FLOW_EDGES) - 1, int)
+    depth = np.zeros(len(DEPTH_EDGES) - 1, int)
+    background = 0
+    for scene in _scene_dirs(scenes):
+        meta = json.loads((scene / "metadata.json").read_text())
+        n = len(meta["instances"])
+        objects[str(n)] = objects.get(str(n), 0) + 1
+        h, w = meta["metadata"]["resolution"][1], meta["metadata"]["resolution"][0]
+        for inst in meta["instances"]:
+            shapes[inst["shape"]] = shapes.get(inst["shape"], 0) + 1
+            attribution.add((inst["asset_id"], inst["license"]))
+            visibility += np.histogram(np.array(inst["visibility"]) / (h * w),
+                                       VISIBILITY_EDGES)[0]
+        layers = file_io.read_image_dict(scene)
+        flow += np.histogram(np.hypot(*np.moveaxis(layers["forward_flow"], -1, 0)),
+                             FLOW_EDGES)[0]
+        d = layers["depth"]
+        background += int((d >= 9999).sum())
+        depth += np.histogram(d[d < 9999], DEPTH_EDGES)[0]
+    assert numbers["splits"] == {"train": len(load(ds, "train")),
+                                 "validation": len(load(ds, "validation"))}
+    assert numbers["objects_per_scene"] == objects
+    assert numbers["categories"]["instances/shape_label"] == shapes
+    assert numbers["visibility"]["counts"] == visibility.tolist()
+    assert numbers["depth_m"]["background"] == background
+    # flow and depth are read back from the 16-bit quantised dataset: a value within half a
+    # step of a bin edge may cross it
+    for key, want in (("flow_magnitude_px", flow), ("depth_m", depth)):
+        got = np.array(numbers[key]["counts"])
+        assert got.sum() == want.sum() and np.abs(got - want).sum() <= 0.01 * want.sum(), key
+    assert {(a["asset"], a["license"]) for a in numbers["attribution"]} == attribution
+    readme = (tmp_path / "card" / "README.md").read_text()
+    assert numbers["command"].startswith("kubric generate movi_a ") and \
+        "--set renderer=raycast" in numbers["command"] and numbers["command"] in readme
+    for picture in ("objects.png", "visibility.png", "flow.png", "depth.png",
+                    "contact_sheet.png"):
+        assert f"card/{picture}" in readme and (tmp_path / "card" / "card" / picture).is_file()
+    from PIL import Image
+    sheet = np.asarray(Image.open(tmp_path / "card" / "card" / "contact_sheet.png"))
+    assert sheet.ndim == 3 and sheet.std() > 0
+
+
+@pytest.fixture(scope="module")
+def movi_c_gso(tmp_path_factory):
+    """MOVi-C scenes (raycast) whose objects come from a GSO-layout source (four zipped models
+    converted by `build_gso`), packed."""
+    from collection_fixtures import gso_files, write_zip
+
+    from kubric.asset_tools.gso import build_gso
+    root = tmp_path_factory.mktemp("hub_movi_c")
+    (root / "src").mkdir()
+    for name in ("Box_A", "Box_B", "Box_C", "Box_D"):
+        write_zip(root / "src" / f"{name}.zip", gso_files(name, category="Toys"))
+    build_gso(root / "src", root / "gso", workers=1, progress=False)
+    gen = ["generate", "movi_c", "--out", root / "scenes", "--scenes", 3, "--first-seed", 1,
+           "--workers", 1, "--no-progress"]
+    options = MOVI + [f"objects_source={root / 'gso'}", "split=train"]
+    ok(kubric(*gen, *[a for o in options for a in ("--set", o)]))
+    ok(kubric("pack", root / "scenes", "--out", root / "ds", "--splits", "train=1",
+              "--no-progress"))
+    return root / "scenes", root / "ds"
+
+
+def test_movi_c_gso_card_attributes_every_object(movi_c_gso, tmp_path):
+    import datasets
+
+    from kubric.asset_tools.gso import LICENSE
+    scenes, ds = movi_c_gso
+    out = tmp_path / "hf"
+    ok(kubric("export", "hf", ds, "--out", out, "--scenes", scenes, "--no-progress"))
+    readme = (out / "README.md").read_text()
+    used = {i["asset_id"] for s in _scene_dirs(scenes)
+            for i in json.loads((s / "metadata.json").read_text())["instances"]}
+    assert used
+    for asset in used:
+        assert f"- `{asset}` " in readme and f"{LICENSE}" in readme.split(f"- `{asset}` ")[1] \
+            .splitlines()[0]
+    numbers = json.loads((out / "card" / "stats.json").read_text(), parse_constant=float)
+    assert {a["asset"] for a in numbers["attribution"] if a["license"] == LICENSE} == used
+    # the background HDRI (bpy's, CC0) is attributed too; CC0 + CC-BY 4.0 → cc-by-4.0
+    assert any(a["description"] == "background HDRI" for a in numbers["attribution"])
+    import yaml
+    assert yaml.safe_load(readme.split("---\n")[1])["license"] == "cc-by-4.0"
+    rows = datasets.load_dataset(str(out))["train"].with_format("numpy")
+    source = load(ds, "train")
+    for i in range(len(source)):
+        assert_same_example(rows[i], source[i])

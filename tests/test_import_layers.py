@@ -33,7 +33,8 @@ ALLOWED = {
     "recipes": ABOVE,
     "datasets": {"core", "io", "errors", "faults", "pipeline"},
     "viewer": {"core", "io", "errors", "annotations", "pipeline"},
-    "datasets.exports.hub": {"core", "io", "errors", "datasets", "datasets.exports"},
+    "datasets.exports.hub": {"core", "io", "errors", "asset_tools", "datasets",
+                             "datasets.exports"},
 }
 
 

@@ -1,7 +1,8 @@
 """The dataset card (``kubric datasets card DATASET``, and README.md of ``kubric export hf``):
 splits and counts; objects per scene, categories, visibility, flow-magnitude and depth
-histograms, track counts (PNG bar charts); a contact sheet of random scenes; every asset
-source's licence and the attribution list it requires; the generating command and versions.
+histograms, track counts (PNG bar charts, their numbers in ``card/stats.json``); a contact sheet
+of random scenes; every asset source's licence and the attribution list it requires; the
+generating command and versions.
 
 Statistics are accumulated one example at a time (:class:`CardStats`: fixed-bin histograms and
 a reservoir of a few frames), so the card of any number of scenes takes flat memory. Licences,
@@ -14,10 +15,12 @@ from __future__ import annotations
 
 import collections
 import dataclasses
+import json
 import pathlib
 
 import numpy as np
 
+from kubric.asset_tools.hdri import BPY_WORLD_LICENSE
 from kubric.core.camera_geometry import BACKGROUND_DEPTH
 from kubric.datasets.exports.hub import plots
 from kubric.datasets.exports.hub.common import progress_bar, scene_examples, splits_of, writing
@@ -151,6 +154,22 @@ def _licensed(node, found: list) -> None:
             _licensed(value, found)
 
 
+def _background(meta: dict) -> tuple[str, str] | None:
+    """(HDRI id, licence) of a scene's background dome, for the recipes with an ``hdri_source``
+    option: the licence is the source manifest's entry, or that of the HDRIs shipped with bpy
+    (the default source)."""
+    flags, background = meta.get("flags", {}), meta.get("metadata", {}).get("background")
+    if "hdri_source" not in flags or not isinstance(background, str) or \
+            background.startswith("#"):
+        return None
+    source = flags.get("hdri_source")
+    if source is None:
+        return background, BPY_WORLD_LICENSE
+    manifest = pathlib.Path(str(source)) / "manifest.json"
+    entry = read_json(manifest).get("assets", {}).get(background) if manifest.is_file() else None
+    return background, str(entry["license"]) if entry else f"unknown (not in {source})"
+
+
 def generating_command(flags: dict) -> str:
     """``kubric generate RECIPE --set KEY=VALUE ...`` of a scene's options (``flags``)."""
     sets = []
@@ -181,6 +200,9 @@ def provenance(scenes_dir) -> Provenance:
             asset = str(entry.get("asset_id", entry.get("name", "?")))
             source = str(entry.get("source", ""))
             out.assets[(source, asset)] = (str(entry.get("description", "")), entry["license"])
+        background = _background(meta)
+        if background:
+            out.assets[("hdri", background[0])] = ("background HDRI", background[1])
         if not out.command:
             out.command = generating_command(meta.get("flags", {}))
             out.versions = dict(meta.get("metadata", {}).get("versions", {}))
@@ -202,6 +224,26 @@ class Card:
     @property
     def license_id(self) -> str:
         return self.provenance.license_id
+
+    def numbers(self) -> dict:
+        """The card's numbers as JSON (``card/stats.json``): counts, histograms with their bin
+        edges, licences and attribution."""
+        s, p = self.stats, self.provenance
+        edges = lambda e: [float(v) for v in e]  # noqa: E731 (inf is JSON's Infinity)
+        return {
+            "splits": dict(s.counts), "dims": s.dims,
+            "objects_per_scene": {str(k): v for k, v in sorted(s.objects.items())},
+            "categories": {k: dict(sorted(v.items())) for k, v in s.categories.items()},
+            "visibility": {"edges": edges(VISIBILITY_EDGES), "counts": s.visibility.tolist()},
+            "flow_magnitude_px": {"edges": edges(FLOW_EDGES), "counts": s.flow.tolist()},
+            "depth_m": {"edges": edges(DEPTH_EDGES), "counts": s.depth.tolist(),
+                        "background": s.background},
+            "tracks_per_scene": {str(k): v for k, v in sorted(s.tracks.items())},
+            "licences": dict(p.licences),
+            "attribution": [{"asset": a, "source": src, "description": d, "license": lic}
+                            for (src, a), (d, lic) in sorted(p.assets.items())],
+            "command": p.command, "versions": p.versions,
+        }
 
     def markdown(self, citation: str | None = None) -> str:
         s, p = self.stats, self.provenance
@@ -296,8 +338,11 @@ def build_card(dataset_dir, scenes_dir, out_dir, stats: CardStats | None = None,
                 bar.update(1)
         bar.close()
     pictures = _pictures(stats, pathlib.Path(out_dir) / CARD_DIR)
-    return Card(str(info["name"]), schema.description, stats, provenance(scenes_dir), pictures,
+    card = Card(str(info["name"]), schema.description, stats, provenance(scenes_dir), pictures,
                 str(info.get("kubric_version", "")))
+    (pathlib.Path(out_dir) / CARD_DIR / "stats.json").write_text(
+        json.dumps(card.numbers(), indent=1) + "\n")
+    return card
 
 
 def write_card(dataset_dir, out, scenes_dir=None, progress: bool = True) -> pathlib.Path:
