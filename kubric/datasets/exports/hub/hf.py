@@ -103,9 +103,10 @@ def shard_name(split: str, index: int, count: int) -> str:
     return f"{DATA_DIR}/{split}-{index:05d}-of-{count:05d}.parquet"
 
 
-def yaml_header(features, counts: dict[str, int], license_id: str, pretty_name: str,
-                tags: list[str]) -> str:
-    """The Hub's YAML metadata block (between ``---`` lines) of README.md."""
+def yaml_header(features, counts: dict[str, int], sizes: dict[str, int], license_id: str,
+                pretty_name: str, tags: list[str]) -> str:
+    """The Hub's YAML metadata block (between ``---`` lines) of README.md; ``sizes``: each
+    split's bytes in Arrow (what ``datasets`` calls ``num_bytes``)."""
     import yaml
     header = {
         "license": license_id,
@@ -116,7 +117,9 @@ def yaml_header(features, counts: dict[str, int], license_id: str, pretty_name: 
         "configs": [{"config_name": "default", "data_files": [
             {"split": s, "path": f"{DATA_DIR}/{s}-*.parquet"} for s in counts]}],
         "dataset_info": {"features": features._to_yaml_list(),
-                         "splits": [{"name": s, "num_examples": n} for s, n in counts.items()]},
+                         "splits": [{"name": s, "num_bytes": sizes[s], "num_examples": n}
+                                    for s, n in counts.items()],
+                         "dataset_size": sum(sizes.values())},
     }
     return "---\n" + yaml.safe_dump(header, sort_keys=False, width=100) + "---\n"
 
@@ -149,13 +152,14 @@ def export_hf(source, out, splits: str = "train=0.9,validation=0.1",
         (work / DATA_DIR).mkdir()
         stats = card_module.CardStats(schema, info["dims"])
         bar = progress_bar(sum(counts.values()), "hf", progress)
+        sizes = dict.fromkeys(counts, 0)
         for split, count in counts.items():
             shards = -(-count // scenes_per_shard)
             writer = None
             for index, example in enumerate(scene_examples(dataset_dir, split)):
                 if index % scenes_per_shard == 0:
                     if writer is not None:
-                        writer.finalize()
+                        sizes[split] += writer.finalize()[1]
                         writer.close()
                     path = work / shard_name(split, index // scenes_per_shard, shards)
                     writer = ParquetWriter(path=str(path), features=features)
@@ -163,11 +167,11 @@ def export_hf(source, out, splits: str = "train=0.9,validation=0.1",
                 writer.write_batch({k: [v] for k, v in row.items()})
                 stats.add(split, example)
                 bar.update(1)
-            writer.finalize()
+            sizes[split] += writer.finalize()[1]
             writer.close()
         bar.close()
         card = card_module.build_card(dataset_dir, scenes or scene_folder, work, stats)
-        header = yaml_header(features, counts, license_id or card.license_id,
+        header = yaml_header(features, counts, sizes, license_id or card.license_id,
                              f"Kubric {info['name']}", [str(info["schema"])])
         (work / "README.md").write_text(header + card.markdown(citation=CITATION))
     return counts

@@ -31,8 +31,8 @@ def bar_chart(labels: list[str], values: list[float], title: str, path: pathlib.
     chars = max(int(step / 6), 1)
     for i, (label, value) in enumerate(zip(labels, values, strict=True)):
         x0, x1 = left + i * step + 1, left + (i + 1) * step - 1
-        y = bottom - (bottom - top) * float(value) / peak
-        if value > 0:
+        y = min(bottom - (bottom - top) * float(value) / peak, bottom - 2)
+        if value > 0:  # at least one pixel high
             draw.rectangle([x0, y, max(x1, x0 + 1), bottom - 1], fill=BAR)
         draw.text((x0, bottom + 4 + 12 * (i % 2)), str(label)[:chars], fill=INK, font=font)
     path = pathlib.Path(path)
