@@ -169,17 +169,19 @@ def test_coco_bad_input(tmp_path):
 
 
 def test_one_export_command_per_registered_format(tmp_path):
-    """Every module of kubric/datasets/exports/ that defines export_<its name> is a row of
-    FORMATS and a `kubric export` sub-command; the old `kubric tracks export` prints one line
-    naming `kubric export tapvid`."""
+    """Every module of kubric/datasets/exports/ (and of its hub/) that defines export_<its name>
+    is a row of FORMATS and a `kubric export` sub-command; the old `kubric tracks export` prints
+    one line naming `kubric export tapvid`."""
     import ast
 
     from kubric.datasets.exports import FORMATS
     defined = set()
-    for path in (ROOT / "kubric" / "datasets" / "exports").glob("*.py"):
+    root = ROOT / "kubric" / "datasets" / "exports"
+    for path in root.rglob("*.py"):
+        module = ".".join(path.relative_to(root).with_suffix("").parts)
         for node in ast.parse(path.read_text()).body:
             if isinstance(node, ast.FunctionDef) and node.name == f"export_{path.stem}":
-                defined.add(f"kubric.datasets.exports.{path.stem}:{node.name}")
+                defined.add(f"kubric.datasets.exports.{module}:{node.name}")
     assert defined == {row.target for row in FORMATS.values()}
     usage = kubric("export", "--help").stdout
     assert all(name in usage for name in FORMATS)

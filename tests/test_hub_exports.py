@@ -265,7 +265,7 @@ def test_webdataset_from_an_object_store(bench, tmp_path):
         fs = s3fs.S3FileSystem()
         fs.mkdir("shards")
         fs.put(str(out), "shards/wds", recursive=True)
-        from kubric.datasets.exports.hub.wds import register_fsspec
+        from kubric.datasets.exports.hub.webdataset import register_fsspec
         register_fsspec("s3")
         index = json.loads((out / "shards.json").read_text())
         samples = _wds_examples("s3://shards/wds/" + index["splits"]["train"]["pattern"], workers=0)

@@ -65,7 +65,7 @@ FORMATS = {
         "(docs/hub.md).",
         "output folder (must not exist, or be empty)"),
     "webdataset": ExportFormat(
-        "kubric.datasets.exports.hub.wds:export_webdataset",
+        "kubric.datasets.exports.hub.webdataset:export_webdataset",
         "a packed dataset as WebDataset tar shards",
         "OUT/SPLIT-00000k.tar (one sample per scene, or per frame), OUT/shards.json and the "
         "card OUT/README.md (docs/hub.md).",

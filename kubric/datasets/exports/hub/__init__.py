@@ -1,5 +1,5 @@
 """Exports of a packed dataset to where trainers already are (docs/hub.md): Hugging Face
-``datasets`` Parquet (:mod:`.hf`), WebDataset tar shards (:mod:`.wds`) and the dataset card
+``datasets`` Parquet (:mod:`.hf`), WebDataset tar shards (:mod:`.webdataset`) and the dataset card
 (:mod:`.card`, ``kubric datasets card``), registered in :data:`kubric.datasets.exports.FORMATS`.
 
 Unlike the scene-directory exports beside it, this package reads through the loader
