@@ -415,3 +415,23 @@ def test_movi_c_gso_card_attributes_every_object(movi_c_gso, tmp_path):
     source = load(ds, "train")
     for i in range(len(source)):
         assert_same_example(rows[i], source[i])
+
+
+@pytest.mark.slow
+def test_export_memory_is_flat_in_the_number_of_scenes(tmp_path):
+    """The peak memory an export adds does not grow with the scenes: 48 scenes within 1.2× (+8
+    MB) of 12, where holding the 36 extra scenes' decoded examples alone would take more than
+    the allowance (measured from the loader, independently of the export)."""
+    from benchmarks.bench_hub import FORMATS, make_dataset, measure_export
+    from kubric.datasets.tfds_io import flatten
+    options = {"resolution": (128, 128), "frames": 8}
+    warmup = make_dataset(tmp_path, 2, options)
+    small, large = make_dataset(tmp_path, 12, options), make_dataset(tmp_path, 48, options)
+    example = flatten(load(large, "train")[0])
+    held_mb = 36 * sum(v.nbytes for v in example.values() if isinstance(v, np.ndarray)) / 2**20
+    for fmt in FORMATS:
+        a = measure_export(fmt, small, warmup, tmp_path / f"{fmt}-12")
+        b = measure_export(fmt, large, warmup, tmp_path / f"{fmt}-48")
+        allowance = 0.2 * a["added_mb"] + 8
+        assert held_mb > allowance, (held_mb, allowance)  # the check can see a held dataset
+        assert b["added_mb"] <= a["added_mb"] + allowance, (fmt, a, b)
