@@ -154,6 +154,15 @@ def test_hf_export_loads_with_datasets_feature_by_feature(name, request, tmp_pat
             count = str(len(npz["query_points"]))
         tracks[count] = tracks.get(count, 0) + 1
     assert numbers["tracks_per_scene"] == tracks and (name != "movi_e_tracks" or tracks)
+    people = {"character_id": {}, "motion_id": {}}  # characters and clips, from metadata.json
+    for scene in _scene_dirs(scenes):
+        for inst in json.loads((scene / "metadata.json").read_text())["instances"]:
+            for key, counts in people.items():
+                if key in inst:
+                    counts[inst[key]] = counts.get(inst[key], 0) + 1
+    assert (numbers["characters"], numbers["clips"]) == (people["character_id"],
+                                                         people["motion_id"])
+    assert name != "pose_estimation" or numbers["characters"]
 
 
 def test_hf_export_from_scene_folders_equals_the_packed_one(bench, tmp_path):
