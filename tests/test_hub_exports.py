@@ -444,3 +444,16 @@ def test_export_memory_is_flat_in_the_number_of_scenes(tmp_path):
         allowance = 0.2 * a["added_mb"] + 8
         assert held_mb > allowance, (held_mb, allowance)  # the check can see a held dataset
         assert b["added_mb"] <= a["added_mb"] + allowance, (fmt, a, b)
+
+
+def test_progress_bar_and_a_missing_library_is_one_line(bench, tmp_path, monkeypatch):
+    scenes, ds = bench
+    proc = ok(kubric("export", "webdataset", ds, "--out", tmp_path / "w"))
+    assert "export webdataset" in proc.stderr and "scene" in proc.stderr  # tqdm's bar
+    from kubric.datasets.exports.hub import hf
+    from kubric.datasets.exports.scenes import ExportError
+    monkeypatch.setitem(sys.modules, "datasets", None)  # as if not installed
+    with pytest.raises(ExportError, match=r"needs the Python package 'datasets': install the "
+                       r"hub extra \(pip install 'kubric\[hub\]'\)"):
+        hf.export_hf(ds, tmp_path / "hf", progress=False)
+    assert not (tmp_path / "hf").exists()

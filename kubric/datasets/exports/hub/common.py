@@ -6,6 +6,7 @@ when complete (nothing that looks complete after a failure, as ``kubric pack``).
 from __future__ import annotations
 
 import contextlib
+import importlib
 import os
 import pathlib
 import shutil
@@ -18,6 +19,15 @@ from kubric.io import scene_dir
 
 #: the folder, inside the work folder, where scene folders are packed before an export
 PACKED = ".packed"
+
+
+def need(module: str):
+    """``module`` imported, or one line naming the extra that installs it."""
+    try:
+        return importlib.import_module(module)
+    except ImportError:
+        raise ExportError(f"this export needs the Python package {module!r}: install the hub "
+                          "extra (pip install 'kubric[hub]')") from None
 
 
 def check_out(out) -> pathlib.Path:

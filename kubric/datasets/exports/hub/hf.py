@@ -25,7 +25,14 @@ from __future__ import annotations
 import numpy as np
 
 from kubric.datasets.exports.hub import card as card_module
-from kubric.datasets.exports.hub.common import dataset_of, progress_bar, scene_examples, splits_of, writing
+from kubric.datasets.exports.hub.common import (
+    dataset_of,
+    need,
+    progress_bar,
+    scene_examples,
+    splits_of,
+    writing,
+)
 from kubric.datasets.exports.scenes import ExportError
 from kubric.datasets.layout import read_info
 from kubric.datasets.tfds_io import flatten, unflatten
@@ -50,8 +57,7 @@ DATA_DIR = "data"
 
 
 def _hd():
-    import datasets
-    return datasets
+    return need("datasets")
 
 
 def is_image(f: Feature) -> bool:
@@ -141,7 +147,7 @@ def export_hf(source, out, splits: str = "train=0.9,validation=0.1",
     the card derives from the assets. Returns {split: number of examples}."""
     if scenes_per_shard < 1:
         raise ExportError(f"--scenes-per-shard must be ≥ 1, got {scenes_per_shard}")
-    from datasets.arrow_writer import ParquetWriter
+    ParquetWriter = _hd() and need("datasets.arrow_writer").ParquetWriter
 
     with writing(out) as work:
         dataset_dir, scene_folder = dataset_of(source, work, splits, progress)

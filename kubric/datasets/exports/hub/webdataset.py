@@ -27,7 +27,14 @@ import json
 import numpy as np
 
 from kubric.datasets.exports.hub import card as card_module
-from kubric.datasets.exports.hub.common import dataset_of, progress_bar, scene_examples, splits_of, writing
+from kubric.datasets.exports.hub.common import (
+    dataset_of,
+    need,
+    progress_bar,
+    scene_examples,
+    splits_of,
+    writing,
+)
 from kubric.datasets.exports.hub.hf import is_image
 from kubric.datasets.exports.scenes import ExportError
 from kubric.datasets.layout import read_info
@@ -120,8 +127,7 @@ def export_webdataset(source, out, splits: str = "train=0.9,validation=0.1",
     "files": {suffix: feature name}}."""
     if samples_per_shard < 1:
         raise ExportError(f"--samples-per-shard must be ≥ 1, got {samples_per_shard}")
-    import webdataset
-
+    webdataset = need("webdataset")
     index: dict = {}
     with writing(out) as work:
         dataset_dir, scene_folder = dataset_of(source, work, splits, progress)
