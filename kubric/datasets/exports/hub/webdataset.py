@@ -27,14 +27,7 @@ import json
 import numpy as np
 
 from kubric.datasets.exports.hub import card as card_module
-from kubric.datasets.exports.hub.common import (
-    dataset_of,
-    need,
-    progress_bar,
-    scene_examples,
-    splits_of,
-    writing,
-)
+from kubric.datasets.exports.hub import common
 from kubric.datasets.exports.hub.hf import is_image
 from kubric.datasets.exports.scenes import ExportError
 from kubric.datasets.layout import read_info
@@ -127,19 +120,19 @@ def export_webdataset(source, out, splits: str = "train=0.9,validation=0.1",
     "files": {suffix: feature name}}."""
     if samples_per_shard < 1:
         raise ExportError(f"--samples-per-shard must be ≥ 1, got {samples_per_shard}")
-    webdataset = need("webdataset")
+    webdataset = common.need("webdataset")
     index: dict = {}
-    with writing(out) as work:
-        dataset_dir, scene_folder = dataset_of(source, work, splits, progress)
+    with common.writing(out) as work:
+        dataset_dir, scene_folder = common.dataset_of(source, work, splits, progress)
         info = read_info(dataset_dir)
         schema = Schema.from_json(info["schema_json"])
         check_names(schema)
         stats = card_module.CardStats(schema, info["dims"])
-        counts = splits_of(dataset_dir)
-        bar = progress_bar(sum(counts.values()), "webdataset", progress)
+        counts = common.splits_of(dataset_dir)
+        bar = common.progress_bar(sum(counts.values()), "webdataset", progress)
         for split, count in counts.items():
             shards, written, writer = [], 0, None
-            for example in scene_examples(dataset_dir, split):
+            for example in common.scene_examples(dataset_dir, split):
                 for sample in samples(schema, example, per_frame):
                     if written % samples_per_shard == 0:
                         if writer is not None:
