@@ -146,6 +146,9 @@ def test_hf_export_loads_with_datasets_feature_by_feature(name, request, tmp_pat
     assert {s["name"]: s["num_examples"] for s in meta["dataset_info"]["splits"]} == \
         {s: len(load(ds, s)) for s in _splits(ds)}
     assert meta["license"] and "greff2022kubric" in readme
+    tasks = {"movi_a": {"image-segmentation", "depth-estimation", "object-detection"},
+             "bench": {"image-segmentation"}}
+    assert name not in tasks or set(meta["task_categories"]) == tasks[name]
     assert not list(tmp_path.glob(".*incomplete"))
     numbers = json.loads((out / "card" / "stats.json").read_text(), parse_constant=float)
     tracks: dict = {}

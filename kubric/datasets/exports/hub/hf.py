@@ -109,15 +109,25 @@ def shard_name(split: str, index: int, count: int) -> str:
     return f"{DATA_DIR}/{split}-{index:05d}-of-{count:05d}.parquet"
 
 
+#: feature → the Hub task category a dataset with it serves
+TASKS = {"segmentations": "image-segmentation", "depth": "depth-estimation",
+         "instances/bboxes": "object-detection", "instances/keypoints_2d": "keypoint-detection"}
+
+
+def task_categories(schema: Schema) -> list[str]:
+    names = {f.name for f in schema.features}
+    return [task for feature, task in TASKS.items() if feature in names]
+
+
 def yaml_header(features, counts: dict[str, int], sizes: dict[str, int], license_id: str,
-                pretty_name: str, tags: list[str]) -> str:
+                pretty_name: str, tags: list[str], tasks: list[str]) -> str:
     """The Hub's YAML metadata block (between ``---`` lines) of README.md; ``sizes``: each
     split's bytes in Arrow (what ``datasets`` calls ``num_bytes``)."""
     import yaml
     header = {
         "license": license_id,
         "pretty_name": pretty_name,
-        "task_categories": ["image-segmentation", "depth-estimation", "object-detection"],
+        "task_categories": tasks,
         "tags": ["synthetic", "kubric", *tags],
         "size_categories": [_size_category(sum(counts.values()))],
         "configs": [{"config_name": "default", "data_files": [
@@ -178,7 +188,8 @@ def export_hf(source, out, splits: str = "train=0.9,validation=0.1",
         bar.close()
         card = card_module.build_card(dataset_dir, scenes or scene_folder, work, stats)
         header = yaml_header(features, counts, sizes, license_id or card.license_id,
-                             f"Kubric {info['name']}", [str(info["schema"])])
+                             f"Kubric {info['name']}", [str(info["schema"])],
+                             task_categories(schema))
         (work / "README.md").write_text(header + card.markdown(citation=CITATION))
     return counts
 
