@@ -47,6 +47,8 @@ def cmd_worker(args) -> int:
     _die_with_parent()
     handle_termination()  # SIGTERM like SIGINT: unwind, remove the work directory
     seed = args.seed if args.seed is not None else args.first_seed + args.index
+    if args.recipe_path:
+        sys.path.insert(0, args.recipe_path)
     if not 0 <= seed <= MAX_SEED:
         return _error("worker", f"seed must be in 0..{MAX_SEED} (2**32 - 1), got {seed}")
     try:
@@ -268,6 +270,8 @@ def add_parser(subparsers) -> None:
                    "(the scene renders into local scratch and is uploaded, _SUCCESS last)")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help="recipe option (repeatable)")
+    p.add_argument("--recipe-path", default=None, metavar="DIR", help="a folder put first on "
+                   "the module path to import a module:Class recipe from (generate passes it)")
     p.set_defaults(func=cmd_worker)
 
     p = subparsers.add_parser("generate", help="generate many scenes (process pool or Dask)",

@@ -97,9 +97,28 @@ def _last_line(log: pathlib.Path) -> str:
     return markers[-1] if markers else "empty log"
 
 
+def recipe_import_root(recipe_spec: str) -> str | None:
+    """The folder this process imported a ``module:Class`` recipe's top-level module from (the
+    worker puts it first on its path, having no current directory there), or None for a
+    registered name, a ``file.py:Class`` or a module of kubric's."""
+    module, sep, _ = recipe_spec.rpartition(":")
+    top = module.split(".")[0]
+    if not sep or top == "kubric" or module.endswith(".py") or pathlib.Path(module).is_file():
+        return None
+    loaded = sys.modules.get(top)
+    where = list(getattr(loaded, "__path__", None) or []) or [getattr(loaded, "__file__", None)]
+    return str(pathlib.Path(where[0]).resolve().parent) if where[0] else None
+
+
 def worker_command(recipe_spec: str, seed: int, out_root, assignments: Sequence[str]) -> list[str]:
-    cmd = [sys.executable, "-m", "kubric", "worker", recipe_spec, "--seed", str(seed),
+    """The worker's command line. ``-P``: the current directory is not put first on the worker's
+    ``sys.path``, so a folder named ``kubric`` there (the clone, run from its parent) cannot
+    shadow the installed package as a namespace package; the worker imports what the runner did."""
+    cmd = [sys.executable, "-P", "-m", "kubric", "worker", recipe_spec, "--seed", str(seed),
            "--out", str(out_root)]
+    root = recipe_import_root(recipe_spec)
+    if root is not None:
+        cmd += ["--recipe-path", root]
     for a in assignments:
         cmd += ["--set", a]
     return cmd
