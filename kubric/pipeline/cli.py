@@ -163,8 +163,9 @@ def cmd_generate(args) -> int:
     except storage.StorageError as err:
         return _error("generate", err)
     seeds = range(args.first_seed, args.first_seed + args.scenes)
+    resume = "overwrite" if args.overwrite else "any" if args.resume_any else "same"
     common = dict(assignments=args.set, retries=args.retries, timeout=args.timeout,
-                  progress=not args.no_progress)
+                  progress=not args.no_progress, resume=resume)
     client = cluster = None
     if cluster_opts is None:
         runner = LocalRunner(recipe_spec(cls), out, seeds, workers=args.workers, **common)
@@ -288,7 +289,16 @@ def add_parser(subparsers) -> None:
                    "with --cluster local: cores // --threads-per-scene)")
     p.add_argument("--retries", type=int, default=2, help="extra attempts per failed scene")
     p.add_argument("--timeout", type=float, default=None, help="seconds per worker attempt")
-    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                   help="recipe option, repeatable (`kubric recipes NAME` lists a recipe's "
+                   "options, types and defaults), e.g. --set resolution=128x128 "
+                   "--set quality=fast")
+    again = p.add_mutually_exclusive_group()
+    again.add_argument("--overwrite", action="store_true", help="make the requested seeds "
+                       "again: their complete scenes in --out are deleted first")
+    again.add_argument("--resume-any", action="store_true", help="skip the complete scenes in "
+                       "--out even when other options made them (by default a re-run whose "
+                       "options differ from theirs refuses)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     add_cluster_arguments(p, "run on Dask: a LocalCluster, a running scheduler, or Slurm jobs")
     p.set_defaults(func=cmd_generate)

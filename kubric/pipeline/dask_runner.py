@@ -284,8 +284,9 @@ class DaskRunner(Runner):
 
     def __init__(self, recipe_spec: str, out_root, seeds: Sequence[int], client,
                  assignments: Sequence[str] = (), retries: int = 2, timeout: float | None = None,
-                 progress: bool = True, threads_per_scene: int = 1):
-        super().__init__(recipe_spec, out_root, seeds, assignments, retries, timeout, progress)
+                 progress: bool = True, threads_per_scene: int = 1, resume: str = "same"):
+        super().__init__(recipe_spec, out_root, seeds, assignments, retries, timeout, progress,
+                         resume)
         if threads_per_scene < 1:
             raise ValueError(f"threads_per_scene must be ≥ 1, got {threads_per_scene}")
         self.client = client
