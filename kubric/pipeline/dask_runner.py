@@ -95,6 +95,9 @@ class ClusterOptions:
         if kind == "slurm" and self.cores_per_job < self.threads_per_scene:
             raise ClusterError(f"--cores-per-job {self.cores_per_job} is less than "
                                f"--threads-per-scene {self.threads_per_scene}")
+        from kubric.extras import require  # one line naming the extra, before any cluster
+        require(f"--cluster {self.spec}", "dask", "distributed",
+                *(["dask_jobqueue"] if kind == "slurm" else []))
 
     def slurm_kwargs(self) -> dict:
         """dask-jobqueue ``SLURMCluster`` arguments: one Dask worker process per scene slot,
