@@ -198,7 +198,9 @@ def cmd_generate(args) -> int:
 
 
 def format_recipe(cls) -> str:
-    lines = [f"{cls.name}: {cls.description()}"]
+    internal = " [internal: a test tool, not a dataset]" \
+        if cls.internal else ""
+    lines = [f"{cls.name}: {cls.description()}{internal}"]
     width = max((len(n) for n in cls.options), default=0)
     for name, opt in cls.options.items():
         bounded = opt.choices is not None or any(
@@ -212,7 +214,7 @@ def format_recipe(cls) -> str:
 def cmd_recipes(args) -> int:
     try:
         classes = [get_recipe(args.name)] if args.name else \
-            [cls for _, cls in sorted(load_builtin().items())]
+            sorted(load_builtin().values(), key=lambda c: (c.internal, c.name))
     except OptionError as err:
         return _error("recipes", err)
     print("\n\n".join(format_recipe(cls) for cls in classes))

@@ -23,10 +23,10 @@ from kubric import file_io
 from kubric.annotations import pictures
 from kubric.annotations.track_files import TRACKS_FILE, read_tracks
 from kubric.core.camera_geometry import BACKGROUND_DEPTH
-from kubric.errors import InputError
+from kubric.errors import InputError, UsageError
 from kubric.io import storage
 from kubric.io.palette import label_palette
-from kubric.io.scene_dir import EVENTS_FILE, METADATA_FILE, is_complete
+from kubric.io.scene_dir import EVENTS_FILE, METADATA_FILE, complete_scenes, is_complete
 from kubric.io.scene_writer import check_scene_content
 from kubric.io.schema import SchemaError
 from kubric.pipeline.recipe import scene_schema
@@ -162,6 +162,10 @@ def inspect_scene(scene_dir, sheet=None) -> str:
     if not scene_dir.is_dir():
         raise FileNotFoundError(f"{str(scene_dir)!r} is not a directory")
     meta_path = scene_dir / METADATA_FILE
+    inside = complete_scenes(scene_dir)
+    if inside and not meta_path.exists():  # the output folder of generate, not one scene
+        raise UsageError(f"{str(scene_dir)!r} is a folder of {len(inside)} scenes, not a scene: "
+                         f"inspect one of them, e.g. kubric inspect {scene_dir / inside[0]}")
     metadata = file_io.read_json(meta_path) if meta_path.exists() else {}
     events_path = scene_dir / EVENTS_FILE
     events = file_io.read_json(events_path) if events_path.exists() else {}
