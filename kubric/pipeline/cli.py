@@ -45,6 +45,7 @@ def _die_with_parent() -> None:
 
 def cmd_worker(args) -> int:
     _die_with_parent()
+    os.environ.setdefault("KUBRIC_RENDER_PROGRESS", "0")  # no frame bar in a scene's log
     handle_termination()  # SIGTERM like SIGINT: unwind, remove the work directory
     seed = args.seed if args.seed is not None else args.first_seed + args.index
     if args.recipe_path:

@@ -301,6 +301,20 @@ class Runner(abc.ABC):
             previous[sig] = signal.signal(sig, self.stop)
         return previous
 
+    def cores(self) -> int | None:
+        """The cores the scenes share (for the estimate); None when unknown (a cluster)."""
+        return None
+
+    def estimate(self, scenes: int) -> str | None:
+        """The line announcing how long ``scenes`` scenes will take (kubric.pipeline.estimate),
+        or None (a recipe or renderer without measured costs, unknown cores)."""
+        if self.cores() is None:
+            return None
+        from kubric.pipeline.estimate import estimate_line
+        from kubric.pipeline.recipe import get_recipe
+        recipe = get_recipe(self.recipe_spec).from_assignments(self.assignments)
+        return estimate_line(recipe.name, recipe.values, scenes, self.cores())
+
     @abc.abstractmethod
     def _execute(self, todo: list[int], summary: RunSummary, bar) -> None:
         """Run the scenes of ``todo`` (seeds), recording each result in ``summary``."""
@@ -330,6 +344,9 @@ class Runner(abc.ABC):
         todo = []
         for seed in self.seeds:
             (summary.skipped if scene_name(seed) in complete else todo).append(seed)
+        line = self.estimate(len(todo)) if todo and self.progress else None
+        if line:
+            print(line, flush=True)
         bar = None
         if self.progress and todo:
             from tqdm import tqdm
@@ -382,6 +399,9 @@ class LocalRunner(Runner):
                          resume)
         self.workers = workers or usable_cores()
         self._procs: set[subprocess.Popen] = set()
+
+    def cores(self) -> int:
+        return usable_cores()
 
     # ------------------------------------------------------------------ one scene
     def _start(self, cmd, **kwargs):
