@@ -127,7 +127,6 @@ def contact_sheet(layers: dict, background_depth: float | None, path: pathlib.Pa
                   max_rows: int = 6, tracks: dict | None = None) -> pathlib.Path:
     """Write the contact sheet (PNG) or animation (GIF) of the available COLUMNS (with
     ``tracks`` drawn on the RGB column)."""
-    from PIL import Image
 
     names = [n for n in COLUMNS if n in layers]
     if not names:
@@ -136,15 +135,46 @@ def contact_sheet(layers: dict, background_depth: float | None, path: pathlib.Pa
     if tracks is not None and names[0] == "rgba":
         pictures[0] = draw_tracks(pictures[0], tracks)
     t = pictures[0].shape[0]
+    scale = tile_scale(pictures[0].shape[2])
+    pictures = [p.repeat(scale, axis=1).repeat(scale, axis=2) for p in pictures]  # nearest
     rows = [np.concatenate([p[i] for p in pictures], axis=1) for i in range(t)]
     path.parent.mkdir(parents=True, exist_ok=True)
     if path.suffix.lower() == ".gif":
-        frames = [Image.fromarray(r) for r in rows]
+        frames = [labelled(names, [r], [i]) for i, r in enumerate(rows)]
         frames[0].save(path, save_all=True, append_images=frames[1:], duration=120, loop=0)
     else:
         picks = sorted(set(np.linspace(0, t - 1, min(max_rows, t)).round().astype(int)))
-        Image.fromarray(np.concatenate([rows[i] for i in picks], axis=0)).save(path)
+        labelled(names, [rows[i] for i in picks], picks).save(path)
     return path
+
+
+#: contact sheet layout: tiles at least this wide (integer nearest-neighbour upscaling, so that
+#: the labels fit), a header this high with the layer names, a gutter with the frame index
+MIN_TILE_WIDTH = 96
+HEADER = 14
+GUTTER = 28
+
+
+def tile_scale(width: int) -> int:
+    """The integer factor a layer ``width`` px wide is enlarged by on a contact sheet."""
+    return max(1, -(-MIN_TILE_WIDTH // max(1, width)))
+
+
+def labelled(names, rows, frames):
+    """A PIL image of picture ``rows`` (equal-width tiles, one per name) under a header naming
+    each column's layer, each row preceded by its frame index (the files' ``_{index:05d}``)."""
+    from PIL import Image, ImageDraw
+    body = np.concatenate(rows, axis=0)
+    tile_w, row_h = body.shape[1] // len(names), rows[0].shape[0]
+    image = Image.new("RGB", (GUTTER + body.shape[1], HEADER + body.shape[0]), "white")
+    image.paste(Image.fromarray(body), (GUTTER, HEADER))
+    draw = ImageDraw.Draw(image)
+    for k, name in enumerate(names):
+        label = "rgb" if name == "rgba" else name
+        draw.text((GUTTER + k * tile_w + 3, 2), label[:max(1, (tile_w - 4) // 6)], fill="black")
+    for r, frame in enumerate(frames):
+        draw.text((3, HEADER + r * row_h + 2), str(int(frame)), fill="black")
+    return image
 
 
 def default_sheet(scene_name: str) -> pathlib.Path:
