@@ -66,3 +66,17 @@ def test_grain_example_with_worker_processes_runs(tmp_path):
     seen = sorted(int(line.split()[1]) for line in lines[:-1])
     assert seen == seeds  # every scene once, whichever worker read it
     assert all(line.endswith("video (2, 8, 8, 3)") for line in lines[:-1])  # bench: T=2, 8×8
+
+
+def test_building_an_asset_source_on_first_use_says_so(tmp_path):
+    """A source built on first use (KuBasic takes about a minute) announces itself on stderr,
+    once: here the HDRIs of the bpy wheel, the quickest real build."""
+    code = ("import sys; from kubric.asset_tools import ensure_hdri_source; "
+            "print(len(ensure_hdri_source(sys.argv[1])))")
+    first, again = (subprocess.run([sys.executable, "-c", code, str(tmp_path)],
+                                   capture_output=True, text=True, timeout=300) for _ in "12")
+    assert first.returncode == 0, first.stderr
+    assert f"building the asset source HDRIs into {tmp_path} (first use only)" in first.stderr
+    assert re.search(r"^built HDRIs in \d+ s$", first.stderr, re.M)
+    assert again.returncode == 0 and "building" not in again.stderr  # built: silent
+    assert int(first.stdout) == int(again.stdout) > 0

@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import multiprocessing
 import os
-import sys
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
@@ -191,8 +190,5 @@ def ensure_kubasic(cache: str | os.PathLike | None = None, workers: int | None =
     """
     root = Path(cache) if cache is not None else cache_dir()
     _discard_if_stale(root / NAME)
-    if not (root / NAME / "manifest.json").is_file():  # a phase of a minute: say so
-        print(f"building KuBasic into {root / NAME} (first use only; about a minute on 2 cores)",
-              file=sys.stderr, flush=True)
     target = build_once(root / NAME, lambda tmp: build_kubasic(tmp, workers=workers))
     return AssetSource(target)
