@@ -231,6 +231,7 @@ def test_inspect_draws_tracks(scene, tmp_path):
     from kubric.pipeline.inspect import (
         GUTTER,
         HEADER,
+        colourise,
         drawn_tracks,
         inspect_scene,
         marker_radius,
@@ -247,8 +248,10 @@ def test_inspect_draws_tracks(scene, tmp_path):
     colours = track_colours(len(picks)).astype(int)
     r = marker_radius(W)
     filled = hollow = 0
+    plain = colourise("rgba", layers["rgba"])  # the RGB column stays clean; tracks beside it
     for t in range(T):
-        rgb = sheet[t * H:(t + 1) * H, :W].astype(int)
+        np.testing.assert_array_equal(sheet[t * H:(t + 1) * H, :W], plain[t])
+        rgb = sheet[t * H:(t + 1) * H, W:2 * W].astype(int)
         xy = tr["target_points"][picks, t]
         for i, n in enumerate(picks):
             x, y = xy[i]

@@ -126,14 +126,15 @@ def summarise(scene_dir: pathlib.Path, layers: dict, metadata: dict, events: dic
 def contact_sheet(layers: dict, background_depth: float | None, path: pathlib.Path,
                   max_rows: int = 6, tracks: dict | None = None) -> pathlib.Path:
     """Write the contact sheet (PNG) or animation (GIF) of the available COLUMNS (with
-    ``tracks`` drawn on the RGB column)."""
+    ``tracks`` drawn on a copy of the RGB, a column of their own after it: the RGB stays clean)."""
 
     names = [n for n in COLUMNS if n in layers]
     if not names:
         raise InputError(f"no layer to show; expected some of {COLUMNS}")
     pictures = [colourise(n, layers[n], background_depth) for n in names]
     if tracks is not None and names[0] == "rgba":
-        pictures[0] = draw_tracks(pictures[0], tracks)
+        names.insert(1, "tracks")
+        pictures.insert(1, draw_tracks(pictures[0], tracks))
     t = pictures[0].shape[0]
     scale = tile_scale(pictures[0].shape[2])
     pictures = [p.repeat(scale, axis=1).repeat(scale, axis=2) for p in pictures]  # nearest
