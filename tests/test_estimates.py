@@ -77,6 +77,10 @@ def test_the_estimate_line_scales_and_suggests_fast():
     fast = estimate_line("movi_a", get_recipe("movi_a").from_assignments(
         ["resolution=128", "quality=fast"]).values, 100, runner.cores())
     assert "quality=fast" in fast and "to explore" not in fast
+    spp = get_recipe("movi_a").from_assignments(["samples=16"]).values  # 16/64 of final's cost
+    assert "24 frames, samples=16;" in estimate_line("movi_a", spp, 1, 2)
+    assert scene_cpu("movi_a", spp) == pytest.approx(
+        0.5 + (RGB_CPU_PER_FRAME["movi_a"][1]["final"] * 16 / 64 + 0.1) * 24)
     raycast = get_recipe("movi_a").from_assignments(["renderer=raycast"]).values
     assert estimate_line("movi_a", raycast, 100, 2) is None  # not measured: nothing said
 

@@ -95,9 +95,10 @@ def estimate_line(recipe: str, values: dict, scenes: int, cores: int) -> str | N
     cores = max(1, cores)
     wall = cpu * scenes / cores
     quality = values.get("quality", "default")
+    setting = f"samples={values['samples']}" if values.get("samples") else f"quality={quality}"
     line = (f"estimate: ~{_duration(wall)} for {scenes} {recipe} scene{'s' * (scenes != 1)} "
             f"({cpu:.0f} CPU-s each at {values['resolution'][0]}x{values['resolution'][1]}, "
-            f"{frames_of(values)} frames, quality={quality}; {cores} cores; {SOURCE})")
+            f"{frames_of(values)} frames, {setting}; {cores} cores; {SOURCE})")
     if quality not in ("fast", "draft") and not values.get("samples") \
             and wall > SUGGEST_FAST_ABOVE_S:
         fast = scene_cpu(recipe, values, "fast")
