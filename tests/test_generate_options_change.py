@@ -70,3 +70,20 @@ def test_older_scenes_without_schema_json_are_compared_by_their_metadata(tmp_pat
     other_recipe = generate(out, "bench", "--scenes", "2")
     assert other_recipe.returncode == 2 and '"test_fake" there, "bench" now' in other_recipe.stderr
     assert all(is_complete(out / f"scene_{s:08d}") for s in range(2))
+
+
+def test_an_option_added_since_a_scene_was_made_counts_as_its_default(tmp_path):
+    """A scene made before the recipe had ``num_instances`` does not record it (simulated by
+    removing it from the scene's schema.json and metadata.json): the default resumes, another
+    value refuses."""
+    out = tmp_path / "scenes"
+    assert generate(out, "bench", "--scenes", "2").returncode == 0
+    for scene in out.glob("scene_*"):
+        for name, key in (("schema.json", "options"), ("metadata.json", "flags")):
+            doc = json.loads((scene / name).read_text())
+            del doc[key]["num_instances"]
+            (scene / name).write_text(json.dumps(doc))
+    same = generate(out, "bench", "--scenes", "2")
+    assert same.returncode == 0 and "2 already complete" in same.stdout, same.stderr
+    other = generate(out, "bench", "--scenes", "2", "--set", "num_instances=2")
+    assert other.returncode == 2 and "num_instances (3 there, 2 now)" in other.stderr

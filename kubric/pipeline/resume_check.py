@@ -9,7 +9,8 @@ run compares the options its workers would be given (the recipe's :meth:`flags
 would skip, or — when it skips none — with one complete scene of the folder, so that new seeds
 are not added to scenes made otherwise. ``resume`` chooses:
 
-* ``"same"`` (default): that check;
+* ``"same"`` (default): that check (an option a scene does not record — added to the recipe
+  after the scene was made — counts as its default);
 * ``"any"`` (``--resume-any``): skip complete scenes whatever made them (the check is off);
 * ``"overwrite"`` (``--overwrite``): the requested seeds' complete scenes are deleted and made
   again; scenes of other seeds are left alone (and not checked).
@@ -34,12 +35,15 @@ class OptionsChanged(UsageError):
     """The folder's complete scenes were made with other options than this run's."""
 
 
-def run_options(recipe_spec: str, assignments: Sequence[str]) -> dict:
-    """The options (and recipe name) a run's workers record, as their JSON reads back."""
+def run_options(recipe_spec: str, assignments: Sequence[str]) -> tuple[dict, dict]:
+    """(the options and recipe name a run's workers record, the recipe's defaults), both as
+    their JSON reads back."""
     from kubric.pipeline.recipe import get_recipe
-    flags = get_recipe(recipe_spec).from_assignments(assignments).flags(0)
+    cls = get_recipe(recipe_spec)
+    flags = cls.from_assignments(assignments).flags(0)
     flags.pop("seed", None)
-    return json.loads(json.dumps(flags, default=str))
+    defaults = {name: opt.default for name, opt in cls.options.items()}
+    return tuple(json.loads(json.dumps(d, default=str)) for d in (flags, defaults))
 
 
 def stored_options(scene: str) -> dict | None:
@@ -63,11 +67,13 @@ def stored_options(scene: str) -> dict | None:
     return None
 
 
-def differences(stored: Mapping, wanted: Mapping) -> list[str]:
-    """``name (THERE there, NOW now)`` for each option whose values differ (the recipe first)."""
-    out = []
+def differences(stored: Mapping, wanted: Mapping,
+                defaults: Mapping | None = None) -> list[str]:
+    """``name (THERE there, NOW now)`` for each option whose values differ (the recipe first).
+    An option the scene does not record (added to the recipe since) counts as its default."""
+    out, defaults = [], defaults or {}
     for key in sorted(set(stored) | set(wanted), key=lambda k: (k != "recipe", k)):
-        there, now = stored.get(key, "unset"), wanted.get(key, "unset")
+        there, now = stored.get(key, defaults.get(key, "unset")), wanted.get(key, "unset")
         if there != now:
             out.append(f"{key} ({json.dumps(there)} there, {json.dumps(now)} now)")
     return out
@@ -81,15 +87,16 @@ def scenes_to_check(seeds: Sequence[int], complete: set[str]) -> list[str]:
 
 
 def check_same_options(out_root, seeds: Sequence[int], complete: set[str],
-                       wanted: Mapping) -> None:
+                       wanted: Mapping, defaults: Mapping | None = None) -> None:
     """:class:`OptionsChanged` (one line) when a complete scene the run would skip, or the
-    folder's first when it skips none, was made with options other than ``wanted``."""
+    folder's first when it skips none, was made with options other than ``wanted`` (an option
+    the scene does not record counts as its value in ``defaults``)."""
     names = scenes_to_check(seeds, complete)
     for name in names:
         stored = stored_options(storage.join(out_root, name))
         if stored is None:
             continue
-        diff = differences(stored, wanted)
+        diff = differences(stored, wanted, defaults)
         if diff:
             shown = "; ".join(diff[:SHOWN]) + ("; ..." if len(diff) > SHOWN else "")
             raise OptionsChanged(

@@ -340,7 +340,7 @@ class Runner(abc.ABC):
             summary.replaced = len(removed)
         elif self.resume == "same" and complete:
             check_same_options(self.out_root, self.seeds, complete,
-                               run_options(self.recipe_spec, self.assignments))
+                               *run_options(self.recipe_spec, self.assignments))
         todo = []
         for seed in self.seeds:
             (summary.skipped if scene_name(seed) in complete else todo).append(seed)
