@@ -19,7 +19,7 @@ EXTRA_OF = {
     "grain": "datasets", "cv2": "datasets",
     "dask": "cluster", "distributed": "cluster", "dask_jobqueue": "cluster", "bokeh": "cluster",
     "fsspec": "cluster",
-    "s3fs": "s3", "gcsfs": "gcs", "embreex": "raycast", "coacd": "coacd",
+    "s3fs": "s3", "gcsfs": "gcs", "embreex": "raycast", "coacd": "coacd", "h5py": "events",
     "tensorflow": "tf", "torch": "torch", "jax": "jax", "jaxlib": "jax",
 }
 
