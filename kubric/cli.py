@@ -18,6 +18,7 @@ import sys
 import traceback
 
 from kubric.errors import KubricError
+from kubric.extras import missing_extra
 
 #: sub-command modules, in the order ``kubric --help`` lists them.
 SUBCOMMAND_MODULES = (
@@ -49,6 +50,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 def error_line(err: BaseException) -> str:
     """The one-line message of ``err`` (an OSError's path included)."""
+    if missing_extra(err):
+        return missing_extra(err)
     if isinstance(err, OSError) and err.strerror and err.filename is not None:
         target = f" -> {err.filename2}" if err.filename2 is not None else ""
         message = f"{err.filename}{target}: {err.strerror}"
@@ -64,6 +67,8 @@ def exit_code(err: BaseException) -> int | None:
     OSError: a path and its reason), None for a bug (which keeps its traceback)."""
     if isinstance(err, KubricError):
         return err.exit_code
+    if missing_extra(err):  # an optional package not installed: its extra named in one line
+        return 1
     if isinstance(err, OSError):
         return 1
     return None

@@ -17,6 +17,7 @@ ABOVE = "all of the above"
 ALLOWED = {
     "errors": set(),
     "faults": set(),
+    "extras": {"errors"},
     "core": {"errors"},
     "io": {"core", "errors"},
     "annotations": {"core", "io", "errors"},
@@ -31,7 +32,7 @@ ALLOWED = {
     "datasets.exports": {"core", "io", "errors", "annotations", "assets", "asset_tools"},
     "pipeline": ABOVE,
     "recipes": ABOVE,
-    "datasets": {"core", "io", "errors", "faults", "pipeline"},
+    "datasets": {"core", "io", "errors", "faults", "extras", "pipeline"},
     "viewer": {"core", "io", "errors", "annotations", "pipeline"},
     "datasets.exports.hub": {"core", "io", "errors", "asset_tools", "datasets",
                              "datasets.exports"},

@@ -187,7 +187,9 @@ def test_inspect_real_scene(scenes):
     assert f"frames: {T} (1..{T})" in proc.stdout and "instances:" in proc.stdout
     from PIL import Image
     sheet = Image.open(scenes / "sheet.gif")
-    assert sheet.n_frames == T and sheet.size == (5 * W, H)
+    from kubric.pipeline.inspect import GUTTER, HEADER, tile_scale
+    k = tile_scale(W)  # labelled: names above, frame indices beside, small tiles enlarged
+    assert sheet.n_frames == T and sheet.size == (GUTTER + 5 * W * k, HEADER + H * k)
 
 
 def test_every_written_file_and_field_is_documented(scenes):

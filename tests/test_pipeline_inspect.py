@@ -11,7 +11,14 @@ from kubric import file_io
 from kubric.annotations import pictures
 from kubric.core.camera_geometry import BACKGROUND_DEPTH
 from kubric.pipeline.cli import cmd_inspect
-from kubric.pipeline.inspect import colourise, inspect_scene
+from kubric.pipeline.inspect import (
+    GUTTER,
+    HEADER,
+    MIN_TILE_WIDTH,
+    colourise,
+    inspect_scene,
+    tile_scale,
+)
 
 
 def _scene_dir(tmp_path, t=3, h=8, w=10):
@@ -47,8 +54,14 @@ def test_inspect_summary_and_contact_sheet(tmp_path, capsys, monkeypatch):
     assert "camera path length: 5.000 m" in text and "collisions: 1" in text
     assert "depth" in text and "(3, 8, 10, 1)" in text
     assert f"contact sheet: {tmp_path / 'scene_00000003_contact_sheet.png'}" in text
-    sheet = np.asarray(Image.open(tmp_path / "scene_00000003_contact_sheet.png"))
+    labelled = np.asarray(Image.open(tmp_path / "scene_00000003_contact_sheet.png"))
+    k = tile_scale(10)  # tiles enlarged (nearest) so that the layer names fit above them
+    assert k * 10 >= MIN_TILE_WIDTH and labelled.shape == (HEADER + 3 * 8 * k,
+                                                           GUTTER + 5 * 10 * k, 3)
+    sheet = labelled[HEADER:, GUTTER:][::k, ::k]
     assert sheet.shape == (3 * 8, 5 * 10, 3)
+    check_labels(labelled, ["rgb", "segmentation", "depth", "forward_flow", "normal"], 10 * k,
+                 [0, 1, 2], 8 * k)
     # depth column: the object in the depth map's colours, background black; segmentation
     # column: label coloured
     depth_col = sheet[:8, 20:30]
@@ -64,13 +77,29 @@ def test_inspect_summary_and_contact_sheet(tmp_path, capsys, monkeypatch):
     gif = tmp_path / "anim.gif"
     inspect_scene(d, gif)
     img = Image.open(gif)
-    assert img.n_frames == 3 and img.size == (50, 8)
+    assert img.n_frames == 3 and img.size == (GUTTER + 50 * k, HEADER + 8 * k)
     # CLI: a missing directory is a one-line error
     class Args:
         scene_dir = str(tmp_path / "missing")
         sheet = None
     assert cmd_inspect(Args) == 2
     assert capsys.readouterr().err.count("\n") == 1
+
+
+def check_labels(sheet, names, tile_w, frames, row_h):
+    """Each column's header shows its layer name and each row's gutter its frame index: the
+    strips equal the text drawn alone with PIL's default font at the same place."""
+    from PIL import ImageDraw
+    for k, name in enumerate(names):
+        strip = Image.new("RGB", (tile_w, HEADER), "white")
+        ImageDraw.Draw(strip).text((3, 2), name[:(tile_w - 4) // 6], fill="black")
+        x = GUTTER + k * tile_w
+        np.testing.assert_array_equal(sheet[:HEADER, x:x + tile_w], np.asarray(strip), name)
+    for r, frame in enumerate(frames):
+        cell = Image.new("RGB", (GUTTER, row_h), "white")
+        ImageDraw.Draw(cell).text((3, 2), str(frame), fill="black")
+        y = HEADER + r * row_h
+        np.testing.assert_array_equal(sheet[y:y + row_h, :GUTTER], np.asarray(cell), frame)
 
 
 def test_flow_colours_encode_direction():

@@ -43,12 +43,13 @@ def test_generate_retries_reports_and_resumes(tmp_path):
     log = (out / "logs" / "scene_00000020.log").read_text()
     assert "attempt 1" in log and "attempt 2" in log and "fails on its first attempt" in log
     # resume: the complete scenes are skipped, new ones added
-    proc = generate(out, "--scenes", "6", "--first-seed", "20", "--workers", "2")
+    proc = generate(out, "--scenes", "6", "--first-seed", "20", "--workers", "2",
+                    "--set", "flaky=true")  # the same options (other options refuse)
     assert "2 generated, 4 already complete" in proc.stdout, proc.stdout
     assert len(scene_dirs(out)) == 6
     # a scene that keeps failing: bounded retries, reported with its log, non-zero exit
     proc = generate(out, "--scenes", "1", "--first-seed", "40", "--retries", "1",
-                    "--set", "fail=true")
+                    "--set", "fail=true", "--resume-any")  # beside scenes of other options
     assert proc.returncode == 1
     assert "1 failed" in proc.stdout and "(2 worker runs)" in proc.stdout
     assert "FAILED scene_00000040: RuntimeError: scene 40 fails on purpose" in proc.stdout
@@ -95,8 +96,8 @@ def test_kill_mid_run_then_rerun_completes_dataset(tmp_path):
         for p in out.glob("scene_*"):  # nothing that looks complete is partial
             if is_complete(p):
                 assert len(list(p.glob("rgba_*.png"))) == 3
-        proc = generate(out, "--scenes", str(n), "--workers", "2")
-        assert proc.returncode == 0, proc.stdout + proc.stderr
+        proc = generate(out, "--scenes", str(n), "--workers", "2", "--set", "sleep=0.8")
+        assert proc.returncode == 0, proc.stdout + proc.stderr  # the same command finishes it
         assert f"{len(done_before)} already complete" in proc.stdout
         assert scene_dirs(out) == [f"scene_{s:08d}" for s in range(n)]
         assert_consistent(out)

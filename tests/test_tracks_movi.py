@@ -228,18 +228,30 @@ def test_panning_camera_moves_its_look_at_point_on_a_line(scene):
 def test_inspect_draws_tracks(scene, tmp_path):
     from PIL import Image
 
-    from kubric.pipeline.inspect import drawn_tracks, inspect_scene, marker_radius, track_colours
+    from kubric.pipeline.inspect import (
+        GUTTER,
+        HEADER,
+        colourise,
+        drawn_tracks,
+        inspect_scene,
+        marker_radius,
+        tile_scale,
+        track_colours,
+    )
     scene_dir, tr, layers = scene
     report = inspect_scene(scene_dir, tmp_path / "sheet.png")
     assert "tracks: 512" in report
-    sheet = np.asarray(Image.open(tmp_path / "sheet.png").convert("RGB"))
+    k = tile_scale(W)  # the labelled sheet's tiles, enlarged nearest-neighbour: sample back
+    sheet = np.asarray(Image.open(tmp_path / "sheet.png").convert("RGB"))[HEADER:, GUTTER:][::k, ::k]
     assert sheet.shape[0] == T * H  # one row per frame (T ≤ 6 rows)
     picks = drawn_tracks(512)
     colours = track_colours(len(picks)).astype(int)
     r = marker_radius(W)
     filled = hollow = 0
+    plain = colourise("rgba", layers["rgba"])  # the RGB column stays clean; tracks beside it
     for t in range(T):
-        rgb = sheet[t * H:(t + 1) * H, :W].astype(int)
+        np.testing.assert_array_equal(sheet[t * H:(t + 1) * H, :W], plain[t])
+        rgb = sheet[t * H:(t + 1) * H, W:2 * W].astype(int)
         xy = tr["target_points"][picks, t]
         for i, n in enumerate(picks):
             x, y = xy[i]

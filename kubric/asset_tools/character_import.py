@@ -47,7 +47,7 @@ def extract(path: Path, timeout: float = 600, bvh_up: str = "y") -> tuple[dict, 
     """Run the bpy extraction of ``path`` in a fresh process; (arrays, info)."""
     with tempfile.TemporaryDirectory(prefix="kubric-char-") as tmp:
         out = Path(tmp) / "extract.npz"
-        proc = subprocess.run([sys.executable, "-m", "kubric.asset_tools.character_bpy",
+        proc = subprocess.run([sys.executable, "-P", "-m", "kubric.asset_tools.character_bpy",
                                str(path), str(out), bvh_up], capture_output=True, text=True,
                               timeout=timeout)
         errors = [ln[len("ERROR: "):] for ln in proc.stdout.splitlines() if ln.startswith("ERROR: ")]

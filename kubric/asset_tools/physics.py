@@ -123,7 +123,7 @@ def vhacd(mesh, params: dict | None = None) -> list:
         code = ("import sys, pybullet; pybullet.vhacd(sys.argv[1], sys.argv[2], sys.argv[3], "
                 f"**{params!r})")
         try:
-            proc = subprocess.run([sys.executable, "-c", code, src, out, log],
+            proc = subprocess.run([sys.executable, "-P", "-c", code, src, out, log],
                                   stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
                                   timeout=_VHACD_TIMEOUT_S, check=False)
         except subprocess.TimeoutExpired:

@@ -234,7 +234,7 @@ def suzanne():
     import sys
 
     trimesh = _trimesh()
-    proc = subprocess.run([sys.executable, "-c", _SUZANNE_SCRIPT], capture_output=True,
+    proc = subprocess.run([sys.executable, "-P", "-c", _SUZANNE_SCRIPT], capture_output=True,
                           text=True, check=False, timeout=300)
     lines = [ln for ln in proc.stdout.splitlines() if ln.startswith("{")]
     if proc.returncode != 0 or not lines:

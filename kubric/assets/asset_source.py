@@ -18,6 +18,8 @@ import difflib
 import json
 import os
 import shutil
+import sys
+import time
 from collections.abc import Iterable
 from pathlib import Path
 
@@ -347,8 +349,14 @@ def build_once(target: str | os.PathLike, build) -> Path:
 
     The build happens in a temporary sibling folder, so a crash never leaves a half-built source
     and concurrent builders never see one; if another process finished first, its copy is kept.
+    A build (seconds to minutes) says so on stderr when it starts and ends.
     """
     target = Path(target)
     if (target / "manifest.json").is_file():
         return target
-    return build_staged(target, build, complete=lambda t: (t / "manifest.json").is_file())
+    start = time.monotonic()
+    print(f"building the asset source {target.name} into {target.parent} (first use only)",
+          file=sys.stderr, flush=True)
+    built = build_staged(target, build, complete=lambda t: (t / "manifest.json").is_file())
+    print(f"built {target.name} in {time.monotonic() - start:.0f} s", file=sys.stderr, flush=True)
+    return built

@@ -10,6 +10,7 @@ from kubric.datasets.layout import DatasetError
 from kubric.datasets.packer import pack, read_class_names
 from kubric.datasets.store_commit import pack_into
 from kubric.errors import KubricError
+from kubric.extras import require
 from kubric.io import storage
 from kubric.io.schema import SchemaError, schema_markdown
 from kubric.pipeline.cleanup import handle_termination, private_tmpdir
@@ -36,6 +37,7 @@ def cmd_pack(args) -> int:
     misplaced = misplaced_flag(args)
     if misplaced:
         return _error("pack", misplaced)
+    require("kubric pack", "tensorflow_datasets", "array_record")  # before any scene is read
     try:
         common["class_names"] = read_class_names(args.class_names)
     except DatasetError as err:

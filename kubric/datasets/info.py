@@ -42,7 +42,9 @@ def dataset_info(dataset_dir) -> str:
     for split, count in info["counts"].items():
         shards = info["shard_lengths"].get(split, [])
         lines.append(f"    {split:<12} {count:>7} examples in {len(shards)} shards "
-                     f"(fraction {info['splits'].get(split, 0):g})")
+                     f"(fraction {info['splits'].get(split, 0):g})"
+                     + ("; no scene fell into it: it loads as an empty split" if not count
+                        else ""))
     # a local dataset's shards are opened; a URL's are checked when a split is loaded
     problems = check_shards(path, info) if isinstance(path, pathlib.Path) else []
     if info.get("incomplete_skipped"):

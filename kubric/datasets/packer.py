@@ -84,6 +84,11 @@ class PackResult:
             lines.append(f"  skipped {self.incomplete} incomplete scene directories (no _SUCCESS)")
         for path, reason in self.corrupt:
             lines.append(f"  skipped corrupt scene {path}: {reason}")
+        for split in [s for s, n in self.counts.items() if not n]:
+            lines.append(f"  split {split!r} got no scene (a scene's split is a fixed function of "
+                         f"its seed; {sum(self.counts.values())} scenes are few for its fraction): "
+                         f"it loads as an empty split; pack more scenes, or give --splits "
+                         f"without it")
         return "\n".join(lines)
 
 

@@ -122,10 +122,9 @@ class DataSource:
             dataset_dir = fetch(self.location, split if isinstance(split, str) else None)
         self.dataset_dir = pathlib.Path(dataset_dir)
         self.info = layout.read_info(self.dataset_dir)
-        if split not in self.info["counts"] or not self.info["counts"][split]:
-            have = [s for s, n in self.info["counts"].items() if n]
+        if split not in self.info["counts"]:  # a split that got no scene loads empty
             raise DatasetError(f"{self.location!r} has no split {split!r} (splits: "
-                               f"{', '.join(have)})")
+                               f"{', '.join(self.info['counts'])})")
         self.split = split
         self.schema = Schema.from_json(self.info["schema_json"])
         self.dims = dict(self.info["dims"])

@@ -45,8 +45,11 @@ def _die_with_parent() -> None:
 
 def cmd_worker(args) -> int:
     _die_with_parent()
+    os.environ.setdefault("KUBRIC_RENDER_PROGRESS", "0")  # no frame bar in a scene's log
     handle_termination()  # SIGTERM like SIGINT: unwind, remove the work directory
     seed = args.seed if args.seed is not None else args.first_seed + args.index
+    if args.recipe_path:
+        sys.path.insert(0, args.recipe_path)
     if not 0 <= seed <= MAX_SEED:
         return _error("worker", f"seed must be in 0..{MAX_SEED} (2**32 - 1), got {seed}")
     try:
@@ -161,8 +164,9 @@ def cmd_generate(args) -> int:
     except storage.StorageError as err:
         return _error("generate", err)
     seeds = range(args.first_seed, args.first_seed + args.scenes)
+    resume = "overwrite" if args.overwrite else "any" if args.resume_any else "same"
     common = dict(assignments=args.set, retries=args.retries, timeout=args.timeout,
-                  progress=not args.no_progress)
+                  progress=not args.no_progress, resume=resume)
     client = cluster = None
     if cluster_opts is None:
         runner = LocalRunner(recipe_spec(cls), out, seeds, workers=args.workers, **common)
@@ -195,7 +199,9 @@ def cmd_generate(args) -> int:
 
 
 def format_recipe(cls) -> str:
-    lines = [f"{cls.name}: {cls.description()}"]
+    internal = " [internal: a test tool, not a dataset]" \
+        if cls.internal else ""
+    lines = [f"{cls.name}: {cls.description()}{internal}"]
     width = max((len(n) for n in cls.options), default=0)
     for name, opt in cls.options.items():
         bounded = opt.choices is not None or any(
@@ -209,7 +215,7 @@ def format_recipe(cls) -> str:
 def cmd_recipes(args) -> int:
     try:
         classes = [get_recipe(args.name)] if args.name else \
-            [cls for _, cls in sorted(load_builtin().items())]
+            sorted(load_builtin().values(), key=lambda c: (c.internal, c.name))
     except OptionError as err:
         return _error("recipes", err)
     print("\n\n".join(format_recipe(cls) for cls in classes))
@@ -268,6 +274,8 @@ def add_parser(subparsers) -> None:
                    "(the scene renders into local scratch and is uploaded, _SUCCESS last)")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help="recipe option (repeatable)")
+    p.add_argument("--recipe-path", default=None, metavar="DIR", help="a folder put first on "
+                   "the module path to import a module:Class recipe from (generate passes it)")
     p.set_defaults(func=cmd_worker)
 
     p = subparsers.add_parser("generate", help="generate many scenes (process pool or Dask)",
@@ -284,7 +292,16 @@ def add_parser(subparsers) -> None:
                    "with --cluster local: cores // --threads-per-scene)")
     p.add_argument("--retries", type=int, default=2, help="extra attempts per failed scene")
     p.add_argument("--timeout", type=float, default=None, help="seconds per worker attempt")
-    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                   help="recipe option, repeatable (`kubric recipes NAME` lists a recipe's "
+                   "options, types and defaults), e.g. --set resolution=128x128 "
+                   "--set quality=fast")
+    again = p.add_mutually_exclusive_group()
+    again.add_argument("--overwrite", action="store_true", help="make the requested seeds "
+                       "again: their complete scenes in --out are deleted first")
+    again.add_argument("--resume-any", action="store_true", help="skip the complete scenes in "
+                       "--out even when other options made them (by default a re-run whose "
+                       "options differ from theirs refuses)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     add_cluster_arguments(p, "run on Dask: a LocalCluster, a running scheduler, or Slurm jobs")
     p.set_defaults(func=cmd_generate)

@@ -95,6 +95,9 @@ class ClusterOptions:
         if kind == "slurm" and self.cores_per_job < self.threads_per_scene:
             raise ClusterError(f"--cores-per-job {self.cores_per_job} is less than "
                                f"--threads-per-scene {self.threads_per_scene}")
+        from kubric.extras import require  # one line naming the extra, before any cluster
+        require(f"--cluster {self.spec}", "dask", "distributed",
+                *(["dask_jobqueue"] if kind == "slurm" else []))
 
     def slurm_kwargs(self) -> dict:
         """dask-jobqueue ``SLURMCluster`` arguments: one Dask worker process per scene slot,
@@ -284,8 +287,9 @@ class DaskRunner(Runner):
 
     def __init__(self, recipe_spec: str, out_root, seeds: Sequence[int], client,
                  assignments: Sequence[str] = (), retries: int = 2, timeout: float | None = None,
-                 progress: bool = True, threads_per_scene: int = 1):
-        super().__init__(recipe_spec, out_root, seeds, assignments, retries, timeout, progress)
+                 progress: bool = True, threads_per_scene: int = 1, resume: str = "same"):
+        super().__init__(recipe_spec, out_root, seeds, assignments, retries, timeout, progress,
+                         resume)
         if threads_per_scene < 1:
             raise ValueError(f"threads_per_scene must be ≥ 1, got {threads_per_scene}")
         self.client = client

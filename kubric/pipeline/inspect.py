@@ -23,10 +23,10 @@ from kubric import file_io
 from kubric.annotations import pictures
 from kubric.annotations.track_files import TRACKS_FILE, read_tracks
 from kubric.core.camera_geometry import BACKGROUND_DEPTH
-from kubric.errors import InputError
+from kubric.errors import InputError, UsageError
 from kubric.io import storage
 from kubric.io.palette import label_palette
-from kubric.io.scene_dir import EVENTS_FILE, METADATA_FILE, is_complete
+from kubric.io.scene_dir import EVENTS_FILE, METADATA_FILE, complete_scenes, is_complete
 from kubric.io.scene_writer import check_scene_content
 from kubric.io.schema import SchemaError
 from kubric.pipeline.recipe import scene_schema
@@ -126,25 +126,56 @@ def summarise(scene_dir: pathlib.Path, layers: dict, metadata: dict, events: dic
 def contact_sheet(layers: dict, background_depth: float | None, path: pathlib.Path,
                   max_rows: int = 6, tracks: dict | None = None) -> pathlib.Path:
     """Write the contact sheet (PNG) or animation (GIF) of the available COLUMNS (with
-    ``tracks`` drawn on the RGB column)."""
-    from PIL import Image
+    ``tracks`` drawn on a copy of the RGB, a column of their own after it: the RGB stays clean)."""
 
     names = [n for n in COLUMNS if n in layers]
     if not names:
         raise InputError(f"no layer to show; expected some of {COLUMNS}")
     pictures = [colourise(n, layers[n], background_depth) for n in names]
     if tracks is not None and names[0] == "rgba":
-        pictures[0] = draw_tracks(pictures[0], tracks)
+        names.insert(1, "tracks")
+        pictures.insert(1, draw_tracks(pictures[0], tracks))
     t = pictures[0].shape[0]
+    scale = tile_scale(pictures[0].shape[2])
+    pictures = [p.repeat(scale, axis=1).repeat(scale, axis=2) for p in pictures]  # nearest
     rows = [np.concatenate([p[i] for p in pictures], axis=1) for i in range(t)]
     path.parent.mkdir(parents=True, exist_ok=True)
     if path.suffix.lower() == ".gif":
-        frames = [Image.fromarray(r) for r in rows]
+        frames = [labelled(names, [r], [i]) for i, r in enumerate(rows)]
         frames[0].save(path, save_all=True, append_images=frames[1:], duration=120, loop=0)
     else:
         picks = sorted(set(np.linspace(0, t - 1, min(max_rows, t)).round().astype(int)))
-        Image.fromarray(np.concatenate([rows[i] for i in picks], axis=0)).save(path)
+        labelled(names, [rows[i] for i in picks], picks).save(path)
     return path
+
+
+#: contact sheet layout: tiles at least this wide (integer nearest-neighbour upscaling, so that
+#: the labels fit), a header this high with the layer names, a gutter with the frame index
+MIN_TILE_WIDTH = 96
+HEADER = 14
+GUTTER = 28
+
+
+def tile_scale(width: int) -> int:
+    """The integer factor a layer ``width`` px wide is enlarged by on a contact sheet."""
+    return max(1, -(-MIN_TILE_WIDTH // max(1, width)))
+
+
+def labelled(names, rows, frames):
+    """A PIL image of picture ``rows`` (equal-width tiles, one per name) under a header naming
+    each column's layer, each row preceded by its frame index (the files' ``_{index:05d}``)."""
+    from PIL import Image, ImageDraw
+    body = np.concatenate(rows, axis=0)
+    tile_w, row_h = body.shape[1] // len(names), rows[0].shape[0]
+    image = Image.new("RGB", (GUTTER + body.shape[1], HEADER + body.shape[0]), "white")
+    image.paste(Image.fromarray(body), (GUTTER, HEADER))
+    draw = ImageDraw.Draw(image)
+    for k, name in enumerate(names):
+        label = "rgb" if name == "rgba" else name
+        draw.text((GUTTER + k * tile_w + 3, 2), label[:max(1, (tile_w - 4) // 6)], fill="black")
+    for r, frame in enumerate(frames):
+        draw.text((3, HEADER + r * row_h + 2), str(int(frame)), fill="black")
+    return image
 
 
 def default_sheet(scene_name: str) -> pathlib.Path:
@@ -162,6 +193,10 @@ def inspect_scene(scene_dir, sheet=None) -> str:
     if not scene_dir.is_dir():
         raise FileNotFoundError(f"{str(scene_dir)!r} is not a directory")
     meta_path = scene_dir / METADATA_FILE
+    inside = complete_scenes(scene_dir)
+    if inside and not meta_path.exists():  # the output folder of generate, not one scene
+        raise UsageError(f"{str(scene_dir)!r} is a folder of {len(inside)} scenes, not a scene: "
+                         f"inspect one of them, e.g. kubric inspect {scene_dir / inside[0]}")
     metadata = file_io.read_json(meta_path) if meta_path.exists() else {}
     events_path = scene_dir / EVENTS_FILE
     events = file_io.read_json(events_path) if events_path.exists() else {}

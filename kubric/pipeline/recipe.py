@@ -63,9 +63,11 @@ class Recipe(abc.ABC):
       schema: the output contract of its scenes (None only for recipes outside
         ``kubric.recipes`` that are never packed, e.g. a test's).
       variants: further schemas over the same scenes (e.g. with point tracks).
+      internal: a tool, not a dataset (``bench``): ``kubric recipes`` lists it last, marked.
     """
 
     name: ClassVar[str] = ""
+    internal: ClassVar[bool] = False
     options: ClassVar[dict[str, Option]] = {}
     schema: ClassVar[Schema | None] = None
     variants: ClassVar[tuple[Schema, ...]] = ()

@@ -8,7 +8,8 @@ logs, resume, progress bar, summary, signals); :class:`LocalRunner` is the proce
 * a tqdm progress bar with ETA and the failure count;
 * up to ``retries`` extra attempts per failed scene;
 * one log per scene, kept, in ``OUT/logs/scene_{seed:08d}.log`` (all attempts appended);
-* resume: complete scenes are skipped, stale work directories removed;
+* resume: complete scenes are skipped, stale work directories removed — when they were made
+  with this run's options (else the run refuses: :mod:`kubric.pipeline.resume_check`);
 * one run per output folder: ``OUT/.kubric-generate.lock`` is held while the run lasts; a second
   run on the same folder refuses at once (:class:`~kubric.io.output_lock.OutputBusy`);
 * SIGINT / SIGTERM: no new scenes start, running workers are terminated (they delete their work
@@ -36,6 +37,12 @@ from dataclasses import dataclass, field
 from kubric.io import storage
 from kubric.io.output_lock import OutputLock
 from kubric.io.scene_dir import complete_scenes, is_complete, scene_name
+from kubric.pipeline.resume_check import (
+    RESUME_MODES,
+    check_same_options,
+    remove_requested,
+    run_options,
+)
 from kubric.pipeline.worker import remove_stale
 
 #: environment variable telling a worker to die with the runner that started it.
@@ -59,6 +66,7 @@ class RunSummary:
     done: list[int] = field(default_factory=list)
     skipped: list[int] = field(default_factory=list)
     failed: dict[int, pathlib.Path] = field(default_factory=dict)
+    replaced: int = 0    # complete scenes deleted to be made again (--overwrite)
     attempts: int = 0
     interrupted: bool = False
     seconds: float = 0.0
@@ -71,6 +79,8 @@ class RunSummary:
         lines = [f"{len(self.done)} generated, {len(self.skipped)} already complete, "
                  f"{len(self.failed)} failed of {self.requested} scenes in {self.seconds:.1f} s "
                  f"({self.attempts} worker runs) → {out_root}"]
+        if self.replaced:
+            lines[0] += f" ({self.replaced} complete scenes replaced: --overwrite)"
         if self.interrupted:
             lines.append("interrupted: run the same command again to finish the remaining scenes")
         for seed, log in sorted(self.failed.items()):
@@ -97,9 +107,28 @@ def _last_line(log: pathlib.Path) -> str:
     return markers[-1] if markers else "empty log"
 
 
+def recipe_import_root(recipe_spec: str) -> str | None:
+    """The folder this process imported a ``module:Class`` recipe's top-level module from (the
+    worker puts it first on its path, having no current directory there), or None for a
+    registered name, a ``file.py:Class`` or a module of kubric's."""
+    module, sep, _ = recipe_spec.rpartition(":")
+    top = module.split(".")[0]
+    if not sep or top == "kubric" or module.endswith(".py") or pathlib.Path(module).is_file():
+        return None
+    loaded = sys.modules.get(top)
+    where = list(getattr(loaded, "__path__", None) or []) or [getattr(loaded, "__file__", None)]
+    return str(pathlib.Path(where[0]).resolve().parent) if where[0] else None
+
+
 def worker_command(recipe_spec: str, seed: int, out_root, assignments: Sequence[str]) -> list[str]:
-    cmd = [sys.executable, "-m", "kubric", "worker", recipe_spec, "--seed", str(seed),
+    """The worker's command line. ``-P``: the current directory is not put first on the worker's
+    ``sys.path``, so a folder named ``kubric`` there (the clone, run from its parent) cannot
+    shadow the installed package as a namespace package; the worker imports what the runner did."""
+    cmd = [sys.executable, "-P", "-m", "kubric", "worker", recipe_spec, "--seed", str(seed),
            "--out", str(out_root)]
+    root = recipe_import_root(recipe_spec)
+    if root is not None:
+        cmd += ["--recipe-path", root]
     for a in assignments:
         cmd += ["--set", a]
     return cmd
@@ -218,9 +247,12 @@ class Runner(abc.ABC):
 
     def __init__(self, recipe_spec: str, out_root, seeds: Sequence[int],
                  assignments: Sequence[str] = (), retries: int = 2,
-                 timeout: float | None = None, progress: bool = True):
+                 timeout: float | None = None, progress: bool = True, resume: str = "same"):
         if retries < 0:
             raise ValueError(f"retries must be ≥ 0, got {retries}")
+        if resume not in RESUME_MODES:
+            raise ValueError(f"resume must be one of {RESUME_MODES}, got {resume!r}")
+        self.resume = resume
         self.recipe_spec = recipe_spec
         root = storage.normalise(out_root)
         self.remote = storage.is_url(root)
@@ -269,6 +301,20 @@ class Runner(abc.ABC):
             previous[sig] = signal.signal(sig, self.stop)
         return previous
 
+    def cores(self) -> int | None:
+        """The cores the scenes share (for the estimate); None when unknown (a cluster)."""
+        return None
+
+    def estimate(self, scenes: int) -> str | None:
+        """The line announcing how long ``scenes`` scenes will take (kubric.pipeline.estimate),
+        or None (a recipe or renderer without measured costs, unknown cores)."""
+        if self.cores() is None:
+            return None
+        from kubric.pipeline.estimate import estimate_line
+        from kubric.pipeline.recipe import get_recipe
+        recipe = get_recipe(self.recipe_spec).from_assignments(self.assignments)
+        return estimate_line(recipe.name, recipe.values, scenes, self.cores())
+
     @abc.abstractmethod
     def _execute(self, todo: list[int], summary: RunSummary, bar) -> None:
         """Run the scenes of ``todo`` (seeds), recording each result in ``summary``."""
@@ -288,9 +334,19 @@ class Runner(abc.ABC):
             remove_stale(pathlib.Path(self.out_root))
         self.logs.prepare()
         complete = set(complete_scenes(self.out_root))
+        if self.resume == "overwrite":
+            removed = remove_requested(self.out_root, self.seeds, complete)
+            complete -= set(removed)
+            summary.replaced = len(removed)
+        elif self.resume == "same" and complete:
+            check_same_options(self.out_root, self.seeds, complete,
+                               *run_options(self.recipe_spec, self.assignments))
         todo = []
         for seed in self.seeds:
             (summary.skipped if scene_name(seed) in complete else todo).append(seed)
+        line = self.estimate(len(todo)) if todo and self.progress else None
+        if line:
+            print(line, flush=True)
         bar = None
         if self.progress and todo:
             from tqdm import tqdm
@@ -336,12 +392,16 @@ class LocalRunner(Runner):
 
     def __init__(self, recipe_spec: str, out_root, seeds: Sequence[int],
                  assignments: Sequence[str] = (), workers: int | None = None, retries: int = 2,
-                 timeout: float | None = None, progress: bool = True):
+                 timeout: float | None = None, progress: bool = True, resume: str = "same"):
         if workers is not None and workers < 1:
             raise ValueError(f"workers must be ≥ 1, got {workers}")
-        super().__init__(recipe_spec, out_root, seeds, assignments, retries, timeout, progress)
+        super().__init__(recipe_spec, out_root, seeds, assignments, retries, timeout, progress,
+                         resume)
         self.workers = workers or usable_cores()
         self._procs: set[subprocess.Popen] = set()
+
+    def cores(self) -> int:
+        return usable_cores()
 
     # ------------------------------------------------------------------ one scene
     def _start(self, cmd, **kwargs):

@@ -41,6 +41,7 @@ class Bench(Recipe, name="bench"):
     """No-render scene (random images, labels, positions) for scale measurements."""
 
     schema = BENCH
+    internal = True  # listed last by `kubric recipes`
     resolution = Option((8, 8), "(width, height) of the random images", type=resolution, low=1)
     frames = Option(2, "number of frames written", low=1, high=1000)
     num_instances = Option(3, "instances (segmentation labels 1..N, one position track each)",

@@ -67,6 +67,7 @@ from kubric.renderer import blender_passes as bp
 from kubric.renderer import blender_shadows as bs
 from kubric.renderer import blender_world as bw
 from kubric.renderer.base import Renderer
+from kubric.renderer.render_progress import frame_bar
 
 
 @contextlib.contextmanager
@@ -471,8 +472,9 @@ class Blender(TableView, Renderer):
                 runs[-1][1] = f
             else:
                 runs.append([f, f])
+        what = "Blender RGB" if suffix == ".png" else "Blender exact layers"
         try:
-            with self.quiet():
+            with frame_bar(what, len(frames)), self.quiet():
                 for a, b in runs:
                     s.frame_end = 1048574
                     s.frame_start, s.frame_end = a, b

@@ -60,7 +60,8 @@ def scene_dirs_with_tracks(root) -> list[pathlib.Path]:
     lacking = [p.name for p in candidates if not (p / TRACKS_FILE).is_file()]
     if lacking:
         raise InputError(f"scene {lacking[0]!r} has no {TRACKS_FILE} ({len(lacking)} of "
-                         f"{len(candidates)} scenes lack it; generate with --set tracks=N)")
+                         f"{len(candidates)} scenes lack it; generate them with --set tracks=N "
+                         f"into a new --out, or into this one with --overwrite)")
     return candidates
 
 
