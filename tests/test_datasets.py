@@ -4,7 +4,6 @@ every feature equals the scene directory (bit-exact integers, floats within the 
 step). No TensorFlow anywhere. Tasks (video, frames, nerf_rays), bad input, resume, determinism.
 """
 
-import importlib.util
 import json
 import pathlib
 import shutil
@@ -117,26 +116,51 @@ def test_load_reads_every_feature_back(packed):
     _check_against_scene(load(out, "validation")[0], scenes / "scene_00000002")
 
 
-def test_tfds_reads_the_directory_without_tensorflow(packed, monkeypatch):
-    import tensorflow_datasets as tfds
-    scenes, out = packed
-    # the `tf` extra installs TensorFlow: simulate its absence (find_spec and import see none);
-    # a fresh process that never imports it is checked in test_no_tensorflow_after_load_and_decode
-    monkeypatch.setitem(sys.modules, "tensorflow", None)
-    assert importlib.util.find_spec("tensorflow") is None
-    builder = tfds.builder_from_directory(str(out))
-    assert builder.info.splits["train"].num_examples == 3
-    source = builder.as_data_source("train")
-    ours = load(out, "train")
-    for i in range(len(source)):
-        theirs = flatten(source[i])
-        mine = flatten(ours[i])
-        assert theirs["metadata/video_name"].decode() == mine["metadata/video_name"]
-        for name in ("video", "segmentations", "depth", "forward_flow", "normal"):
-            assert np.array_equal(np.stack(theirs[name]), mine[name]), name
-        assert np.array_equal(np.stack(theirs["instances/positions"]),
-                              mine["instances/positions"])
-    assert sys.modules["tensorflow"] is None
+#: run in a fresh process in which TensorFlow cannot be imported (the `tf` extra installs it, and
+#: TFDS takes TF's code paths once any earlier test of this process imported it)
+TFDS_WITHOUT_TF = r"""
+import importlib.machinery, importlib.util, json, sys
+import numpy as np
+
+_find = importlib.machinery.PathFinder.find_spec.__func__
+
+
+def find_spec(cls, name, path=None, target=None):  # as if TensorFlow were not installed
+    return None if name.split(".")[0] == "tensorflow" else _find(cls, name, path, target)
+
+
+importlib.machinery.PathFinder.find_spec = classmethod(find_spec)
+assert importlib.util.find_spec("tensorflow") is None
+import tensorflow_datasets as tfds
+
+from kubric.datasets import load
+from kubric.datasets.tfds_io import flatten
+
+out = sys.argv[1]
+builder = tfds.builder_from_directory(out)
+source = builder.as_data_source("train")
+ours = load(out, "train")
+checked = []
+for i in range(len(source)):
+    theirs, mine = flatten(source[i]), flatten(ours[i])
+    assert theirs["metadata/video_name"].decode() == mine["metadata/video_name"]
+    for name in ("video", "segmentations", "depth", "forward_flow", "normal",
+                 "instances/positions"):
+        assert np.array_equal(np.stack(theirs[name]), mine[name]), name
+    checked.append(mine["metadata/video_name"])
+print(json.dumps({"examples": builder.info.splits["train"].num_examples, "checked": checked,
+                  "tensorflow": sorted(m for m in sys.modules if m.split(".")[0] == "tensorflow")}))
+"""
+
+
+def test_tfds_reads_the_directory_without_tensorflow(packed):
+    _, out = packed
+    proc = subprocess.run([sys.executable, "-c", TFDS_WITHOUT_TF, str(out)], cwd=ROOT,
+                          capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    result = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert result["examples"] == 3 and len(result["checked"]) == 3
+    assert result["tensorflow"] == []
 
 
 def test_torch_dataloader_two_workers(packed):

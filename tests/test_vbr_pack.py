@@ -64,7 +64,7 @@ def test_inspect_recognises_the_vbr_schema(packed):
     from kubric.pipeline.recipe import schema_of as get_schema
     count = len(get_schema("vbr").features)
     for report in packed["inspect"].values():
-        assert f"schema vbr: {count} features, every source present" in report
+        assert f"schema vbr (from schema.json): {count} features, every source present" in report
 
 
 def test_video_task_frames_bit_exact(packed):

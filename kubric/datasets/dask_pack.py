@@ -43,6 +43,7 @@ from collections.abc import Mapping, Sequence
 
 from kubric.datasets import layout, packer, tfds_io
 from kubric.datasets.layout import DatasetError, DatasetUsageError
+from kubric.datasets.pack_schema import schema_origin_and_dims
 from kubric.io import scene_dir, storage
 from kubric.io.json_io import read_json, write_json
 from kubric.pipeline.dask_slots import RESOURCE, uses_resource
@@ -242,6 +243,7 @@ class PackPlan:
     corrupt: list
     incomplete: int
     key: str = ""
+    schema_origin: str = ""  # where the schema came from (the pack's summary says it)
 
     def chunk_files(self) -> dict:
         """``{(split, k): chunk file name}`` with the scenes of each chunk."""
@@ -272,7 +274,7 @@ def make_plan(scenes_dir, name, split_fractions: dict, schema, examples_per_shar
         if not locations:
             raise DatasetError(f"{scenes_dir!r} holds no complete scene directory (with "
                                f"_SUCCESS); {incomplete} incomplete")
-        schema, dims = packer.schema_and_dims(folders, schema)
+        schema, dims, origin = schema_origin_and_dims(folders, schema)
         schema = packer.resolve_names(schema, folders, class_names)
         name = name or schema.name
         if not layout.NAME_PATTERN.match(name):
@@ -287,7 +289,7 @@ def make_plan(scenes_dir, name, split_fractions: dict, schema, examples_per_shar
             except (packer.SceneError, ValueError) as err:
                 corrupt.append((location, str(err).replace(str(folder), location)))
     plan = PackPlan(scenes_dir, name, schema, dims, split_fractions, examples_per_shard,
-                    assignment, corrupt, incomplete)
+                    assignment, corrupt, incomplete, schema_origin=origin)
     described = {"engine": "sharded", "schema": schema.name, "name": name,
                  "splits": split_fractions, "dims": dims,
                  "examples_per_shard": examples_per_shard,
@@ -381,7 +383,7 @@ def _pack_planned(plan, out, executor, workers, progress, verify, split_fraction
             raise DatasetError(f"{err}; nothing was written to {str(out)!r}") from None
     packer.swap_into_place(work, out)
     return packer.PackResult(out, counts, plan.incomplete, corrupt,
-                             time.perf_counter() - start, resumed)
+                             time.perf_counter() - start, resumed, plan.schema_origin)
 
 
 def _open_work(work: pathlib.Path, plan_key: str) -> None:

@@ -167,13 +167,6 @@ def scene_seed(scene: pathlib.Path) -> int:
     return seed
 
 
-def schema_and_dims(complete: list[pathlib.Path], schema) -> tuple[Schema, dict]:
-    """The schema (given, or the one every scene has:
-    :func:`~kubric.datasets.pack_schema.scenes_schema`) and the frame count / resolution of the
-    first scene that has them."""
-    return schema_origin_and_dims(complete, schema)[:2]
-
-
 def resolve_names(schema: Schema, scenes: list[pathlib.Path],
                   given: Mapping[str, Sequence[str]] | None = None) -> Schema:
     """``schema`` with every :data:`~kubric.io.schema.NAMES_FROM_SCENES` class label given the

@@ -175,7 +175,7 @@ def pack_to_store(scenes_dir, out, executor=None, name=None, splits=packer.DEFAU
         counts, renames, files = _metadata(plan, state, pathlib.Path(scratch))
         commit(out, work, renames, files)
     return packer.PackResult(out, counts, plan.incomplete, corrupt,
-                             time.perf_counter() - start, resumed)
+                             time.perf_counter() - start, resumed, plan.schema_origin)
 
 
 __all__ = ["COMMIT_FILE", "WORK", "check_output", "commit", "dataset_files", "pack_into",
