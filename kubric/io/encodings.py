@@ -408,12 +408,15 @@ class BitFlags(LayerKind):
     """Integer bit flags stored as they are in a PNG of :attr:`dtype` samples."""
 
     dtype = np.uint8
+    #: zlib level: sparse bits compress ~2.5× better at 9 than at the default 2, at little cost
+    #: (docs/scene-format.md#amodal-segmentation)
+    compress_level = 9
 
     def encoder(self, arr, what):
         if arr.dtype != self.dtype:
             raise TypeError(f"{what}: expected {np.dtype(self.dtype).name} {self.name} samples, "
                             f"got {arr.dtype}")
-        return png_io.encode_png, None
+        return (lambda frame: png_io.encode_png(frame, compress_level=self.compress_level)), None
 
 
 @register

@@ -13,18 +13,21 @@ name                        adds
 ``occlusion_boundaries``    layer ``occlusion_boundaries`` (edge bits, which side occludes)
 ==========================  =======================================================================
 
-Every one is computed from the scene model with Embree
-(:mod:`kubric.renderer.scene_model_layers`, :mod:`kubric.annotations.boundaries`), whichever
-backend renders RGB; none is computed unless asked for, so a default scene costs what it did.
+Amodal masks are cast from the scene model with Embree (:mod:`kubric.renderer.scene_model_layers`),
+whichever backend renders RGB; scene flow (:mod:`kubric.annotations.scene_flow`) and occlusion
+boundaries (:mod:`kubric.annotations.boundaries`) are computed from the backend's exact depth and
+labels and the scene model's poses. None is computed unless asked for, so a default scene costs
+what it did.
 """
 
 from __future__ import annotations
 
 from kubric.annotations.amodal import annotate_amodal
 from kubric.annotations.boundaries import occlusion_boundaries
+from kubric.annotations.scene_flow import CAMERA_LAYERS, WORLD_LAYERS, scene_flow
 from kubric.io.bitmask import pack_masks
 from kubric.io.schema import Feature, Schema
-from kubric.renderer import scene_model_layers as sml
+from kubric.renderer.scene_model_layers import amodal_masks
 
 EXTRA_LAYERS = ("amodal", "scene_flow", "scene_flow_camera", "occlusion_boundaries")
 F = Feature
@@ -89,9 +92,10 @@ def schema_with(schema: Schema, names) -> Schema:
 def add_before_relabel(scene, layers: dict, names) -> None:
     """The layers that need the renderer's own labels or none (scene flow, boundaries)."""
     if "scene_flow" in names or "scene_flow_camera" in names:
-        flows = sml.scene_flow(scene, camera_frame="scene_flow_camera" in names)
-        for key in (sml.SCENE_FLOW_LAYERS if "scene_flow" in names else ()) + \
-                (sml.SCENE_FLOW_CAMERA_LAYERS if "scene_flow_camera" in names else ()):
+        flows = scene_flow(scene, layers["depth"], layers["segmentation"],
+                           camera_frame="scene_flow_camera" in names)
+        for key in (WORLD_LAYERS if "scene_flow" in names else ()) + \
+                (CAMERA_LAYERS if "scene_flow_camera" in names else ()):
             layers[key] = flows[key]
     if "occlusion_boundaries" in names:
         layers["occlusion_boundaries"] = occlusion_boundaries(layers["depth"],
@@ -101,6 +105,6 @@ def add_before_relabel(scene, layers: dict, names) -> None:
 def add_after_relabel(scene, layers: dict, names, instances) -> None:
     """The amodal layer and annotations (instance k = bit k, the relabelled order)."""
     if "amodal" in names:
-        masks = sml.amodal_masks(scene, instances)
+        masks = amodal_masks(scene, instances)
         annotate_amodal(masks, layers["segmentation"], instances)
         layers["amodal_segmentation"] = pack_masks(masks)
