@@ -265,3 +265,23 @@ def test_scene_with_extra_layers_packs(made, tmp_path):
                            "--no-progress"], capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-2000:]
     assert "verified: every example equals its scene directory" in proc.stdout
+    # the loader tasks give back the scene's layers
+    from kubric.datasets import load
+
+    layers, meta = _files(made)
+    n = len(meta["instances"])
+    item = load(tmp_path / "ds", "train", task="amodal_segmentation")[0]
+    assert item["amodal_masks"].shape == (n,) + layers["segmentation"].shape[:3]
+    assert (np.moveaxis(item["amodal_masks"], 0, 1) ==
+            unpack_masks(layers["amodal_segmentation"], n)).all()
+    assert (item["segmentations"] == layers["segmentation"][..., 0]).all()
+    np.testing.assert_allclose(item["visible_fraction"],
+                               [i["visible_fraction"] for i in meta["instances"]])
+    frames = load(tmp_path / "ds", "train", task="scene_flow")
+    assert len(frames) == layers["depth"].shape[0]
+    item = frames[1]
+    for name in ("forward_scene_flow", "backward_scene_flow", "forward_scene_flow_camera"):
+        assert (item[name] == layers[name][1]).all(), name
+    np.testing.assert_allclose(item["depth"], layers["depth"][1, ..., 0], rtol=1e-3)
+    np.testing.assert_allclose(item["next_camera_to_world"], meta["camera"]["matrices_world"][2],
+                               atol=1e-6)
