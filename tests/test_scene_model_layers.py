@@ -33,7 +33,8 @@ from kubric.pipeline import OptionError, get_recipe
 from kubric.recipes import movi_base
 from kubric.renderer.raycast import Raycast
 
-EXTRA = "extra_layers=amodal,scene_flow,scene_flow_camera,occlusion_boundaries"
+EXTRA = ("extra_layers=amodal,scene_flow,scene_flow_camera,occlusion_boundaries,material_ids,"
+         "part_ids")
 CASES = {
     "movi_a": (5, ["resolution=48x40", "frame_end=4", "renderer=raycast", "min_num_objects=6",
                    "max_num_objects=8", EXTRA]),
@@ -286,6 +287,38 @@ def test_occlusion_boundaries_equal_the_definition_on_an_independent_render(made
     assert change.any()
 
 
+# ---------------------------------------------------------------------------------- materials
+def test_material_and_part_ids_name_each_pixel_s_asset(made):
+    """Every visible instance's pixels carry one material id whose table entry is its material
+    as the instance metadata records it (MOVi-A: colour, metal / rubber; MOVi-C: its file), and
+    one part id whose entry names its URDF link (MOVi-C's articulated object) or itself."""
+    out, _, _ = made
+    layers, meta = _files(made)
+    seg = layers["segmentation"][..., 0]
+    hit = layers["depth"][..., 0] < geo.BACKGROUND_DEPTH
+    materials, parts = meta["metadata"]["materials"], meta["metadata"]["parts"]
+    assert ((layers["material_ids"][..., 0] > 0) == hit).all()
+    assert ((layers["part_ids"][..., 0] > 0) == hit).all()
+    links = 0
+    for k, inst in enumerate(meta["instances"]):
+        mids = np.unique(layers["material_ids"][..., 0][seg == k + 1])
+        pids = np.unique(layers["part_ids"][..., 0][seg == k + 1])
+        assert len(mids) == 1 and len(pids) == 1, (k, mids, pids)
+        entry, part = materials[mids[0] - 1], parts[pids[0] - 1]
+        if "material" in inst:  # MOVi-A: CLEVR colour and metal / rubber
+            np.testing.assert_allclose(entry["color"], inst["color"][:3], atol=1e-5)
+            assert (entry["metallic"] > 0.5) == (inst["material"] == "metal")
+        elif entry["type"] == "file":  # a mesh file's own material names its asset
+            assert entry["asset"] in (inst["asset_id"], inst.get("articulated_base"))
+        assert part["part"] == inst.get("articulated_link", "")
+        links += bool(part["part"])
+    if "movi_c" in out.parent.name:
+        assert links >= 1
+    # parts name distinct assets: instances never share a part id
+    assert len({int(np.unique(layers["part_ids"][..., 0][seg == k + 1])[0])
+                for k in range(len(meta["instances"]))}) == len(meta["instances"])
+
+
 # ---------------------------------------------------------------------------------- product
 def test_extra_layers_option_is_checked():
     with pytest.raises(OptionError, match=r"extra_layers=.*unknown extra layer\(s\) \['albedo'\]"):
@@ -296,7 +329,10 @@ def test_extra_layers_option_is_checked():
 
 
 def test_scene_with_extra_layers_packs(made, tmp_path):
+    from kubric import docgen
+
     out, _, _ = made
+    assert docgen.undocumented_scene_fields(out) == []
     (out / "_SUCCESS").write_text("")
     proc = subprocess.run([sys.executable, "-m", "kubric", "pack", str(out.parent), "--out",
                            str(tmp_path / "ds"), "--splits", "train=1", "--verify",

@@ -117,6 +117,8 @@ _STANDARD = (
      "backward scene flow (m, camera)", None),
     ("occlusion_boundaries", "occlusion_boundaries_{:05d}.png", 1, "edge_bits",
      "occlusion boundaries", None),
+    ("material_ids", "material_ids_{:05d}.png", 1, "labels", "material ids", None),
+    ("part_ids", "part_ids_{:05d}.png", 1, "labels", "part ids", None),
 )
 #: the standard layers' formats
 LAYERS: dict[str, LayerFormat] = {name: LayerFormat(template, channels, kind)

@@ -11,11 +11,14 @@ name                        adds
 ``scene_flow_camera``       layers ``forward_scene_flow_camera`` / ``backward_scene_flow_camera``:
                             metres, the camera frame of each frame
 ``occlusion_boundaries``    layer ``occlusion_boundaries`` (edge bits, which side occludes)
+``material_ids``            layer ``material_ids`` and the table ``metadata.materials``
+``part_ids``                layer ``part_ids`` and the table ``metadata.parts`` (articulated links)
 ==========================  =======================================================================
 
 Amodal masks are cast from the scene model with Embree (:mod:`kubric.renderer.scene_model_layers`),
 whichever backend renders RGB; scene flow (:mod:`kubric.annotations.scene_flow`) and occlusion
-boundaries (:mod:`kubric.annotations.boundaries`) are computed from the backend's exact depth and
+boundaries (:mod:`kubric.annotations.boundaries`), material and part ids
+(:mod:`kubric.annotations.materials_parts`) are computed from the backend's exact depth and
 labels and the scene model's poses. None is computed unless asked for, so a default scene costs
 what it did.
 """
@@ -24,12 +27,14 @@ from __future__ import annotations
 
 from kubric.annotations.amodal import annotate_amodal
 from kubric.annotations.boundaries import occlusion_boundaries
+from kubric.annotations.materials_parts import id_layer, material_table, part_table
 from kubric.annotations.scene_flow import CAMERA_LAYERS, WORLD_LAYERS, scene_flow
 from kubric.io.bitmask import pack_masks
 from kubric.io.schema import Feature, Schema
 from kubric.renderer.scene_model_layers import amodal_masks
 
-EXTRA_LAYERS = ("amodal", "scene_flow", "scene_flow_camera", "occlusion_boundaries")
+EXTRA_LAYERS = ("amodal", "scene_flow", "scene_flow_camera", "occlusion_boundaries",
+                "material_ids", "part_ids")
 F = Feature
 _FLOW_DOC = "3D displacement of the surface point seen at the pixel centre to the {} frame"
 FEATURES = {
@@ -58,6 +63,14 @@ FEATURES = {
         F("occlusion_boundaries", "uint8", ("T", "H", "W", 1), "layer:occlusion_boundaries",
           "png", doc="bits 0–3: boundary towards up / down / left / right; bits 4–7: this pixel "
           "occludes across it (docs/conventions.md)"),
+    ),
+    "material_ids": (
+        F("material_ids", "uint16", ("T", "H", "W", 1), "layer:material_ids", "png",
+          doc="0 = nothing hit, k = metadata materials[k − 1] (docs/conventions.md)"),
+    ),
+    "part_ids": (
+        F("part_ids", "uint16", ("T", "H", "W", 1), "layer:part_ids", "png",
+          doc="0 = nothing hit, k = metadata parts[k − 1]: {object, part (URDF link)}"),
     ),
 }
 
@@ -90,13 +103,20 @@ def schema_with(schema: Schema, names) -> Schema:
 
 
 def add_before_relabel(scene, layers: dict, names) -> None:
-    """The layers that need the renderer's own labels or none (scene flow, boundaries)."""
+    """The layers that need the renderer's own labels (scene flow, boundaries, material and part
+    ids; the tables go to ``scene.metadata``)."""
     if "scene_flow" in names or "scene_flow_camera" in names:
         flows = scene_flow(scene, layers["depth"], layers["segmentation"],
                            camera_frame="scene_flow_camera" in names)
         for key in (WORLD_LAYERS if "scene_flow" in names else ()) + \
                 (CAMERA_LAYERS if "scene_flow_camera" in names else ()):
             layers[key] = flows[key]
+    for name, table_of, key in (("material_ids", material_table, "materials"),
+                                ("part_ids", part_table, "parts")):
+        if name in names:
+            table, ids = table_of(scene.assets)
+            scene.metadata[key] = table
+            layers[name] = id_layer(layers["segmentation"], scene.assets, ids)
     if "occlusion_boundaries" in names:
         layers["occlusion_boundaries"] = occlusion_boundaries(layers["depth"],
                                                               layers["segmentation"])
