@@ -88,7 +88,7 @@ def scene_records(scene: Scene, scheme, compressed: bool = True):
         raise ExportError(f"{scene.path.name}: segmentation label {int(seg.max())} but only "
                           f"{len(instances)} instances in metadata.json")
     views = scene.metadata["metadata"].get("views")
-    amodal = _amodal_masks(scene, len(instances))
+    amodal = amodal_masks(scene, len(instances))
     images, annotations = [], []
     for i in range(scene.num_frames):
         rgb = f"rgba_{i:05d}.png"
@@ -116,7 +116,7 @@ def scene_records(scene: Scene, scheme, compressed: bool = True):
     return images, annotations
 
 
-def _amodal_masks(scene: Scene, count: int):
+def amodal_masks(scene: Scene, count: int):
     """(T, N, H, W) amodal masks of a scene made with ``extra_layers=amodal``, else None."""
     if not any(scene.path.glob("amodal_segmentation_*.png")):
         return None
