@@ -1,10 +1,10 @@
 """Cost of each opt-in scene-model layer (``extra_layers``) relative to a default MOVi-A raycast
 scene, and the bytes of the amodal masks of 20 objects × 24 frames in several storages.
 
-Part 1 (cost): a simulated MOVi-A scene; the baseline is what a default ``renderer=raycast``
-scene renders (every layer, rgba included); then each extra layer alone (CPU-s of computing it,
-its annotations included) and all four together, as a ratio to the baseline, measured in the
-same run.
+Part 1 (cost): a simulated MOVi scene (``--recipe``, default movi_a; ``--set KEY=VALUE`` adds
+recipe options); the baseline is what a default ``renderer=raycast`` scene renders (every layer,
+rgba included); then each extra layer alone (CPU-s of computing it, its annotations included)
+and all of them together, as a ratio to the baseline, measured in the same run.
 
 Part 2 (storage): 20 objects (10 cubes, 10 spheres, 0.3–0.6 m) moving over a floor for 24
 frames, their amodal masks (``kubric.renderer.scene_model_layers.amodal_masks``) stored as
@@ -13,8 +13,8 @@ PNG per object and frame (what re-rendering per object gives), (c) COCO compress
 (``kubric.datasets.exports.rle``, as COCO / KINS JSON hold them), (d) ``np.packbits`` in a
 compressed npz. Bytes per scene.
 
-Run: ``python benchmarks/bench_extra_layers.py [--size 64] [--frames 4]`` (cost) and
-``[--storage-size 256]`` (storage; 0 skips it).
+Run: ``python benchmarks/bench_extra_layers.py [--recipe movi_a] [--size 64] [--frames 4]
+[--set KEY=VALUE ...]`` (cost) and ``[--storage-size 256]`` (storage; 0 skips it).
 """
 
 from __future__ import annotations
@@ -51,9 +51,9 @@ def timed(fn):
     return value, cpu_seconds() - c
 
 
-def cost(size: int, frames: int, seed: int) -> None:
-    rec = get_recipe("movi_a").from_assignments([f"resolution={size}", f"frame_end={frames}",
-                                                 "renderer=raycast"])
+def cost(recipe: str, size: int, frames: int, seed: int, options=()) -> None:
+    rec = get_recipe(recipe).from_assignments([f"resolution={size}", f"frame_end={frames}",
+                                               "renderer=raycast", *options])
     with tempfile.TemporaryDirectory() as scratch:
         scene = rec.make_scene()
         sim = kb.simulator.PyBullet(scene, scratch)
@@ -62,7 +62,7 @@ def cost(size: int, frames: int, seed: int) -> None:
         sim.close()
     layers, base = timed(lambda: create("raycast", scene).render(return_layers=ALL_LAYERS))
     instances = [a for a in scene.foreground_assets if isinstance(a, kb.PhysicalObject)]
-    print(f"movi_a seed {seed}, {size}², {frames} frames, {len(instances)} objects: default "
+    print(f"{recipe} seed {seed}, {size}², {frames} frames, {len(instances)} objects: default "
           f"raycast scene (all layers) {base:.2f} CPU-s")
     print("| extra_layers | CPU-s | × default scene |")
     print("|---|---|---|")
@@ -119,13 +119,15 @@ def storage(size: int) -> None:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--recipe", default="movi_a")
+    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
     ap.add_argument("--size", type=int, default=64)
     ap.add_argument("--frames", type=int, default=4)
     ap.add_argument("--seed", type=int, default=3)
     ap.add_argument("--storage-size", type=int, default=256)
     args = ap.parse_args()
     start = time.perf_counter()
-    cost(args.size, args.frames, args.seed)
+    cost(args.recipe, args.size, args.frames, args.seed, args.set)
     if args.storage_size:
         storage(args.storage_size)
     print(f"\n({time.perf_counter() - start:.1f} s wall)")
