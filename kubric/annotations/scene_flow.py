@@ -13,7 +13,9 @@ and the optical flow use, held outside them), exactly as the flow layers move it
   projected with frame t ± 1's intrinsics is where the optical flow points.
 
 0 where nothing is hit. Rigid assets (primitives, mesh files, the links of an articulated
-object, each its own asset); skinned characters move per vertex and are refused.
+object, each its own asset) move with their pose; on a skinned character the pixel's surface
+point is the material point of the skinned mesh its ray hits (as the point tracks anchor it,
+:mod:`kubric.annotations.character_tracks`), followed onto the mesh skinned at frame t ± 1.
 """
 
 from __future__ import annotations
@@ -22,6 +24,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from kubric.annotations.character_tracks import anchor_queries
 from kubric.annotations.segmentation import instance_labels
 from kubric.core import camera_geometry as geo
 from kubric.core.characters import Character
@@ -44,6 +47,27 @@ def to_camera(camera, points, frame) -> np.ndarray:
     return points @ m[:3, :3].T + m[:3, 3]
 
 
+def _rigid_moves(asset, camera, frame, pixels, points, resolution):
+    """(step, direction index, the points at frame + step) of a rigid asset's surface points."""
+    rot, trans, scale = _pose(asset, frame)
+    local = (points - trans) @ rot / scale
+    for step, k in ((1, 0), (-1, 1)):
+        rot2, trans2, scale2 = _pose(asset, frame + step)
+        yield step, k, (local * scale2) @ rot2.T + trans2
+
+
+def _character_moves(character, camera, frame, pixels, points, resolution):
+    """The same for a skinned character: each pixel's surface point is the material point
+    (triangle, barycentric) its ray hits on the mesh skinned at ``frame`` (the anchor of the
+    point tracks, :func:`kubric.annotations.character_tracks.anchor_queries`), followed onto the
+    mesh skinned at frame ± 1 and moved by the difference of the two (so the step starts at the
+    depth layer's point)."""
+    tri, bary = anchor_queries(character, camera, frame, pixels, points, resolution)
+    here = character.surface_points(tri, bary, frame)
+    for step, k in ((1, 0), (-1, 1)):
+        yield step, k, points + character.surface_points(tri, bary, frame + step) - here
+
+
 def scene_flow(scene, depth, segmentation, frames: Sequence[int] | None = None,
                camera_frame: bool = True) -> dict[str, np.ndarray]:
     """{layer: (T, H, W, 3) float32 m} of :data:`WORLD_LAYERS` (and with ``camera_frame``
@@ -56,10 +80,6 @@ def scene_flow(scene, depth, segmentation, frames: Sequence[int] | None = None,
     if d.shape != lab.shape or d.ndim != 3 or d.shape[0] != len(frames):
         raise ValueError(f"scene_flow: depth {d.shape} and segmentation {lab.shape} must be "
                          f"(T={len(frames)}, H, W[, 1])")
-    people = [a.name for a in scene.assets if isinstance(a, Character)]
-    if people:
-        raise ValueError(f"scene_flow: skinned characters {people} are not supported (they move "
-                         "per vertex); allowed: rigid assets")
     camera = scene.camera
     t_, h, w = d.shape
     by_label = dict(zip(instance_labels(scene.assets).tolist(), scene.assets, strict=True))
@@ -76,11 +96,8 @@ def scene_flow(scene, depth, segmentation, frames: Sequence[int] | None = None,
                 raise ValueError(f"scene_flow: label {int(label)} names no asset of the scene "
                                  f"(labels {sorted(by_label)})")
             sel = hit & (lab[t] == label)
-            rot, trans, scale = _pose(asset, frame)
-            local = (points[sel] - trans) @ rot / scale
-            for step, k in ((1, 0), (-1, 1)):
-                rot2, trans2, scale2 = _pose(asset, frame + step)
-                there = (local * scale2) @ rot2.T + trans2
+            moves = _character_moves if isinstance(asset, Character) else _rigid_moves
+            for step, k, there in moves(asset, camera, frame, centres[sel], points[sel], (w, h)):
                 out[WORLD_LAYERS[k]][t][sel] = there - points[sel]
                 if camera_frame:
                     out[CAMERA_LAYERS[k]][t][sel] = to_camera(camera, there, frame + step) - \

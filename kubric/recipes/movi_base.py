@@ -126,10 +126,6 @@ class MoviBase(ExposureOptions, RenderQuality, Recipe):
         self.check_tracks()
         check_min_max(self)
         self.check_exposure()
-        if self.extra_layers and "characters" in getattr(self, "renderer_needs", ()):
-            raise OptionError(f"{self.name}: option extra_layers={','.join(self.extra_layers)} "
-                              "is not available for skinned characters (the scene-model "
-                              "geometry has no skinning); allowed: none")
 
     def renderer_requests(self) -> dict[str, str]:
         out = super().renderer_requests()

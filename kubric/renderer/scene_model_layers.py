@@ -9,8 +9,8 @@ they are the same whichever backend renders RGB (the scene model is the one geom
   pinhole and orthographic cameras) are cast, so the cost grows with the objects' image area,
   not with their number × H × W.
 
-Skinned characters are not cast (the raycast backend has no skinning): a scene with one is
-refused in one line.
+A skinned character (:class:`kubric.core.characters.Character`) is cast as its mesh is skinned
+at each frame (``Character.deformed_vertices``: the triangles the Blender backend renders).
 """
 
 from __future__ import annotations
@@ -29,11 +29,6 @@ from kubric.renderer.raycast import Raycast, _Geometry
 def _check(scene, who: str) -> None:
     if scene.camera is None:
         raise ValueError(f"{who}: the scene has no camera")
-    people = [a.name for a in scene.assets if isinstance(a, Character)]
-    if people:
-        raise ValueError(f"{who}: skinned characters {people} are not supported (the raycast "
-                         "geometry has no skinning); allowed: rigid objects (Cube, Sphere, "
-                         "FileBasedObject, articulated links)")
 
 
 def _frame_rays(camera, frame, w: int, h: int):
@@ -67,6 +62,7 @@ class _LocalCaster:
         from trimesh.ray.ray_pyembree import RayMeshIntersector
 
         self.geometry = _Geometry([(1, asset, mesh)])
+        self.faces = mesh.faces
         self.ray = RayMeshIntersector(trimesh.Trimesh(mesh.vertices, mesh.faces, process=False))
         lo, hi = mesh.vertices.min(0), mesh.vertices.max(0)
         self.corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])
@@ -87,6 +83,29 @@ class _LocalCaster:
         return pixels[np.asarray(self.ray.intersects_first(local_o, local_d)) >= 0]
 
 
+class _SkinnedCaster:
+    """A skinned character: its mesh as skinned at each frame, searchable by Embree (built per
+    frame: the surface deforms)."""
+
+    def __init__(self, character):
+        self.character = character
+        self.faces = character.faces
+
+    def hits(self, camera, origins, dirs, frame, w: int, h: int) -> np.ndarray:
+        from trimesh.ray.ray_pyembree import RayMeshIntersector
+
+        verts = self.character.deformed_vertices(frame)
+        used = verts[np.unique(self.faces)]
+        lo, hi = used.min(0), used.max(0)
+        corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])
+                            for z in (lo[2], hi[2])])
+        pixels = _box_pixels(camera, corners, frame, w, h)
+        if not len(pixels):
+            return pixels
+        ray = RayMeshIntersector(trimesh.Trimesh(verts, self.faces, process=False))
+        return pixels[np.asarray(ray.intersects_first(origins[pixels], dirs[pixels])) >= 0]
+
+
 def amodal_masks(scene, assets: Sequence, frames: Sequence[int] | None = None) -> np.ndarray:
     """(T, N, H, W) bool: the amodal mask of each of ``assets`` (N) at each of ``frames``
     (default: the scene's frames); see module doc."""
@@ -94,11 +113,12 @@ def amodal_masks(scene, assets: Sequence, frames: Sequence[int] | None = None) -
     frames = list(scene.frames if frames is None else frames)
     camera, (w, h) = scene.camera, scene.resolution
     meshes = Raycast(scene)
-    casters = [_LocalCaster(a, meshes._mesh_of(a)) for a in assets]
+    casters = [_SkinnedCaster(a) if isinstance(a, Character) else
+               _LocalCaster(a, meshes._mesh_of(a)) for a in assets]
     out = np.zeros((len(frames), len(assets), h * w), bool)
     for t, frame in enumerate(frames):
         origins, dirs = _frame_rays(camera, frame, w, h)
         for k, caster in enumerate(casters):
-            if len(caster.geometry.faces):
+            if len(caster.faces):
                 out[t, k, caster.hits(camera, origins, dirs, frame, w, h)] = True
     return out.reshape(len(frames), len(assets), h, w)
