@@ -28,6 +28,7 @@ import numpy as np
 
 from kubric.datasets.task_registry import register_task
 from kubric.io.bitmask import unpack_masks
+from kubric.io.layers import LAYERS
 
 _CAMERA_FLOW = ("forward_scene_flow_camera", "backward_scene_flow_camera")
 
@@ -61,11 +62,12 @@ def _camera_flow(schema, options):
                extra_features=_camera_flow)
 def scene_flow_task(example, frame):
     """One frame's image, metric depth and scene flow with the cameras it spans."""
-    from kubric.datasets.tasks import metric_depth
-
     cams = example["camera"]["matrices_world"]
     last = len(cams) - 1
-    item = {"image": example["video"][frame], "depth": metric_depth(example, frame),
+    depth = example["depth"][frame, ..., 0]  # MOVi: uint16 over metadata/depth_range
+    value_range = example["metadata"].get("depth_range") if depth.dtype.kind in "ui" else None
+    item = {"image": example["video"][frame],
+            "depth": LAYERS["depth"].type.decode(depth, value_range, "feature 'depth'").copy(),
             "intrinsics_pixels": example["camera"]["intrinsics_pixels"],
             "camera_to_world": cams[frame], "next_camera_to_world": cams[min(frame + 1, last)],
             "previous_camera_to_world": cams[max(frame - 1, 0)],
