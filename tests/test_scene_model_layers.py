@@ -122,13 +122,17 @@ def test_each_amodal_mask_equals_a_render_of_that_object_alone(made):
         assert sum("articulated_link" in i for i in meta["instances"]) >= 1
 
 
-def test_a_walking_character_s_amodal_mask_equals_a_numpy_cast_of_its_skinned_mesh():
+def test_a_walking_character_s_amodal_mask_and_scene_flow_equal_a_numpy_cast():
     """Skinned characters: the amodal mask (Embree on the mesh skinned at each frame) equals a
-    brute-force Möller–Trumbore cast (kubric.annotations.surfaces) of every pixel-centre ray;
-    a box in front of the person overlaps it."""
+    brute-force Möller–Trumbore cast (kubric.annotations.surfaces) of every pixel-centre ray (a
+    box in front of the person overlaps it), and the scene flow, with Embree's anchoring and
+    with the point tracks', moves each pixel's hit material point to its place on the mesh
+    skinned at frame t ± 1."""
+    from kubric.annotations.character_tracks import anchor_queries
+    from kubric.annotations.scene_flow import scene_flow
     from kubric.annotations.surfaces import ray_triangles
     from kubric.assets.procedural_character import tube_person, walk_clip
-    from kubric.renderer.scene_model_layers import amodal_masks
+    from kubric.renderer.scene_model_layers import amodal_masks, skinned_anchor
 
     scene = kb.Scene(resolution=(32, 40), frame_start=0, frame_end=2)
     person = tube_person()
@@ -144,10 +148,22 @@ def test_a_walking_character_s_amodal_mask_equals_a_numpy_cast_of_its_skinned_me
     for t, frame in enumerate(scene.frames):
         o, d = geo.pixel_rays(scene.camera, centres, frame=frame, resolution=(w, h))
         tris = person.deformed_vertices(frame)[person.faces]
-        tri, _, _ = ray_triangles(o, d, tris)
+        tri, bary, dist = ray_triangles(o, d, tris)
         expect = (tri >= 0).reshape(h, w)
         assert expect.sum() > 80
         assert (masks[t, 0] == expect).all(), int((masks[t, 0] != expect).sum())
+        # scene flow of the person's pixels (depth and labels from this cast): the material
+        # point the brute-force cast hits, followed onto the mesh skinned at t ± 1
+        hit = tri >= 0
+        depth = np.where(hit, dist, geo.BACKGROUND_DEPTH).reshape(1, h, w)
+        labels = np.where(hit, 1, 0).reshape(1, h, w)  # the person is scene.assets[0]
+        for anchor in (skinned_anchor, anchor_queries):
+            flows = scene_flow(scene, depth, labels, frames=[frame], anchor=anchor)
+            for name, step in (("forward_scene_flow", 1), ("backward_scene_flow", -1)):
+                moved = person.surface_points(tri[hit], bary[hit], frame + step) - \
+                    person.surface_points(tri[hit], bary[hit], frame)
+                np.testing.assert_allclose(flows[name][0].reshape(-1, 3)[hit], moved,
+                                           atol=1e-5)
 
 
 def test_bit_planes_round_trip_and_count():

@@ -56,23 +56,26 @@ def _rigid_moves(asset, camera, frame, pixels, points, resolution):
         yield step, k, (local * scale2) @ rot2.T + trans2
 
 
-def _character_moves(character, camera, frame, pixels, points, resolution):
+def _character_moves(character, camera, frame, pixels, points, resolution,
+                     anchor=anchor_queries):
     """The same for a skinned character: each pixel's surface point is the material point
     (triangle, barycentric) its ray hits on the mesh skinned at ``frame`` (the anchor of the
     point tracks, :func:`kubric.annotations.character_tracks.anchor_queries`), followed onto the
     mesh skinned at frame ± 1 and moved by the difference of the two (so the step starts at the
     depth layer's point)."""
-    tri, bary = anchor_queries(character, camera, frame, pixels, points, resolution)
+    tri, bary = anchor(character, camera, frame, pixels, points, resolution)
     here = character.surface_points(tri, bary, frame)
     for step, k in ((1, 0), (-1, 1)):
         yield step, k, points + character.surface_points(tri, bary, frame + step) - here
 
 
 def scene_flow(scene, depth, segmentation, frames: Sequence[int] | None = None,
-               camera_frame: bool = True) -> dict[str, np.ndarray]:
+               camera_frame: bool = True, anchor=anchor_queries) -> dict[str, np.ndarray]:
     """{layer: (T, H, W, 3) float32 m} of :data:`WORLD_LAYERS` (and with ``camera_frame``
     :data:`CAMERA_LAYERS`) from (T, H, W[, 1]) depth and the renderer's labels for
-    ``scene.assets`` (module doc)."""
+    ``scene.assets`` (module doc). ``anchor``: how a character's pixels find their material
+    points (``anchor_queries``' signature; the recipes pass Embree's,
+    :func:`kubric.renderer.scene_model_layers.skinned_anchor`)."""
     d = np.asarray(depth, np.float64)
     lab = np.asarray(segmentation)
     d, lab = (a[..., 0] if a.ndim == 4 else a for a in (d, lab))
@@ -96,8 +99,10 @@ def scene_flow(scene, depth, segmentation, frames: Sequence[int] | None = None,
                 raise ValueError(f"scene_flow: label {int(label)} names no asset of the scene "
                                  f"(labels {sorted(by_label)})")
             sel = hit & (lab[t] == label)
-            moves = _character_moves if isinstance(asset, Character) else _rigid_moves
-            for step, k, there in moves(asset, camera, frame, centres[sel], points[sel], (w, h)):
+            args = (asset, camera, frame, centres[sel], points[sel], (w, h))
+            moves = _character_moves(*args, anchor=anchor) if isinstance(asset, Character) \
+                else _rigid_moves(*args)
+            for step, k, there in moves:
                 out[WORLD_LAYERS[k]][t][sel] = there - points[sel]
                 if camera_frame:
                     out[CAMERA_LAYERS[k]][t][sel] = to_camera(camera, there, frame + step) - \

@@ -31,7 +31,7 @@ from kubric.annotations.materials_parts import id_layer, material_table, part_ta
 from kubric.annotations.scene_flow import CAMERA_LAYERS, WORLD_LAYERS, scene_flow
 from kubric.io.bitmask import pack_masks
 from kubric.io.schema import Feature, Schema
-from kubric.renderer.scene_model_layers import amodal_masks
+from kubric.renderer.scene_model_layers import amodal_masks, skinned_anchor
 
 EXTRA_LAYERS = ("amodal", "scene_flow", "scene_flow_camera", "occlusion_boundaries",
                 "material_ids", "part_ids")
@@ -107,7 +107,7 @@ def add_before_relabel(scene, layers: dict, names) -> None:
     ids; the tables go to ``scene.metadata``)."""
     if "scene_flow" in names or "scene_flow_camera" in names:
         flows = scene_flow(scene, layers["depth"], layers["segmentation"],
-                           camera_frame="scene_flow_camera" in names)
+                           camera_frame="scene_flow_camera" in names, anchor=skinned_anchor)
         for key in (WORLD_LAYERS if "scene_flow" in names else ()) + \
                 (CAMERA_LAYERS if "scene_flow_camera" in names else ()):
             layers[key] = flows[key]

@@ -20,10 +20,11 @@ from collections.abc import Sequence
 import numpy as np
 import trimesh
 
+from kubric.annotations.character_tracks import anchor_queries
 from kubric.annotations.scene_flow import to_camera
 from kubric.core import camera_geometry as geo
 from kubric.core.characters import Character
-from kubric.renderer.raycast import Raycast, _Geometry
+from kubric.renderer.raycast import Raycast, _Geometry, _intersect
 
 
 def _check(scene, who: str) -> None:
@@ -104,6 +105,29 @@ class _SkinnedCaster:
             return pixels
         ray = RayMeshIntersector(trimesh.Trimesh(verts, self.faces, process=False))
         return pixels[np.asarray(ray.intersects_first(origins[pixels], dirs[pixels])) >= 0]
+
+
+def skinned_anchor(character, camera, frame, pixels_xy, world_points, resolution):
+    """(triangle (n,), barycentric (n, 3)) of the surface points of ``character`` seen at
+    ``pixels_xy`` (x, y) at ``frame``: :func:`kubric.annotations.character_tracks.anchor_queries`
+    with Embree finding the triangles (one search structure per call, not a numpy loop per ray;
+    the barycentric weights are recomputed in float64); rays that miss (a depth pixel at a
+    silhouette the two renderers split differently) take ``anchor_queries``' own fallback."""
+    from trimesh.ray.ray_pyembree import RayMeshIntersector
+
+    origins, dirs = geo.pixel_rays(camera, pixels_xy, frame=frame, resolution=resolution)
+    verts = character.deformed_vertices(frame)
+    ray = RayMeshIntersector(trimesh.Trimesh(verts, character.faces, process=False))
+    tri = np.asarray(ray.intersects_first(origins, dirs), np.int64)
+    bary = np.zeros((len(tri), 3))
+    hit = np.flatnonzero(tri >= 0)
+    _, b1, b2 = _intersect(origins[hit], dirs[hit], verts[character.faces[tri[hit]]])
+    bary[hit] = np.stack([1 - b1 - b2, b1, b2], -1)
+    miss = np.flatnonzero(tri < 0)
+    if len(miss):
+        tri[miss], bary[miss] = anchor_queries(character, camera, frame, pixels_xy[miss],
+                                               world_points[miss], resolution)
+    return tri, bary
 
 
 def amodal_masks(scene, assets: Sequence, frames: Sequence[int] | None = None) -> np.ndarray:
