@@ -21,7 +21,8 @@ from kubric.io.schema import ENCODINGS, Feature, Schema, SchemaError
 
 
 def test_registries_hold_the_stored_names():
-    assert tuple(LAYER_KINDS) == ("image8", "tiff", "labels", "scaled", "signed_unit", "unit")
+    assert tuple(LAYER_KINDS) == ("image8", "tiff", "labels", "scaled", "signed_unit", "unit",
+                                 "bitmask", "vector", "edge_bits")
     assert tuple(ENCODINGS) == ("none", "png", "zlib", "text", "class_label", "bbox")
     for name, kind in LAYER_KINDS.items():
         assert isinstance(kind, LayerKind) and kind.name == name

@@ -14,6 +14,8 @@ task=NAME, **options)`` uses it. Built in:
   ``depth`` (H, W) in metres (distance along the ray: ``origin + depth · direction`` is the
   surface point), plus ``frame`` and ``video_name``; on multi-view datasets a frame is a view;
 * ``multiview`` and ``svr`` (multi-view datasets): :mod:`kubric.datasets.multiview_tasks`;
+* ``amodal_segmentation`` and ``scene_flow`` (datasets of scenes made with ``--set
+  extra_layers=...``): :mod:`kubric.datasets.extra_tasks`;
 * ``point_tracks`` (datasets packed with a ``<recipe>_tracks`` schema, e.g. ``kubric pack DIR
   --schema movi_e_tracks``): TAP-Vid's training fields ``video`` (T, H, W, 3) uint8,
   ``query_points`` (P, 3) (t, y, x), ``target_points`` (P, T, 2) (x, y) in pixels (centres at
@@ -153,4 +155,5 @@ def person_keypoints_task(example, frame):
             "video_name": example["metadata"]["video_name"]}
 
 
-from kubric.datasets import multiview_tasks  # noqa: E402,F401  (registers multiview, svr)
+# registers multiview, svr; amodal_segmentation, scene_flow
+from kubric.datasets import extra_tasks, multiview_tasks  # noqa: E402,F401

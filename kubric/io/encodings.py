@@ -24,6 +24,9 @@ kind               file                                     decode of integer sa
 ``scaled``         16-bit PNG over the scene's range        ``q / 65535 · (max − min) + min``
 ``signed_unit``    16-bit PNG of [−1, 1]                    ``q / 65535 · 2 − 1``
 ``unit``           16-bit PNG of [0, 1]                     ``q / 65535``
+``bitmask``        16-bit 4-channel PNG of bit planes       none (bits; :mod:`kubric.io.bitmask`)
+``vector``         zlib float32 TIFF, 3 channels (metres)   as ``tiff``
+``edge_bits``      8-bit grey PNG of edge flags             none (bits)
 =================  =======================================  =====================================
 
 (``signed_unit`` / ``unit`` files written from uint8 samples decode as ``k / 255`` of the
@@ -43,7 +46,7 @@ import numpy as np
 
 from kubric.core.camera_geometry import BACKGROUND_DEPTH
 from kubric.errors import InputError
-from kubric.io import colour_maps, png_io, tiff_io
+from kubric.io import bitmask, colour_maps, png_io, tiff_io
 
 #: the largest 16-bit sample
 UINT16_MAX = png_io.UINT16_MAX
@@ -399,6 +402,70 @@ class SignedUnit(FixedInterval):
 class Unit(FixedInterval):
     name = "unit"
     doc = "float in [0, 1] (object coordinates, UV) → 16-bit PNG of round(x · 65535)"
+
+
+class BitFlags(LayerKind):
+    """Integer bit flags stored as they are in a PNG of :attr:`dtype` samples."""
+
+    dtype = np.uint8
+    #: zlib level: sparse bits compress ~2.5× better at 9 than at the default 2, at little cost
+    #: (docs/scene-format.md#amodal-segmentation)
+    compress_level = 9
+
+    def encoder(self, arr, what):
+        if arr.dtype != self.dtype:
+            raise TypeError(f"{what}: expected {np.dtype(self.dtype).name} {self.name} samples, "
+                            f"got {arr.dtype}")
+        return (lambda frame: png_io.encode_png(frame, compress_level=self.compress_level)), None
+
+
+@register
+class Bitmask(BitFlags):
+    name = "bitmask"
+    doc = ("overlapping masks as bits → 16-bit 4-channel PNG: mask k is bit k % 16 of channel "
+           "k // 16 (kubric.io.bitmask; amodal segmentation)")
+    dtype = np.uint16
+
+    def draw(self, frame, lo=None, hi=None, background=BACKGROUND_DEPTH):
+        """How many masks cover each pixel, in the label palette."""
+        return colour_maps.segmentation_picture(bitmask.mask_counts(frame)[..., None])
+
+
+@register
+class Vector(Tiff):
+    name = "vector"
+    doc = ("float 3-vectors (metres; scene flow) → zlib-compressed float32 TIFF, 0 where "
+           "nothing is hit")
+    adjustable_range = False  # drawn over its own largest length
+
+    def encoder(self, arr, what):
+        if arr.dtype.kind != "f" or not np.isfinite(arr).all():
+            raise TypeError(f"{what}: expected finite float vectors, got dtype {arr.dtype}")
+        return (lambda frame: tiff_io.encode_tiff(frame, compress=True)), \
+            {"min": float(arr.min()), "max": float(arr.max())}
+
+    def draw(self, frame, lo=None, hi=None, background=BACKGROUND_DEPTH):
+        """The vector's length on the depth colour map over [0, hi]; zero vectors black."""
+        length = np.linalg.norm(frame, axis=-1, keepdims=True)
+        length = np.where(length > 0, length, background)
+        return colour_maps.depth_picture(length, 0.0, hi or float(length[length < background]
+                                                                  .max(initial=1.0)), background)
+
+    def scale(self, layer, background=BACKGROUND_DEPTH):
+        return 0.0, float(np.linalg.norm(layer, axis=-1).max(initial=0.0)) or 1.0
+
+
+@register
+class EdgeBits(BitFlags):
+    name = "edge_bits"
+    doc = ("per-pixel edge flags → 8-bit grey PNG: bits 0–3 a boundary towards the pixel "
+           "above / below / left / right, bits 4–7 this pixel occludes across that edge")
+
+    def draw(self, frame, lo=None, hi=None, background=BACKGROUND_DEPTH):
+        """White: boundary pixels on the occluding side; grey: on the occluded side."""
+        bits = frame[..., 0]
+        grey = np.where(bits >> 4, 255, np.where(bits & 15, 96, 0)).astype(np.uint8)
+        return np.repeat(grey[..., None], 3, axis=-1)
 
 
 # ------------------------------------------------------------------------------ feature encodings

@@ -103,6 +103,22 @@ _STANDARD = (
     ("uv", "uv_{:05d}.png", 3, "unit", "UV", "exact"),
     ("defocus", "defocus_{:05d}.tiff", 1, "tiff", "defocus (px)", None),
     ("exposure_flow", "exposure_flow_{:05d}.png", 2, "scaled", "exposure flow (px)", None),
+    # opt-in ground truth from the scene model (kubric.renderer.scene_model_layers), written only
+    # when a recipe's extra_layers asks (docs/conventions.md)
+    ("amodal_segmentation", "amodal_segmentation_{:05d}.png", 4, "bitmask",
+     "amodal segmentation (instances covering)", None),
+    ("forward_scene_flow", "forward_scene_flow_{:05d}.tiff", 3, "vector",
+     "forward scene flow (m, world)", None),
+    ("backward_scene_flow", "backward_scene_flow_{:05d}.tiff", 3, "vector",
+     "backward scene flow (m, world)", None),
+    ("forward_scene_flow_camera", "forward_scene_flow_camera_{:05d}.tiff", 3, "vector",
+     "forward scene flow (m, camera)", None),
+    ("backward_scene_flow_camera", "backward_scene_flow_camera_{:05d}.tiff", 3, "vector",
+     "backward scene flow (m, camera)", None),
+    ("occlusion_boundaries", "occlusion_boundaries_{:05d}.png", 1, "edge_bits",
+     "occlusion boundaries", None),
+    ("material_ids", "material_ids_{:05d}.png", 1, "labels", "material ids", None),
+    ("part_ids", "part_ids_{:05d}.png", 1, "labels", "part ids", None),
 )
 #: the standard layers' formats
 LAYERS: dict[str, LayerFormat] = {name: LayerFormat(template, channels, kind)

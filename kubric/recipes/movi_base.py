@@ -34,6 +34,7 @@ from kubric.annotations.tracks import scene_tracks
 from kubric.io.scene_dir import BLEND_FILE, BULLET_FILE, TRACKS_FILE
 from kubric.io.scene_writer import write_scene
 from kubric.pipeline import Option, OptionError, Recipe, resolution
+from kubric.recipes import extra_layers as extra
 from kubric.recipes.common import (
     annotate_instances,
     check_min_max,
@@ -106,6 +107,9 @@ class MoviBase(ExposureOptions, RenderQuality, Recipe):
                            ".json or text); instead of sampling", type=pathlib.Path,
                            must_exist=True)
     track_stride = Option(4, "grid stride (frames and pixels) of the track query sampling", low=1)
+    extra_layers = Option((), "opt-in ground truth: comma-separated "
+                          f"{', '.join(extra.EXTRA_LAYERS)} (docs/conventions.md)",
+                          type=extra.extra_layers)
     track_max_fraction = Option(0.1, "most tracks per object or background, as a fraction of "
                                 "its grid points (TAP-Vid: 0.1)", low=0.0, high=1.0)
 
@@ -263,10 +267,13 @@ class MoviBase(ExposureOptions, RenderQuality, Recipe):
                 files[TRACKS_FILE] = self.track_archive(scene, layers, visible, seed)
         else:
             add_tracks = None
+        extra.add_before_relabel(scene, layers, self.extra_layers)
         visible = annotate_instances(scene, layers, candidates, before_relabel=add_tracks)
         subframes, shutter = getattr(self, "_subframes", (None, 0.0))  # coverage_samples=K
         files.update(self.coverage_files(scene, subframes, visible, shutter))
+        extra.add_after_relabel(scene, layers, self.extra_layers, visible)
         metadata, events = scene_documents(self, scene, seed, visible, collisions,
                                            background=background, renderer=render_settings)
-        write_scene(self.schema, out_dir, layers, metadata, events, files=files)
+        write_scene(extra.schema_with(self.schema, self.extra_layers), out_dir, layers,
+                    metadata, events, files=files)
         return visible

@@ -21,9 +21,10 @@ negated); ``cam_K`` puts pixel centres at integer coordinates (our ``intrinsics_
 ``cx``, ``cy`` minus 0.5); rotations row-major; lengths in mm. ``mask``: the object's mesh
 rasterised at its pose (a pixel is in when its centre falls inside a projected triangle, as our
 annotation pass samples pixel centres) united with its visible pixels, so ``mask_visib`` ⊆
-``mask`` always. Boxes are ``[x, y, w, h]`` in pixels (``[-1, -1, -1, -1]`` when empty).
-A scene is written into a hidden folder renamed when complete; ``models_info.json`` is written
-last.
+``mask`` always; a scene made with ``extra_layers=amodal`` gives ``mask`` from its amodal layer
+instead (cast from the scene model at pixel centres, objects behind the camera included). Boxes are
+``[x, y, w, h]`` in pixels (``[-1, -1, -1, -1]`` when empty). A scene is written into a hidden
+folder renamed when complete; ``models_info.json`` is written last.
 """
 
 from __future__ import annotations
@@ -38,7 +39,7 @@ import sys
 import numpy as np
 
 from kubric.datasets.exports import models as mdl
-from kubric.datasets.exports.coco import mask_bbox
+from kubric.datasets.exports.coco import amodal_masks, mask_bbox
 from kubric.datasets.exports.scenes import ExportError, Scene, find_scenes, load_scene, model_sources
 from kubric.io.layers import read_frame
 from kubric.io.png_io import encode_png
@@ -170,6 +171,7 @@ def export_scene(scene: Scene, out: pathlib.Path, store: ModelStore, depth_scale
         (work / sub).mkdir(parents=True)
     cams, gts, infos = {}, {}, {}
     clipped = n_ann = 0
+    amodal = amodal_masks(scene, len(instances))  # (T, N, H, W) or None
     for i in range(scene.num_frames):
         try:
             rgba = read_frame(scene.path, "rgba", i)
@@ -198,14 +200,17 @@ def export_scene(scene: Scene, out: pathlib.Path, store: ModelStore, depth_scale
             r = r_w2c @ r_obj
             t = r_w2c @ (np.asarray(inst["positions"][i], dtype=np.float64) * 1000.0) + t_w2c
             t = t + r @ model.centre
-            cam_pts = model.vertices @ r.T + t
-            if np.any(cam_pts[:, 2] <= 1.0):
-                raise ExportError(f"{scene.path.name}: frame {i}: instance {g} "
-                                  f"({inst.get('asset_id')}) reaches behind the camera; its "
-                                  "silhouette cannot be projected")
-            px = cam_pts[:, :2] / cam_pts[:, 2:3] * [k[0, 0], k[1, 1]] + [k[0, 2], k[1, 2]]
             visib = seg == g + 1
-            full = mdl.rasterise(px, model.faces, h, w) | visib
+            if amodal is not None:  # the scene's exact amodal layer (extra_layers=amodal)
+                full = amodal[i, g] | visib
+            else:
+                cam_pts = model.vertices @ r.T + t
+                if np.any(cam_pts[:, 2] <= 1.0):
+                    raise ExportError(f"{scene.path.name}: frame {i}: instance {g} "
+                                      f"({inst.get('asset_id')}) reaches behind the camera; its "
+                                      "silhouette cannot be projected")
+                px = cam_pts[:, :2] / cam_pts[:, 2:3] * [k[0, 0], k[1, 1]] + [k[0, 2], k[1, 2]]
+                full = mdl.rasterise(px, model.faces, h, w) | visib
             name = f"{i:06d}_{g:06d}.png"
             (work / "mask" / name).write_bytes(_png(full.astype(np.uint8) * 255))
             (work / "mask_visib" / name).write_bytes(_png(visib.astype(np.uint8) * 255))

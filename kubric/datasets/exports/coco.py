@@ -12,7 +12,10 @@ in that frame, derived from the segmentation layer:
 * ``area``: the number of pixels (= ``metadata["instances"][k − 1]["visibility"][i]``);
 * ``iscrowd`` 0, ``category_id`` from the recipe's labels (:mod:`.categories`);
 * additions: ``instance`` (k − 1) and ``asset_id``; images add ``scene``, ``seed``, ``frame``
-  and, for multi-view scenes, ``split``.
+  and, for multi-view scenes, ``split``;
+* scenes made with ``extra_layers=amodal``: KINS's amodal fields (:func:`kins_fields`):
+  ``a_segm`` (the amodal mask, RLE), ``a_bbox``, ``a_area`` and the visible ``i_segm``,
+  ``i_bbox``, ``i_area`` — for the instances visible in the frame, as KINS annotates.
 
 Ids: :mod:`kubric.datasets.exports.scenes`. The file is written as it goes (one scene in memory;
 annotations go to a hidden side file and are appended at the end) and renamed into place when
@@ -40,6 +43,7 @@ from kubric.datasets.exports.scenes import (
     image_id,
     load_scene,
 )
+from kubric.io.bitmask import MAX_MASKS, unpack_masks
 from kubric.io.layers import read_layer
 from kubric.io.paths import temp_name_for
 
@@ -84,6 +88,7 @@ def scene_records(scene: Scene, scheme, compressed: bool = True):
         raise ExportError(f"{scene.path.name}: segmentation label {int(seg.max())} but only "
                           f"{len(instances)} instances in metadata.json")
     views = scene.metadata["metadata"].get("views")
+    amodal = amodal_masks(scene, len(instances))
     images, annotations = [], []
     for i in range(scene.num_frames):
         rgb = f"rgba_{i:05d}.png"
@@ -105,8 +110,31 @@ def scene_records(scene: Scene, scheme, compressed: bool = True):
                    "bbox": mask_bbox(mask), "iscrowd": 0, "instance": label - 1,
                    "asset_id": instances[label - 1].get("asset_id")}
             ann.update(scheme.annotation_extras(scene, label - 1, i))
+            if amodal is not None:
+                ann.update(kins_fields(amodal[i, label - 1], ann, compressed))
             annotations.append(ann)
     return images, annotations
+
+
+def amodal_masks(scene: Scene, count: int):
+    """(T, N, H, W) amodal masks of a scene made with ``extra_layers=amodal``, else None."""
+    if not any(scene.path.glob("amodal_segmentation_*.png")):
+        return None
+    if count > MAX_MASKS:
+        raise ExportError(f"{scene.path.name}: {count} instances; the amodal bit planes hold at "
+                          f"most {MAX_MASKS}")
+    return unpack_masks(read_layer(scene.path, "amodal_segmentation"), count)
+
+
+def kins_fields(amodal: np.ndarray, ann: dict, compressed: bool = True) -> dict:
+    """KINS's amodal fields (KINS 2020 ``update_*_2020.json``, read by the amodal-instance
+    segmentation codebases that train on KINS) of one visible annotation: ``a_segm`` the
+    amodal mask as a COCO RLE (pycocotools decodes it, as KINS's polygons), ``a_bbox``
+    ``[x, y, w, h]`` pixels, ``a_area``; ``i_segm`` / ``i_bbox`` / ``i_area`` the visible
+    (inmodal) ones (= ``segmentation`` / ``bbox`` / ``area``)."""
+    return {"a_segm": rle.encode(amodal, compressed), "a_bbox": mask_bbox(amodal),
+            "a_area": int(amodal.sum()), "i_segm": ann["segmentation"], "i_bbox": ann["bbox"],
+            "i_area": ann["area"]}
 
 
 def _dump(item) -> str:
