@@ -19,6 +19,17 @@ horizontal sensor fit):
     ``cy = 0.5 + shift_y·W/H``; ``(u, v, 1) ∝ K @ p_cam``.
   * pixel intrinsics (OpenCV): ``[[fx, 0, cx·W], [0, fy, cy·H], [0, 0, 1]]``, ``fx = fy = f/sw·W``.
   * **depth** = Euclidean distance from the camera centre; **z** = distance along the view axis.
+Lens (``PerspectiveCamera.lens``, :mod:`kubric.core.lenses`; default none = the pinhole above):
+OpenCV's models with OpenCV's conventions. A camera-frame point ``p`` is turned into the OpenCV
+frame (``CAMERA_TO_OPENCV @ p``), the lens maps it to distorted normalised coordinates
+``(xd, yd)``, and the pixel intrinsics above (they are OpenCV's ``cameraMatrix``) give the pixel
+``(fx·xd + cx·W, fy·yd + cy·H)``, exactly what ``cv2.projectPoints`` (Brown–Conrady) or
+``cv2.fisheye.projectPoints`` (fisheye) return for the same K and coefficients. Each pixel means
+the ray the lens gives it (:func:`pixel_rays`): every exact layer, track and keypoint describes the
+distorted image. Points outside the lens's domain (behind the camera, or past the radius where
+the model folds back) have no image position: NaN pixels, sign −1 in :func:`project_points`;
+pixels outside the lens's image have no ray: NaN directions.
+
 Orthographic camera (``orthographic_scale`` = visible width in metres): ``u = x_cam / scale + cx``,
 ``v = -y_cam / (scale·H/W) + cy``; depth and z are both the distance from the image plane.
 """
@@ -28,6 +39,8 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 import numpy as np
+
+from kubric.core.lenses import PINHOLE
 
 #: Depth / z written where a pixel-centre ray hits nothing (metres).
 BACKGROUND_DEPTH = 10000.0
@@ -81,6 +94,17 @@ def is_orthographic(camera) -> bool:
     return hasattr(camera, "orthographic_scale")
 
 
+def lens_of(camera):
+    """The camera's lens model (:mod:`kubric.core.lenses`); orthographic cameras: the pinhole
+    identity."""
+    return getattr(camera, "lens", PINHOLE)
+
+
+def has_distortion(camera) -> bool:
+    """Whether the camera's lens is not the pinhole identity."""
+    return not lens_of(camera).is_pinhole
+
+
 def camera_to_world(camera, frame: float | None = None) -> np.ndarray:
     """(4, 4) camera → world matrix at ``frame`` (interpolated from keyframes; None = now)."""
     with camera.at_frame(frame):
@@ -116,6 +140,10 @@ def _project_camera_points(camera, cam: np.ndarray, resolution) -> np.ndarray:
     """(u, v, ±1) of points (..., 3) already in the camera frame."""
     w, h = image_size(camera, resolution)
     cx, cy = principal_point(camera, (w, h))
+    if has_distortion(camera):
+        xy = _lens_pixels(camera, cam, (w, h))
+        inside = np.isfinite(xy).all(axis=-1)
+        return np.stack([xy[..., 0] / w, xy[..., 1] / h, np.where(inside, 1.0, -1.0)], axis=-1)
     if is_orthographic(camera):
         s = float(camera.orthographic_scale)
         u = cam[..., 0] / s + cx
@@ -130,6 +158,26 @@ def _project_camera_points(camera, cam: np.ndarray, resolution) -> np.ndarray:
             v = -fy * cam[..., 1] / d + cy
         sign = np.sign(d)
     return np.stack([u, v, sign], axis=-1)
+
+
+def _lens_pixels(camera, cam: np.ndarray, resolution) -> np.ndarray:
+    """Pixel positions (..., 2) of camera-frame points (..., 3) through the camera's lens (NaN
+    outside its domain)."""
+    k = pixel_intrinsics(camera, resolution)
+    xy_d = lens_of(camera).project(cam @ CAMERA_TO_OPENCV.T)
+    return np.stack([k[0, 0] * xy_d[..., 0] + k[0, 2], k[1, 1] * xy_d[..., 1] + k[1, 2]], -1)
+
+
+def lens_directions(camera, pixels_xy, resolution=None) -> np.ndarray:
+    """Unit ray directions (..., 3) in the Blender camera frame through pixel positions (..., 2)
+    of a perspective camera, through its lens; NaN where the lens's image has no ray."""
+    k = pixel_intrinsics(camera, resolution)
+    xy = np.asarray(pixels_xy, dtype=np.float64)
+    xy_d = np.stack([(xy[..., 0] - k[0, 2]) / k[0, 0], (xy[..., 1] - k[1, 2]) / k[1, 1]], -1)
+    ab = lens_of(camera).undistort(xy_d)
+    opencv = np.concatenate([ab, np.ones(ab.shape[:-1] + (1,))], axis=-1)
+    opencv /= np.linalg.norm(opencv, axis=-1, keepdims=True)
+    return opencv @ CAMERA_TO_OPENCV.T  # the matrix is its own inverse
 
 
 def project_to_pixels(camera, points, frame: float | None = None, resolution=None):
@@ -170,9 +218,13 @@ def pixel_centres(height: int, width: int) -> np.ndarray:
 
 def pixel_rays(camera, pixels_xy, frame: float | None = None, resolution=None):
     """Rays through pixel positions (..., 2): returns (origins (..., 3), unit directions (..., 3))
-    in world coordinates (perspective cameras: :func:`pinhole_rays`)."""
+    in world coordinates (perspective cameras: :func:`pinhole_rays`; with a lens:
+    :func:`lens_directions`, NaN directions where the lens's image has no ray)."""
     w, h = image_size(camera, resolution)
     m = camera_to_world(camera, frame)
+    if has_distortion(camera):
+        dirs = lens_directions(camera, pixels_xy, (w, h)) @ m[:3, :3].T
+        return np.broadcast_to(m[:3, 3], dirs.shape).copy(), dirs
     if not is_orthographic(camera):
         return pinhole_rays(pixel_intrinsics(camera, (w, h)), m, pixels_xy)
     xy = np.asarray(pixels_xy, dtype=np.float64)
@@ -194,9 +246,12 @@ def unproject_pixels(camera, pixels_xy, depth, frame: float | None = None, resol
 
 
 def _depth_per_z(camera, w: int, h: int) -> np.ndarray:
-    """(H, W) factor depth / z at every pixel centre."""
+    """(H, W) factor depth / z at every pixel centre (1 at pixels with no ray through a lens)."""
     if is_orthographic(camera):
         return np.ones((h, w))
+    if has_distortion(camera):
+        dirs = lens_directions(camera, pixel_centres(h, w), (w, h))
+        return np.nan_to_num(-1.0 / dirs[..., 2], nan=1.0)
     cx, cy = principal_point(camera, (w, h))
     fx = camera.focal_length / camera.sensor_width
     fy = fx * w / h
