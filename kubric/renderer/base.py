@@ -70,6 +70,8 @@ class Capabilities:
       characters: it renders skinned characters (:class:`kubric.core.characters.Character`).
       quality_profiles: it takes the recipes' RGB quality settings (``samples_per_pixel``,
         ``use_denoising``, ``adaptive_sampling``, ...; docs/render-cost.md).
+      lenses: it renders a camera with a lens model (``PerspectiveCamera.lens``,
+        :mod:`kubric.core.lenses`) exactly: RGB and every layer through each pixel's lens ray.
     """
 
     photoreal: bool = False
@@ -78,6 +80,7 @@ class Capabilities:
     state_file_suffix: str | None = None
     characters: bool = False
     quality_profiles: bool = False
+    lenses: bool = False
 
     def __post_init__(self):
         object.__setattr__(self, "layers", tuple(self.layers))
@@ -110,6 +113,7 @@ NEEDS = {
     "characters": "render skinned characters",
     "save_state": "save its state as a scene file",
     "quality_profiles": "take the RGB quality settings (samples, denoising)",
+    "lenses": "render through a lens model (distortion)",
     **{effect: f"render {effect.replace('_', ' ')}" for effect in EFFECTS},
     **{layer: f"make the {layer} layer" for layer in ALL_LAYERS},
 }
@@ -129,7 +133,8 @@ BACKENDS = {
     "blender": Backend("kubric.renderer.blender:Blender", Capabilities(
         photoreal=True, effects={"motion_blur", "depth_of_field"}, state_file_suffix=".blend",
         characters=True, quality_profiles=True)),
-    "raycast": Backend("kubric.renderer.raycast:Raycast", Capabilities(photoreal=False)),
+    "raycast": Backend("kubric.renderer.raycast:Raycast", Capabilities(photoreal=False,
+                                                                       lenses=True)),
 }
 
 
@@ -220,6 +225,14 @@ class Renderer(abc.ABC):
         setting that asks for it) this backend does not render; a backend calls it for the
         effects its settings and scene ask for instead of ignoring them."""
         self._require({e: asked for e, asked in requests.items() if asked}, type(self).__name__)
+
+    def require_lens(self, camera) -> None:
+        """One line (:class:`CapabilityError`) when ``camera`` has a lens model (not the pinhole)
+        and this backend does not render lenses."""
+        lens = getattr(camera, "lens", None)
+        if lens is not None and not lens.is_pinhole:
+            self._require({"lenses": f"camera {camera.name!r} lens={lens.name}"},
+                          type(self).__name__)
 
     def _require(self, requests: dict[str, str], who: str) -> None:
         missing = {need: asked for need, asked in requests.items()

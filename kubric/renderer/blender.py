@@ -501,6 +501,7 @@ class Blender(TableView, Renderer):
                 raise FileNotFoundError(f"Blender.render: missing texture file(s) {missing}; "
                                         "pass ignore_missing_textures=True to render anyway")
         frames, wanted = self.check_request(frames, return_layers)
+        self.require_lens(self.scene.camera)
         self._sync()
         out = _FrameStack(len(frames))
         if "rgba" in wanted:
