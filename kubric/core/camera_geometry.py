@@ -36,6 +36,7 @@ Orthographic camera (``orthographic_scale`` = visible width in metres): ``u = x_
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Sequence
 
 import numpy as np
@@ -174,10 +175,7 @@ def lens_directions(camera, pixels_xy, resolution=None) -> np.ndarray:
     k = pixel_intrinsics(camera, resolution)
     xy = np.asarray(pixels_xy, dtype=np.float64)
     xy_d = np.stack([(xy[..., 0] - k[0, 2]) / k[0, 0], (xy[..., 1] - k[1, 2]) / k[1, 1]], -1)
-    ab = lens_of(camera).undistort(xy_d)
-    opencv = np.concatenate([ab, np.ones(ab.shape[:-1] + (1,))], axis=-1)
-    opencv /= np.linalg.norm(opencv, axis=-1, keepdims=True)
-    return opencv @ CAMERA_TO_OPENCV.T  # the matrix is its own inverse
+    return _directions_of(lens_of(camera).undistort(xy_d))
 
 
 def project_to_pixels(camera, points, frame: float | None = None, resolution=None):
@@ -238,6 +236,41 @@ def pixel_rays(camera, pixels_xy, frame: float | None = None, resolution=None):
     return origins, dirs
 
 
+def pixel_centre_rays(camera, frame: float | None = None, resolution=None):
+    """:func:`pixel_rays` through every pixel centre, (H·W, 3) each, row-major (pixel (r, c) at
+    index r·W + c); a lens's camera-frame directions are computed once per (lens, intrinsics,
+    size) and reused for every frame."""
+    w, h = image_size(camera, resolution)
+    if not has_distortion(camera):
+        return pixel_rays(camera, pixel_centres(h, w).reshape(-1, 2), frame, (w, h))
+    m = camera_to_world(camera, frame)
+    dirs = _centre_directions(camera, w, h).reshape(-1, 3) @ m[:3, :3].T
+    return np.broadcast_to(m[:3, 3], dirs.shape).copy(), dirs
+
+
+def _centre_directions(camera, w: int, h: int) -> np.ndarray:
+    """(H, W, 3) camera-frame lens directions of the pixel centres (cached, read-only)."""
+    k = pixel_intrinsics(camera, (w, h))
+    return _cached_directions(lens_of(camera), tuple(k.ravel().tolist()), w, h)
+
+
+@functools.lru_cache(maxsize=8)
+def _cached_directions(lens, k: tuple, w: int, h: int) -> np.ndarray:
+    k = np.asarray(k).reshape(3, 3)
+    xy = pixel_centres(h, w)
+    xy_d = np.stack([(xy[..., 0] - k[0, 2]) / k[0, 0], (xy[..., 1] - k[1, 2]) / k[1, 1]], -1)
+    dirs = _directions_of(lens.undistort(xy_d))
+    dirs.setflags(write=False)
+    return dirs
+
+
+def _directions_of(ab: np.ndarray) -> np.ndarray:
+    """Unit Blender-camera-frame directions (..., 3) of pinhole positions (..., 2) (OpenCV)."""
+    opencv = np.concatenate([ab, np.ones(ab.shape[:-1] + (1,))], axis=-1)
+    opencv /= np.linalg.norm(opencv, axis=-1, keepdims=True)
+    return opencv @ CAMERA_TO_OPENCV.T  # the matrix is its own inverse
+
+
 def unproject_pixels(camera, pixels_xy, depth, frame: float | None = None, resolution=None):
     """Inverse of :func:`project_to_pixels`: pixel positions (..., 2) and depth (...) → world
     points (..., 3)."""
@@ -250,8 +283,7 @@ def _depth_per_z(camera, w: int, h: int) -> np.ndarray:
     if is_orthographic(camera):
         return np.ones((h, w))
     if has_distortion(camera):
-        dirs = lens_directions(camera, pixel_centres(h, w), (w, h))
-        return np.nan_to_num(-1.0 / dirs[..., 2], nan=1.0)
+        return np.nan_to_num(-1.0 / _centre_directions(camera, w, h)[..., 2], nan=1.0)
     cx, cy = principal_point(camera, (w, h))
     fx = camera.focal_length / camera.sensor_width
     fy = fx * w / h

@@ -133,8 +133,7 @@ BACKENDS = {
     "blender": Backend("kubric.renderer.blender:Blender", Capabilities(
         photoreal=True, effects={"motion_blur", "depth_of_field"}, state_file_suffix=".blend",
         characters=True, quality_profiles=True)),
-    "raycast": Backend("kubric.renderer.raycast:Raycast", Capabilities(photoreal=False,
-                                                                       lenses=True)),
+    "raycast": Backend("kubric.renderer.raycast:Raycast", Capabilities(photoreal=False, lenses=True)),
 }
 
 

@@ -1,6 +1,6 @@
 """A CPU ray-casting renderer: the exact annotation layers from the scene model alone (no bpy).
 
-One ray per pixel centre (:func:`kubric.core.camera_geometry.pixel_rays`) is cast with Embree
+One ray per pixel centre (:func:`kubric.core.camera_geometry.pixel_centre_rays`) is cast with Embree
 (``embreex`` through trimesh; ``pip install kubric[raycast]``) into the scene's meshes posed at
 the frame; Embree only finds the triangle, and the hit is then recomputed in float64 on that
 triangle, so every layer is the value at the surface point seen through the pixel centre, as the
@@ -375,9 +375,8 @@ class Raycast(Renderer):
     def render_frame(self, camera, geometry, frame, wanted) -> dict[str, np.ndarray]:
         """One frame's layers ``wanted`` → {layer: (H, W, C)}."""
         w, h = self.scene.resolution
-        cols, rows = np.meshgrid(np.arange(w) + 0.5, np.arange(h) + 0.5)
-        centres = np.stack([cols, rows], -1).reshape(-1, 2)
-        origins, dirs = geo.pixel_rays(camera, centres, frame=frame, resolution=(w, h))
+        centres = geo.pixel_centres(h, w).reshape(-1, 2)
+        origins, dirs = geo.pixel_centre_rays(camera, frame=frame, resolution=(w, h))
         posed = _PosedScene(geometry, frame)
         has_ray = np.isfinite(dirs).all(axis=1)  # a lens's image may not fill the frame
         tri_id = np.full(len(dirs), -1, np.int64)

@@ -1,0 +1,70 @@
+"""Time a distorted camera against a pinhole one at the same output size (raycast backend, every
+layer: rgba and the eight exact layers), on the same simulated MOVi-A scene in one run.
+
+The lens's camera-frame pixel rays are computed once per (lens, intrinsics, size) and reused for
+every frame (:func:`kubric.core.camera_geometry.pixel_centre_rays`), so the per-frame cost of a
+lens is the rotation of those rays and the projection of the flow targets through the model.
+Reported: CPU seconds per frame (the stable measure on a shared machine) and the ratio to the
+pinhole; the first frame (which pays for the rays and the mesh files) is timed separately.
+
+Run: ``.venv/bin/python benchmarks/bench_lens.py [--size 256] [--frames 8] [--seed 3]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import resource
+import tempfile
+
+import numpy as np
+
+import kubric as kb
+from kubric.core import lenses
+from kubric.pipeline import get_recipe
+from kubric.recipes.lens_options import DEFAULT_COEFFICIENTS
+from kubric.renderer import ALL_LAYERS, create
+
+LENSES = {"pinhole": lenses.PINHOLE,
+          "opencv": lenses.from_record("opencv", DEFAULT_COEFFICIENTS["opencv"]),
+          "fisheye": lenses.from_record("fisheye", DEFAULT_COEFFICIENTS["fisheye"])}
+
+
+def cpu_seconds() -> float:
+    r = resource.getrusage(resource.RUSAGE_SELF)
+    return r.ru_utime + r.ru_stime
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--size", type=int, default=256)
+    ap.add_argument("--frames", type=int, default=8)
+    ap.add_argument("--seed", type=int, default=3)
+    args = ap.parse_args()
+    rec = get_recipe("movi_a").from_assignments([f"resolution={args.size}",
+                                                 f"frame_end={args.frames}", "renderer=raycast"])
+    with tempfile.TemporaryDirectory() as scratch:
+        scene = rec.make_scene()
+        sim = kb.simulator.PyBullet(scene, scratch)
+        rec.populate(scene, sim, np.random.RandomState(args.seed), rec.open_sources())
+        sim.run(frame_start=0, frame_end=scene.frame_end + 1)
+        sim.close()
+    rest = list(range(2, args.frames + 1))
+    results = {}
+    for name, lens in LENSES.items():
+        scene.camera.lens = lens
+        ray = create("raycast", scene)
+        start = cpu_seconds()
+        ray.render(frames=[1], return_layers=ALL_LAYERS)
+        first = cpu_seconds() - start
+        start = cpu_seconds()
+        ray.render(frames=rest, return_layers=ALL_LAYERS)
+        results[name] = ((cpu_seconds() - start) / len(rest), first)
+    print(f"movi_a seed {args.seed}, {args.size}², frames 2..{args.frames} (all layers, raycast)")
+    base = results["pinhole"][0]
+    for name, (per_frame, first) in results.items():
+        print(f"{name:8s} {per_frame:.3f} CPU-s/frame ({per_frame / base:.2f}× pinhole); "
+              f"first frame {first:.2f} CPU-s")
+
+
+if __name__ == "__main__":
+    main()
