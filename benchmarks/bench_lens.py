@@ -13,14 +13,10 @@ Run: ``.venv/bin/python benchmarks/bench_lens.py [--size 256] [--frames 8] [--se
 from __future__ import annotations
 
 import argparse
-import resource
-import tempfile
 
-import numpy as np
+from bench_raycast import cpu_seconds, simulated_scene
 
-import kubric as kb
 from kubric.core import lenses
-from kubric.pipeline import get_recipe
 from kubric.recipes.lens_options import DEFAULT_COEFFICIENTS
 from kubric.renderer import ALL_LAYERS, create
 
@@ -29,25 +25,13 @@ LENSES = {"pinhole": lenses.PINHOLE,
           "fisheye": lenses.from_record("fisheye", DEFAULT_COEFFICIENTS["fisheye"])}
 
 
-def cpu_seconds() -> float:
-    r = resource.getrusage(resource.RUSAGE_SELF)
-    return r.ru_utime + r.ru_stime
-
-
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--size", type=int, default=256)
     ap.add_argument("--frames", type=int, default=8)
     ap.add_argument("--seed", type=int, default=3)
     args = ap.parse_args()
-    rec = get_recipe("movi_a").from_assignments([f"resolution={args.size}",
-                                                 f"frame_end={args.frames}", "renderer=raycast"])
-    with tempfile.TemporaryDirectory() as scratch:
-        scene = rec.make_scene()
-        sim = kb.simulator.PyBullet(scene, scratch)
-        rec.populate(scene, sim, np.random.RandomState(args.seed), rec.open_sources())
-        sim.run(frame_start=0, frame_end=scene.frame_end + 1)
-        sim.close()
+    scene = simulated_scene("movi_a", args.size, args.frames, args.seed, "renderer=raycast")
     rest = list(range(2, args.frames + 1))
     results = {}
     for name, lens in LENSES.items():
