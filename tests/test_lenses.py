@@ -164,3 +164,21 @@ def test_depth_to_z_through_the_lens():
     m = geo.world_to_camera(cam)
     z = -(points @ m[2, :3] + m[2, 3])
     assert np.abs(geo.depth_to_z(cam, depth) - z).max() < 1e-4  # float32 result
+
+
+def test_dataset_rays_of_a_recorded_lens_are_the_cameras():
+    """The nerf_rays task's rays from the recorded numbers (intrinsics, pose, distortion) equal
+    the camera's own pixel rays."""
+    from kubric.annotations.metadata import get_camera_info
+    from kubric.datasets import tasks
+
+    for lens in (BROWN, FISHEYE, None):
+        _, cam = _camera_scene(lens)
+        info = get_camera_info(cam, frames=[0])
+        recorded = {k: np.asarray(v, np.float32) if k != "distortion_model" else v.encode()
+                    for k, v in info.items() if k in ("intrinsics_pixels", "distortion_model",
+                                                      "distortion_coefficients")}
+        origins, dirs = tasks.pixel_rays(recorded["intrinsics_pixels"], info["matrices_world"][0],
+                                         240, 320, tasks.camera_lens(recorded))
+        _, truth = geo.pixel_rays(cam, geo.pixel_centres(240, 320))
+        assert np.abs(dirs - truth).max() < 1e-6

@@ -172,10 +172,8 @@ def _lens_pixels(camera, cam: np.ndarray, resolution) -> np.ndarray:
 def lens_directions(camera, pixels_xy, resolution=None) -> np.ndarray:
     """Unit ray directions (..., 3) in the Blender camera frame through pixel positions (..., 2)
     of a perspective camera, through its lens; NaN where the lens's image has no ray."""
-    k = pixel_intrinsics(camera, resolution)
-    xy = np.asarray(pixels_xy, dtype=np.float64)
-    xy_d = np.stack([(xy[..., 0] - k[0, 2]) / k[0, 0], (xy[..., 1] - k[1, 2]) / k[1, 1]], -1)
-    return _directions_of(lens_of(camera).undistort(xy_d))
+    return pinhole_rays(pixel_intrinsics(camera, resolution), np.eye(4), pixels_xy,
+                        lens_of(camera))[1]
 
 
 def project_to_pixels(camera, points, frame: float | None = None, resolution=None):
@@ -189,20 +187,25 @@ def project_to_pixels(camera, points, frame: float | None = None, resolution=Non
     return xy, depth
 
 
-def pinhole_rays(intrinsics_pixels, camera_to_world, pixels_xy):
-    """The one pixel-ray function of a pinhole camera: rays through pixel positions (..., 2)
-    (x right, y down; the centre of pixel (row r, column c) is (c + 0.5, r + 0.5)) of a camera
-    with OpenCV intrinsics ``intrinsics_pixels`` (3, 3: fx, fy, cx, cy in pixels, no skew) and
-    ``camera_to_world`` (4, 4) in Blender camera axes (x right, y up, −z forward). Returns world
-    (origins (..., 3), unit directions (..., 3)), float64."""
+def pinhole_rays(intrinsics_pixels, camera_to_world, pixels_xy, lens=None):
+    """The one pixel-ray function of a camera given by numbers: rays through pixel positions
+    (..., 2) (x right, y down; the centre of pixel (row r, column c) is (c + 0.5, r + 0.5)) of a
+    camera with OpenCV intrinsics ``intrinsics_pixels`` (3, 3: fx, fy, cx, cy in pixels, no skew),
+    ``camera_to_world`` (4, 4) in Blender camera axes (x right, y up, −z forward) and an
+    optional ``lens`` (:mod:`kubric.core.lenses`; None = pinhole; NaN directions where the lens's
+    image has no ray). Returns world (origins (..., 3), unit directions (..., 3)), float64."""
     k = np.asarray(intrinsics_pixels, dtype=np.float64)
     if k.shape != (3, 3) or k[0, 1] != 0:
         raise ValueError(f"pinhole_rays: intrinsics must be a 3×3 matrix without skew, got "
                          f"{k.tolist()}")
     xy = np.asarray(pixels_xy, dtype=np.float64)
-    local = np.stack([(xy[..., 0] - k[0, 2]) / k[0, 0], -(xy[..., 1] - k[1, 2]) / k[1, 1],
-                      -np.ones(xy.shape[:-1])], axis=-1)
-    local /= np.linalg.norm(local, axis=-1, keepdims=True)
+    if lens is not None and not lens.is_pinhole:
+        xy_d = np.stack([(xy[..., 0] - k[0, 2]) / k[0, 0], (xy[..., 1] - k[1, 2]) / k[1, 1]], -1)
+        local = _directions_of(lens.undistort(xy_d))
+    else:
+        local = np.stack([(xy[..., 0] - k[0, 2]) / k[0, 0], -(xy[..., 1] - k[1, 2]) / k[1, 1],
+                          -np.ones(xy.shape[:-1])], axis=-1)
+        local /= np.linalg.norm(local, axis=-1, keepdims=True)
     m = np.asarray(camera_to_world, dtype=np.float64)
     dirs = local @ m[:3, :3].T
     return np.broadcast_to(m[:3, 3], dirs.shape).copy(), dirs

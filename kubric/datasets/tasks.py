@@ -10,7 +10,8 @@ task=NAME, **options)`` uses it. Built in:
 * ``frames``: one item per (scene, frame): ``image`` (H, W, 3) uint8, ``intrinsics_pixels``
   (3, 3; OpenCV), ``camera_to_world`` (4, 4; Blender camera axes), ``frame``, ``video_name``;
 * ``nerf_rays``: one item per (scene, frame): ``ray_origins`` and unit ``ray_directions``
-  (H, W, 3) in world space for every pixel centre, ``rgb`` (H, W, 3) float32 in [0, 1] and
+  (H, W, 3) in world space for every pixel centre (through the camera's lens model when the
+  dataset records one: ``camera/distortion_model``), ``rgb`` (H, W, 3) float32 in [0, 1] and
   ``depth`` (H, W) in metres (distance along the ray: ``origin + depth · direction`` is the
   surface point), plus ``frame`` and ``video_name``; on multi-view datasets a frame is a view;
 * ``multiview`` and ``svr`` (multi-view datasets): :mod:`kubric.datasets.multiview_tasks`;
@@ -40,6 +41,7 @@ from __future__ import annotations
 import numpy as np
 
 from kubric.core import camera_geometry as geo
+from kubric.core import lenses
 from kubric.datasets.layout import DatasetError
 from kubric.datasets.task_registry import (  # noqa: F401  (the registry's public names)
     TASKS,
@@ -94,16 +96,29 @@ def frames_task(example, frame):
 
 
 def pixel_rays(intrinsics_pixels: np.ndarray, camera_to_world: np.ndarray, height: int,
-               width: int) -> tuple[np.ndarray, np.ndarray]:
+               width: int, lens=None) -> tuple[np.ndarray, np.ndarray]:
     """World-space ray origins and unit directions (H, W, 3) through every pixel centre.
 
     ``intrinsics_pixels`` is OpenCV's (x right, y down, +z forward, pixel (r, c) centred at
     (c + 0.5, r + 0.5)); ``camera_to_world`` maps Blender camera axes (x right, y up, −z
-    forward) to the world.
+    forward) to the world; ``lens``: the camera's lens model (:func:`camera_lens`; None =
+    pinhole; NaN directions where its image has no ray).
     """
     origins, dirs = geo.pinhole_rays(intrinsics_pixels, camera_to_world,
-                                     geo.pixel_centres(height, width))
+                                     geo.pixel_centres(height, width), lens)
     return origins.astype(np.float32), dirs.astype(np.float32)
+
+
+def camera_lens(camera: dict):
+    """The lens of an example's camera features (``distortion_model`` and
+    ``distortion_coefficients``, OpenCV's order, zero-padded); pinhole when absent (datasets
+    written before lenses)."""
+    model = camera.get("distortion_model", "none")
+    model = model.decode() if isinstance(model, bytes) else str(model)
+    if model == "none":
+        return lenses.PINHOLE
+    coefficients = np.asarray(camera["distortion_coefficients"], np.float64)
+    return lenses.from_record(model, coefficients if model == "opencv" else coefficients[:4])
 
 
 def metric_depth(example: dict, frame) -> np.ndarray:
@@ -123,7 +138,7 @@ def nerf_rays_task(example, frame):
     camera = example["camera"]
     height, width = example["video"].shape[1:3]
     origins, dirs = pixel_rays(camera["intrinsics_pixels"], camera["matrices_world"][frame],
-                               height, width)
+                               height, width, camera_lens(camera))
     depth = metric_depth(example, frame)
     return {"ray_origins": origins, "ray_directions": dirs,
             "rgb": example["video"][frame].astype(np.float32) / 255.0, "depth": depth,
