@@ -184,3 +184,46 @@ def test_lens_ranges_are_drawn_from_the_scene_rng():
         assert isinstance(lens, lenses.Fisheye)
         assert 0 <= lens.k1 <= 0.1 and -0.02 <= lens.k2 <= 0 and 0 <= lens.k3 <= 0.01
     assert get_recipe("movi_a").from_assignments([]).make_lens(None) is lenses.PINHOLE
+
+
+def test_multiview_scene_records_the_lens_for_nerf_and_opencv(tmp_path):
+    """klevr with lens=opencv (raycast): the transforms files carry nerfstudio's OPENCV fields,
+    their rays are OpenCV's (cv2.undistortPoints), and every point of points.npz projects with
+    cv2.projectPoints onto the pixel centre it was unprojected from."""
+    coeffs = [-0.3, 0.1, 0.001, 0.002, -0.01]
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(NO_BPY), str(ROOT)]))
+    cmd = [sys.executable, "-m", "kubric", "worker", "klevr", "--seed", "2", "--out",
+           str(tmp_path)]
+    for o in ("resolution=48x40", "num_views=3", "split_ratio=1,1,1", "renderer=raycast",
+              "lens=opencv", "lens_coefficients=" + ",".join(map(str, coeffs))):
+        cmd += ["--set", o]
+    proc = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-2000:]
+    scene_dir = tmp_path / "scene_00000002"
+    data = json.loads((scene_dir / "transforms_train.json").read_text())
+    assert data["camera_model"] == "OPENCV"
+    assert [data[k] for k in ("k1", "k2", "p1", "p2", "k3")] == coeffs
+    from kubric.datasets.exports import nerf
+    entry = data["frames"][0]
+    _, dirs = nerf.pixel_rays_from_transforms(data, entry)
+    k = np.array([[data["fl_x"], 0, data["cx"]], [0, data["fl_y"], data["cy"]], [0, 0, 1.0]])
+    pix = np.stack(np.meshgrid(np.arange(48) + 0.5, np.arange(40) + 0.5), -1).reshape(-1, 2)
+    ab = cv2.undistortPointsIter(pix[:, None], k, np.array(coeffs), None, None, CRITERIA)[:, 0]
+    local = np.concatenate([ab, np.ones((len(ab), 1))], 1) * [1, -1, -1]  # OpenCV → Blender
+    local /= np.linalg.norm(local, axis=1, keepdims=True)
+    truth = local @ np.asarray(entry["transform_matrix"])[:3, :3].T
+    assert np.abs(dirs.reshape(-1, 3) - truth).max() < 1e-6
+    meta = json.loads((scene_dir / "metadata.json").read_text())
+    points = np.load(scene_dir / "points.npz")
+    for view in range(3):
+        sel = points["view"] == view
+        rvec, tvec, kk, dist = _opencv_camera(meta, view)
+        xy = cv2.projectPoints(points["xyz"][sel].astype(np.float64), rvec, tvec, kk, dist)[0]
+        centres = points["pixel"][sel][:, ::-1] + 0.5  # (row, col) → (x, y)
+        assert np.abs(xy[:, 0] - centres).max() < 1e-3
+
+
+def test_multiview_refuses_a_lens_nerfstudio_cannot_record():
+    with pytest.raises(OptionError, match=r"nerfstudio's OPENCV model\) have no k4, k5, k6"):
+        get_recipe("klevr").from_assignments(["renderer=raycast", "lens=opencv",
+                                              "lens_coefficients=0,0,0,0,0,0.1,0,0"])
