@@ -109,7 +109,7 @@ def test_lens_records_and_bad_values():
 
 def _camera_scene(lens):
     scene = kb.Scene(resolution=(320, 240))
-    cam = kb.PerspectiveCamera(focal_length=24.0, sensor_width=32.0, shift_x=0.02,
+    cam = kb.PerspectiveCamera(name="camera", focal_length=24.0, sensor_width=32.0, shift_x=0.02,
                                shift_y=-0.03, lens=lens, position=(3.0, -4.0, 2.5))
     scene += cam
     cam.look_at((0.2, 0.1, 0.3))
@@ -182,3 +182,16 @@ def test_dataset_rays_of_a_recorded_lens_are_the_cameras():
                                          240, 320, tasks.camera_lens(recorded))
         _, truth = geo.pixel_rays(cam, geo.pixel_centres(240, 320))
         assert np.abs(dirs - truth).max() < 1e-6
+
+
+@pytest.mark.blender
+def test_blender_refuses_a_camera_with_a_lens(tmp_path):
+    from kubric.renderer import base
+
+    scene, _ = _camera_scene(FISHEYE)
+    scene += kb.Cube()
+    renderer = base.create("blender", scene, tmp_path)
+    with pytest.raises(base.CapabilityError, match=r"renderer=blender cannot render through a "
+                       r"lens model \(distortion\) \(camera 'camera' lens=fisheye\); backends "
+                       r"that can: raycast"):
+        renderer.render(frames=[0], return_layers=("depth",))
