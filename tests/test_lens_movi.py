@@ -48,7 +48,8 @@ def scene(tmp_path_factory, request):
     assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-2000:]
     scene_dir = root / "scene_00000007"
     meta = json.loads((scene_dir / "metadata.json").read_text())
-    return request.param, meta, file_io.read_image_dict(scene_dir), read_tracks(scene_dir)
+    return (request.param, meta, file_io.read_image_dict(scene_dir), read_tracks(scene_dir),
+            scene_dir)
 
 
 def _opencv_camera(meta, t):
@@ -79,7 +80,7 @@ def _cv_rays(model, pixels, camera):
 
 
 def test_metadata_records_the_lens_in_opencvs_convention(scene):
-    model, meta, _, _ = scene
+    model, meta, _, _, _ = scene
     cam = meta["camera"]
     assert cam["distortion_model"] == model
     given = [float(v) for v in LENSES[model].split(",")]
@@ -94,7 +95,7 @@ def test_metadata_records_the_lens_in_opencvs_convention(scene):
 
 
 def test_tracks_are_opencvs_projection_of_their_points(scene):
-    model, meta, _, tracks = scene
+    model, meta, _, tracks, _ = scene
     assert len(tracks["target_points"]) == 300
     errors = []
     for t in range(T):
@@ -119,7 +120,7 @@ def _pose(instance, t):
 
 @pytest.mark.parametrize("layer, step", [("forward_flow", 1), ("backward_flow", -1)])
 def test_flow_is_the_reprojection_of_depth_and_poses_through_the_lens(scene, layer, step):
-    model, meta, layers, _ = scene
+    model, meta, layers, _, _ = scene
     errors = []
     for t in range(T):
         if not 0 <= t + step < T:
@@ -149,7 +150,7 @@ def test_flow_is_the_reprojection_of_depth_and_poses_through_the_lens(scene, lay
 
 
 def test_z_is_depth_along_opencvs_ray(scene):
-    model, meta, layers, _ = scene
+    model, meta, layers, _, _ = scene
     rows, cols, _ = _pixels_of_instances(layers, 0)
     pixels = np.stack([cols + 0.5, rows + 0.5], 1)
     rays = _cv_rays(model, pixels, _opencv_camera(meta, 0))
@@ -227,3 +228,31 @@ def test_multiview_refuses_a_lens_nerfstudio_cannot_record():
     with pytest.raises(OptionError, match=r"nerfstudio's OPENCV model\) have no k4, k5, k6"):
         get_recipe("klevr").from_assignments(["renderer=raycast", "lens=opencv",
                                               "lens_coefficients=0,0,0,0,0,0.1,0,0"])
+
+
+def test_viewer_unprojects_through_the_lens(scene):
+    from kubric.viewer.service import _unproject
+
+    model, meta, layers, _, _ = scene
+    rows, cols, _ = _pixels_of_instances(layers, 1)
+    camera = _opencv_camera(meta, 1)
+    rays = _cv_rays(model, np.stack([cols + 0.5, rows + 0.5], 1), camera)
+    rot_cv = cv2.Rodrigues(camera[0])[0]
+    for i in range(0, len(rows), max(1, len(rows) // 20)):
+        depth = float(layers["depth"][1, rows[i], cols[i], 0])
+        truth = -rot_cv.T @ camera[1] + rot_cv.T @ (rays[i] / np.linalg.norm(rays[i])) * depth
+        got = _unproject(meta["camera"], 1, int(cols[i]), int(rows[i]), depth)
+        assert np.abs(np.asarray(got) - truth).max() < 1e-6
+
+
+def test_pinhole_only_exports_refuse_a_lens_scene(scene, tmp_path):
+    from kubric.datasets.exports.bop import export_bop
+    from kubric.datasets.exports.lasr import export_lasr
+    from kubric.errors import InputError
+
+    model, _, _, _, scene_dir = scene
+    with pytest.raises(InputError, match=f"LASR's .* pinhole cameras only; .* lens {model}"):
+        export_lasr(scene_dir, tmp_path / "lasr")
+    with pytest.raises(InputError, match=f"BOP's cam_K describes pinhole cameras only; .* lens "
+                                         f"{model}"):
+        export_bop(scene_dir, tmp_path / "bop")

@@ -179,7 +179,7 @@ def test_dataset_rays_of_a_recorded_lens_are_the_cameras():
                     for k, v in info.items() if k in ("intrinsics_pixels", "distortion_model",
                                                       "distortion_coefficients")}
         origins, dirs = tasks.pixel_rays(recorded["intrinsics_pixels"], info["matrices_world"][0],
-                                         240, 320, tasks.camera_lens(recorded))
+                                         240, 320, lenses.from_camera_record(recorded))
         _, truth = geo.pixel_rays(cam, geo.pixel_centres(240, 320))
         assert np.abs(dirs - truth).max() < 1e-6
 

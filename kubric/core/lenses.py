@@ -365,3 +365,25 @@ def from_record(model: str, coefficients=()) -> Lens:
     if model == "opencv":
         return BrownConrady.from_opencv(coefficients)
     return Fisheye(*_coefficients("Fisheye", coefficients, 4))
+
+
+def from_camera_record(camera) -> Lens:
+    """The lens of a camera record (metadata.json's ``camera`` or a packed example's camera
+    features: ``distortion_model`` (str or bytes) and ``distortion_coefficients``, zero-padded to
+    8); the pinhole when the record has none (scenes written before lenses)."""
+    model = camera.get("distortion_model", "none")
+    model = model.decode() if isinstance(model, bytes) else str(model)
+    if model == "none":
+        return PINHOLE
+    coefficients = np.asarray(camera["distortion_coefficients"], np.float64).reshape(-1)
+    return from_record(model, coefficients if model == "opencv" else coefficients[:4])
+
+
+def pinhole_refusal(camera, what: str) -> str | None:
+    """One line when the camera record has a lens that ``what`` (a pinhole-only format) cannot
+    describe; None for a pinhole camera."""
+    lens = from_camera_record(camera)
+    if lens.is_pinhole:
+        return None
+    return (f"{what} describes pinhole cameras only; this scene's camera has the lens "
+            f"{lens.name} {list(lens.coefficients)} (metadata camera.distortion_model)")

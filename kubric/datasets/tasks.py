@@ -101,24 +101,13 @@ def pixel_rays(intrinsics_pixels: np.ndarray, camera_to_world: np.ndarray, heigh
 
     ``intrinsics_pixels`` is OpenCV's (x right, y down, +z forward, pixel (r, c) centred at
     (c + 0.5, r + 0.5)); ``camera_to_world`` maps Blender camera axes (x right, y up, −z
-    forward) to the world; ``lens``: the camera's lens model (:func:`camera_lens`; None =
-    pinhole; NaN directions where its image has no ray).
+    forward) to the world; ``lens``: the camera's lens model
+    (:func:`kubric.core.lenses.from_camera_record`; None = pinhole; NaN directions where its
+    image has no ray).
     """
     origins, dirs = geo.pinhole_rays(intrinsics_pixels, camera_to_world,
                                      geo.pixel_centres(height, width), lens)
     return origins.astype(np.float32), dirs.astype(np.float32)
-
-
-def camera_lens(camera: dict):
-    """The lens of an example's camera features (``distortion_model`` and
-    ``distortion_coefficients``, OpenCV's order, zero-padded); pinhole when absent (datasets
-    written before lenses)."""
-    model = camera.get("distortion_model", "none")
-    model = model.decode() if isinstance(model, bytes) else str(model)
-    if model == "none":
-        return lenses.PINHOLE
-    coefficients = np.asarray(camera["distortion_coefficients"], np.float64)
-    return lenses.from_record(model, coefficients if model == "opencv" else coefficients[:4])
 
 
 def metric_depth(example: dict, frame) -> np.ndarray:
@@ -138,7 +127,7 @@ def nerf_rays_task(example, frame):
     camera = example["camera"]
     height, width = example["video"].shape[1:3]
     origins, dirs = pixel_rays(camera["intrinsics_pixels"], camera["matrices_world"][frame],
-                               height, width, camera_lens(camera))
+                               height, width, lenses.from_camera_record(camera))
     depth = metric_depth(example, frame)
     return {"ray_origins": origins, "ray_directions": dirs,
             "rgb": example["video"][frame].astype(np.float32) / 255.0, "depth": depth,
