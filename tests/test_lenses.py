@@ -182,16 +182,3 @@ def test_dataset_rays_of_a_recorded_lens_are_the_cameras():
                                          240, 320, lenses.from_camera_record(recorded))
         _, truth = geo.pixel_rays(cam, geo.pixel_centres(240, 320))
         assert np.abs(dirs - truth).max() < 1e-6
-
-
-@pytest.mark.blender
-def test_blender_refuses_a_camera_with_a_lens(tmp_path):
-    from kubric.renderer import base
-
-    scene, _ = _camera_scene(FISHEYE)
-    scene += kb.Cube()
-    renderer = base.create("blender", scene, tmp_path)
-    with pytest.raises(base.CapabilityError, match=r"renderer=blender cannot render through a "
-                       r"lens model \(distortion\) \(camera 'camera' lens=fisheye\); backends "
-                       r"that can: raycast"):
-        renderer.render(frames=[0], return_layers=("depth",))

@@ -132,7 +132,7 @@ class Backend:
 BACKENDS = {
     "blender": Backend("kubric.renderer.blender:Blender", Capabilities(
         photoreal=True, effects={"motion_blur", "depth_of_field"}, state_file_suffix=".blend",
-        characters=True, quality_profiles=True)),
+        characters=True, quality_profiles=True, lenses=True)),
     "raycast": Backend("kubric.renderer.raycast:Raycast", Capabilities(photoreal=False, lenses=True)),
 }
 
@@ -224,14 +224,6 @@ class Renderer(abc.ABC):
         setting that asks for it) this backend does not render; a backend calls it for the
         effects its settings and scene ask for instead of ignoring them."""
         self._require({e: asked for e, asked in requests.items() if asked}, type(self).__name__)
-
-    def require_lens(self, camera) -> None:
-        """One line (:class:`CapabilityError`) when ``camera`` has a lens model (not the pinhole)
-        and this backend does not render lenses."""
-        lens = getattr(camera, "lens", None)
-        if lens is not None and not lens.is_pinhole:
-            self._require({"lenses": f"camera {camera.name!r} lens={lens.name}"},
-                          type(self).__name__)
 
     def _require(self, requests: dict[str, str], who: str) -> None:
         missing = {need: asked for need, asked in requests.items()
