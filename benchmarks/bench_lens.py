@@ -43,22 +43,24 @@ def main() -> None:
         backends["blender"] = {"samples_per_pixel": args.samples, "use_denoising": False}
     for backend, settings in backends.items():
         results = {}
+        scratch = tempfile.TemporaryDirectory()
+        renderer = create(backend, scene, scratch.name, **settings)  # one per scene (Blender)
         for name, lens in LENSES.items():
             scene.camera.lens = lens
-            with tempfile.TemporaryDirectory() as scratch:
-                renderer = create(backend, scene, scratch, **settings)
-                start = cpu_seconds()
-                renderer.render(frames=[1], return_layers=ALL_LAYERS)
-                first = cpu_seconds() - start
-                start = cpu_seconds()
-                renderer.render(frames=rest, return_layers=ALL_LAYERS)
-                results[name] = ((cpu_seconds() - start) / len(rest), first)
+            start = cpu_seconds()
+            renderer.render(frames=[1], return_layers=ALL_LAYERS)
+            first = cpu_seconds() - start
+            start = cpu_seconds()
+            renderer.render(frames=rest, return_layers=ALL_LAYERS)
+            results[name] = ((cpu_seconds() - start) / len(rest), first)
+        scratch.cleanup()
         print(f"movi_a seed {args.seed}, {args.size}², frames 2..{args.frames} (all layers, "
               f"{backend} {settings or ''})")
         base = results["pinhole"][0]
         for name, (per_frame, first) in results.items():
             print(f"  {name:8s} {per_frame:.3f} CPU-s/frame ({per_frame / base:.2f}× pinhole); "
                   f"first frame {first:.2f} CPU-s")
+
 
 if __name__ == "__main__":
     main()

@@ -5,9 +5,10 @@ the distorted image, and the annotation decoding that a custom camera needs.
 The camera shader receives the sample's raster position (x right, y **up**, in [0, 1]) and
 returns the ray in Cycles' camera space (x right, y up, looking down +z). Pixel position
 ``(x, y) = (rx·W, (1 − ry)·H)`` (y down, centres at +0.5), distorted normalised position
-``((x − cx) / fx, (y − cy) / fy)``, then the model's inverse, as
-:meth:`kubric.core.lenses.Lens.undistort` computes it (bisection on the radius / angle, Newton's
-method for Brown–Conrady's tangential terms), in OSL's 32-bit floats; a position without a ray
+``((x − cx) / fx, (y − cy) / fy)``, then the model's inverse in OSL's 32-bit floats: Newton's
+method from a first-order guess, and where that does not converge inside the domain the safe
+path of :meth:`kubric.core.lenses.Lens.undistort` (bisection on the radius / angle, then Newton);
+a position without a ray
 (outside the lens's image) gets throughput 0 (nothing: background in every pass). The lens and
 the intrinsics are baked into the shader's source (a camera with a lens keeps its focal length
 and shift: keyframing them is refused).
@@ -52,17 +53,12 @@ float kb_ratio(float r2) {
     return (1.0 + r2 * (%(k1)r + r2 * (%(k2)r + r2 * %(k3)r)))
          / (1.0 + r2 * (%(k4)r + r2 * (%(k5)r + r2 * %(k6)r)));
 }
-""" + _HEADER + """    float lo = 0.0, hi = edge;
-    if (rd >= edge * kb_ratio(edge * edge)) { lo = edge * 0.999999; hi = lo; }
-    for (int i = 0; i < 64; i++) {
-        float mid = 0.5 * (lo + hi);
-        if (mid * kb_ratio(mid * mid) < rd) lo = mid; else hi = mid;
-    }
-    float r = 0.5 * (lo + hi);
-    float a = rd > 0.0 ? xd * r / rd : 0.0;
-    float b = rd > 0.0 ? yd * r / rd : 0.0;
-    float ok = 0.0, res = 1.0;
-    for (int i = 0; i < 12; i++) {
+// n Newton steps on the full model from (a, b); res: the residual before the last step
+void kb_newton(float xd, float yd, int n, output float a, output float b, output float res,
+               output float ok) {
+    res = 1.0;
+    ok = 0.0;
+    for (int i = 0; i < n; i++) {
         float r2 = a * a + b * b;
         float num = 1.0 + r2 * (%(k1)r + r2 * (%(k2)r + r2 * %(k3)r));
         float den = 1.0 + r2 * (%(k4)r + r2 * (%(k5)r + r2 * %(k6)r));
@@ -76,13 +72,32 @@ float kb_ratio(float r2) {
         float j01 = 2.0 * a * b * dq + 2.0 * %(p1)r * a + 2.0 * %(p2)r * b;
         float j11 = q + 2.0 * b * b * dq + 6.0 * %(p1)r * b + 2.0 * %(p2)r * a;
         float det = j00 * j11 - j01 * j01;
-        res = max(fabs(ex), fabs(ey));  // before the last step: ~1e-7 once converged
+        res = max(fabs(ex), fabs(ey));
         ok = (det > 0.0 && den > 0.0) ? 1.0 : 0.0;
         if (ok == 0.0) break;
         a -= (j11 * ex - j01 * ey) / det;
         b -= (j00 * ey - j01 * ex) / det;
     }
-    if (ok == 0.0 || res > 1e-4 * max(1.0, rd) || hypot(a, b) >= edge) throughput = color(0.0);
+}
+""" + _HEADER + """    float tol = 1e-5 * max(1.0, rd);
+    // fast path: Newton from the first-order inverse
+    float q0 = kb_ratio(rd * rd);
+    float a = xd / q0, b = yd / q0, res, ok;
+    kb_newton(xd, yd, 5, a, b, res, ok);
+    if (ok == 0.0 || !(res < tol) || !(hypot(a, b) < edge)) {
+        // safe path: the radius by bisection on the increasing radial map, then Newton
+        float lo = 0.0, hi = edge;
+        if (rd >= edge * kb_ratio(edge * edge)) { lo = edge * 0.999999; hi = lo; }
+        for (int i = 0; i < 28; i++) {
+            float mid = 0.5 * (lo + hi);
+            if (mid * kb_ratio(mid * mid) < rd) lo = mid; else hi = mid;
+        }
+        float r = 0.5 * (lo + hi);
+        a = rd > 0.0 ? xd * r / rd : 0.0;
+        b = rd > 0.0 ? yd * r / rd : 0.0;
+        kb_newton(xd, yd, 6, a, b, res, ok);
+    }
+    if (ok == 0.0 || !(res < 10.0 * tol) || !(hypot(a, b) < edge)) throughput = color(0.0);
     direction = normalize(vector(a, -b, 1.0));
 }
 """
@@ -92,13 +107,26 @@ float kb_theta_d(float t) {
     float t2 = t * t;
     return t * (1.0 + t2 * (%(k1)r + t2 * (%(k2)r + t2 * (%(k3)r + t2 * %(k4)r))));
 }
+float kb_slope(float t) {
+    float t2 = t * t;
+    return 1.0 + t2 * (3.0 * %(k1)r + t2 * (5.0 * %(k2)r + t2 * (7.0 * %(k3)r + t2 * 9.0 * %(k4)r)));
+}
 """ + _HEADER + """    if (rd >= kb_theta_d(edge)) throughput = color(0.0);
-    float lo = 0.0, hi = edge;
-    for (int i = 0; i < 64; i++) {
-        float mid = 0.5 * (lo + hi);
-        if (kb_theta_d(mid) < rd) lo = mid; else hi = mid;
+    float t = rd;  // fast path: Newton from theta = theta_d
+    float err = 1.0;
+    for (int i = 0; i < 5; i++) {
+        err = kb_theta_d(t) - rd;
+        t -= err / kb_slope(t);
     }
-    float t = 0.5 * (lo + hi);
+    if (!(fabs(err) < 1e-5 * max(1.0, rd)) || !(t >= 0.0 && t < edge)) {
+        float lo = 0.0, hi = edge;  // safe path: bisection on theta_d, then Newton
+        for (int i = 0; i < 28; i++) {
+            float mid = 0.5 * (lo + hi);
+            if (kb_theta_d(mid) < rd) lo = mid; else hi = mid;
+        }
+        t = 0.5 * (lo + hi);
+        for (int i = 0; i < 2; i++) t -= (kb_theta_d(t) - rd) / kb_slope(t);
+    }
     float s = sin(t);
     float ux = rd > 0.0 ? xd / rd : 0.0;
     float uy = rd > 0.0 ? yd / rd : 0.0;
