@@ -1,5 +1,6 @@
-"""Real MOVi-A scenes rendered through a lens (``lens=opencv`` / ``lens=fisheye``, raycast backend,
-bpy blocked), read back from the scene directory and checked with OpenCV itself:
+"""Real MOVi-A scenes rendered through a lens (``lens=opencv`` / ``lens=fisheye``; the raycast
+backend with bpy blocked, and the blender backend's custom lens camera), read back from the scene
+directory and checked with OpenCV itself:
 
 * tracks: ``cv2.projectPoints`` / ``cv2.fisheye.projectPoints`` of every track's 3D point, with
   the camera of metadata.json, lands on the written pixel position (< 1e-3 px);
@@ -34,21 +35,27 @@ LENSES = {"opencv": "-0.3,0.09,0.002,-0.001,-0.01", "fisheye": "0.2,-0.05,0.01,-
 CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 200, 1e-15)
 
 
-@pytest.fixture(scope="module", params=sorted(LENSES))
+@pytest.fixture(scope="module", params=[
+    ("opencv", "raycast"), ("fisheye", "raycast"),
+    pytest.param(("fisheye", "blender"), marks=pytest.mark.blender),
+    pytest.param(("opencv", "blender"), marks=pytest.mark.blender)], ids="-".join)
 def scene(tmp_path_factory, request):
+    model, renderer = request.param
     root = tmp_path_factory.mktemp("lens")
-    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(NO_BPY), str(ROOT)]))
-    options = [f"resolution={W}x{H}", f"frame_end={T}", "renderer=raycast",
+    paths = [str(ROOT)] if renderer == "blender" else [str(NO_BPY), str(ROOT)]
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(paths))
+    options = [f"resolution={W}x{H}", f"frame_end={T}", f"renderer={renderer}",
                "max_num_objects=5", "tracks=300", "track_stride=2", "track_max_fraction=0.5",
-               f"lens={request.param}", f"lens_coefficients={LENSES[request.param]}"]
+               f"lens={model}", f"lens_coefficients={LENSES[model]}"]
+    options += ["samples=2", "denoise=false"] if renderer == "blender" else []
     cmd = [sys.executable, "-m", "kubric", "worker", "movi_a", "--seed", "7", "--out", str(root)]
     for o in options:
         cmd += ["--set", o]
-    proc = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True, timeout=300)
+    proc = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-2000:]
     scene_dir = root / "scene_00000007"
     meta = json.loads((scene_dir / "metadata.json").read_text())
-    return (request.param, meta, file_io.read_image_dict(scene_dir), read_tracks(scene_dir),
+    return (model, meta, file_io.read_image_dict(scene_dir), read_tracks(scene_dir),
             scene_dir)
 
 
@@ -253,3 +260,10 @@ def test_pinhole_only_exports_refuse_a_lens_scene(scene, tmp_path):
     with pytest.raises(InputError, match=f"BOP's cam_K describes pinhole cameras only; .* lens "
                                          f"{model}"):
         export_bop(scene_dir, tmp_path / "bop")
+
+
+def test_lens_with_characters_is_refused_before_rendering():
+    with pytest.raises(OptionError, match=r"movi_e: lens=opencv with characters=1: skinned "
+                                          r"characters are rendered through a pinhole camera "
+                                          r"only"):
+        get_recipe("movi_e").from_assignments(["lens=opencv", "characters=1"])
