@@ -267,3 +267,38 @@ def test_lens_with_characters_is_refused_before_rendering():
                                           r"characters are rendered through a pinhole camera "
                                           r"only"):
         get_recipe("movi_e").from_assignments(["lens=opencv", "characters=1"])
+
+
+def test_sampled_lens_is_recorded_and_leaves_the_rest_of_the_scene(tmp_path):
+    """lens_coefficients_high: each seed draws its own coefficients within the ranges (recorded
+    in metadata.json), after every other draw: the objects are those of the pinhole scene."""
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(NO_BPY), str(ROOT)]))
+    low, high = [0.0, -0.02, 0.0, 0.0], [0.1, 0.0, 0.01, 0.001]
+    common = ["resolution=32x24", "frame_end=2", "renderer=raycast", "max_num_objects=4"]
+    runs = {"pinhole": common, "lens": common + [
+        "lens=fisheye", "lens_coefficients=" + ",".join(map(str, low)),
+        "lens_coefficients_high=" + ",".join(map(str, high))]}
+    meta = {}
+    for name, options in runs.items():
+        for seed in (1, 2):
+            out = tmp_path / f"{name}{seed}"
+            cmd = [sys.executable, "-m", "kubric", "worker", "movi_a", "--seed", str(seed),
+                   "--out", str(out)]
+            for o in options:
+                cmd += ["--set", o]
+            proc = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True,
+                                  timeout=300)
+            assert proc.returncode == 0, proc.stderr[-2000:]
+            meta[name, seed] = json.loads(
+                (out / f"scene_{seed:08d}" / "metadata.json").read_text())
+    drawn = [meta["lens", s]["camera"]["distortion_coefficients"][:4] for s in (1, 2)]
+    assert drawn[0] != drawn[1]
+    for values in drawn:
+        assert all(lo <= v <= hi for lo, v, hi in zip(low, values, high, strict=True))
+    for seed in (1, 2):
+        a, b = meta["pinhole", seed], meta["lens", seed]
+        assert a["camera"]["distortion_model"] == "none"
+        assert a["camera"]["matrices_world"] == b["camera"]["matrices_world"]
+        # (instances are sorted by visible pixels, which the lens changes)
+        assert sorted(map(str, (i["positions"] for i in a["instances"]))) == \
+            sorted(map(str, (i["positions"] for i in b["instances"])))
