@@ -169,13 +169,6 @@ def _lens_pixels(camera, cam: np.ndarray, resolution) -> np.ndarray:
     return np.stack([k[0, 0] * xy_d[..., 0] + k[0, 2], k[1, 1] * xy_d[..., 1] + k[1, 2]], -1)
 
 
-def lens_directions(camera, pixels_xy, resolution=None) -> np.ndarray:
-    """Unit ray directions (..., 3) in the Blender camera frame through pixel positions (..., 2)
-    of a perspective camera, through its lens; NaN where the lens's image has no ray."""
-    return pinhole_rays(pixel_intrinsics(camera, resolution), np.eye(4), pixels_xy,
-                        lens_of(camera))[1]
-
-
 def project_to_pixels(camera, points, frame: float | None = None, resolution=None):
     """World points (..., 3) → (pixel xy (..., 2), depth (...)): depth is the distance to the camera
     centre (perspective) or to the image plane (orthographic)."""
@@ -219,15 +212,12 @@ def pixel_centres(height: int, width: int) -> np.ndarray:
 
 def pixel_rays(camera, pixels_xy, frame: float | None = None, resolution=None):
     """Rays through pixel positions (..., 2): returns (origins (..., 3), unit directions (..., 3))
-    in world coordinates (perspective cameras: :func:`pinhole_rays`; with a lens:
-    :func:`lens_directions`, NaN directions where the lens's image has no ray)."""
+    in world coordinates (perspective cameras: :func:`pinhole_rays`, through the camera's lens:
+    NaN directions where the lens's image has no ray)."""
     w, h = image_size(camera, resolution)
     m = camera_to_world(camera, frame)
-    if has_distortion(camera):
-        dirs = lens_directions(camera, pixels_xy, (w, h)) @ m[:3, :3].T
-        return np.broadcast_to(m[:3, 3], dirs.shape).copy(), dirs
     if not is_orthographic(camera):
-        return pinhole_rays(pixel_intrinsics(camera, (w, h)), m, pixels_xy)
+        return pinhole_rays(pixel_intrinsics(camera, (w, h)), m, pixels_xy, lens_of(camera))
     xy = np.asarray(pixels_xy, dtype=np.float64)
     u, v = xy[..., 0] / w, xy[..., 1] / h
     cx, cy = principal_point(camera, (w, h))
@@ -259,10 +249,7 @@ def _centre_directions(camera, w: int, h: int) -> np.ndarray:
 
 @functools.lru_cache(maxsize=8)
 def _cached_directions(lens, k: tuple, w: int, h: int) -> np.ndarray:
-    k = np.asarray(k).reshape(3, 3)
-    xy = pixel_centres(h, w)
-    xy_d = np.stack([(xy[..., 0] - k[0, 2]) / k[0, 0], (xy[..., 1] - k[1, 2]) / k[1, 1]], -1)
-    dirs = _directions_of(lens.undistort(xy_d))
+    dirs = pinhole_rays(np.asarray(k).reshape(3, 3), np.eye(4), pixel_centres(h, w), lens)[1]
     dirs.setflags(write=False)
     return dirs
 
