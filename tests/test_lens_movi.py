@@ -323,6 +323,10 @@ def test_packed_lens_scene_gives_rays_through_the_lens(scene, tmp_path):
     assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-2000:]
     example = load(out, "train")[0]
     assert example["camera"]["distortion_model"] in (model, model.encode())
+    frame = load(out, "train", task="frames")[1]
+    assert frame["distortion_model"] in (model, model.encode())
+    assert np.allclose(frame["distortion_coefficients"],
+                       meta["camera"]["distortion_coefficients"], rtol=1e-6)
     rays = load(out, "train", task="nerf_rays")
     for t in range(T):
         item = rays[t]

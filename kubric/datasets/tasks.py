@@ -8,7 +8,9 @@ task=NAME, **options)`` uses it. Built in:
   (keep every k-th frame), ``num_frames`` (keep the first n after striding) and ``resize``
   ((height, width), area-averaged when shrinking, bilinear otherwise);
 * ``frames``: one item per (scene, frame): ``image`` (H, W, 3) uint8, ``intrinsics_pixels``
-  (3, 3; OpenCV), ``camera_to_world`` (4, 4; Blender camera axes), ``frame``, ``video_name``;
+  (3, 3; OpenCV), ``camera_to_world`` (4, 4; Blender camera axes), ``frame``, ``video_name``,
+  and where the dataset records the lens ``distortion_model`` and ``distortion_coefficients``
+  (OpenCV's order, zero-padded to 8: :mod:`kubric.core.lenses`);
 * ``nerf_rays``: one item per (scene, frame): ``ray_origins`` and unit ``ray_directions``
   (H, W, 3) in world space for every pixel centre (through the camera's lens model when the
   dataset records one: ``camera/distortion_model``), ``rgb`` (H, W, 3) float32 in [0, 1] and
@@ -89,10 +91,14 @@ def video_task(example, frame, frame_stride: int = 1, num_frames: int | None = N
 def frames_task(example, frame):
     """Single RGB frames with their camera (OpenCV intrinsics, camera-to-world pose)."""
     camera = example["camera"]
-    return {"image": example["video"][frame].copy(),  # the source keeps the scene for its next frame
-            "intrinsics_pixels": camera["intrinsics_pixels"].copy(),
-            "camera_to_world": camera["matrices_world"][frame].copy(), "frame": np.int32(frame),
-            "video_name": example["metadata"]["video_name"]}
+    out = {"image": example["video"][frame].copy(),  # the source keeps the scene for its next frame
+           "intrinsics_pixels": camera["intrinsics_pixels"].copy(),
+           "camera_to_world": camera["matrices_world"][frame].copy(), "frame": np.int32(frame),
+           "video_name": example["metadata"]["video_name"]}
+    if "distortion_model" in camera:  # the lens, where the dataset records one
+        out["distortion_model"] = camera["distortion_model"]
+        out["distortion_coefficients"] = np.asarray(camera["distortion_coefficients"]).copy()
+    return out
 
 
 def pixel_rays(intrinsics_pixels: np.ndarray, camera_to_world: np.ndarray, height: int,
