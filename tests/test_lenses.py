@@ -182,3 +182,25 @@ def test_dataset_rays_of_a_recorded_lens_are_the_cameras():
                                          240, 320, lenses.from_camera_record(recorded))
         _, truth = geo.pixel_rays(cam, geo.pixel_centres(240, 320))
         assert np.abs(dirs - truth).max() < 1e-6
+
+
+@pytest.mark.parametrize("lens", [BROWN, FISHEYE], ids=["opencv", "fisheye"])
+def test_character_keypoints_are_opencvs_projection(lens):
+    """The keypoint annotation of a walking (procedural) person seen by a moving lens camera:
+    keypoints_2d = cv2.projectPoints / cv2.fisheye.projectPoints of keypoints_3d (< 1e-3 px)."""
+    from character_fixtures import walking_scene
+
+    from kubric.annotations.keypoints import character_keypoints
+
+    scene, person = walking_scene(frames=3)
+    scene.camera.lens = lens
+    frames = [1, 2, 3]
+    depth = np.full((3, 64, 64, 1), geo.BACKGROUND_DEPTH, np.float32)  # occlusion is not tested
+    seg = np.zeros((3, 64, 64, 1), np.uint32)
+    out = character_keypoints(scene.camera, frames, depth, seg, scene.assets, person)
+    for t, f in enumerate(frames):
+        with scene.camera.at_frame(f):
+            rvec, tvec = _opencv_pose(scene.camera)
+            k = scene.camera.intrinsics_pixels
+        theirs = _cv_project(lens, out["keypoints_3d"][t].astype(np.float64), k, rvec, tvec)
+        assert np.abs(out["keypoints_2d"][t] - theirs).max() < 1e-3
