@@ -1,7 +1,9 @@
 """The blender backend through a lens (a Cycles custom OSL camera, kubric.renderer.blender_lens)
 against the raycast backend as the oracle (whose lens rays are checked against OpenCV in
 tests/test_lens_movi.py): the same exact layers on a small scene with a moving object, a shifted
-principal point and each lens model; and what it refuses."""
+principal point and each lens model; a walking person's flow through the custom-camera path
+against Cycles' motion vectors; a real pose_estimation scene's keypoints against OpenCV; and what
+it refuses."""
 
 import numpy as np
 import pytest
@@ -74,3 +76,63 @@ def test_blender_refuses_what_its_lens_camera_cannot_render(tmp_path):
     with pytest.raises(base.CapabilityError, match=r"camera 'camera' has a lens and keyframed "
                                                    r"\['focal_length'\]"):
         renderer.render(frames=[1], return_layers=("depth",))
+
+
+def test_character_flow_through_a_custom_camera_equals_cycles_motion_vectors(tmp_path):
+    """A walking (procedural) person: the flow a lens camera computes from the rest-pose AOV
+    (kubric.renderer.blender_lens.rest_anchors + the skinned mesh at t ± 1) equals Cycles' own
+    motion vectors of the pinhole camera, with the lens set to zero coefficients (the same rays
+    through the custom-camera path)."""
+    from character_fixtures import walking_scene
+
+    out = {}
+    for name, lens in (("pinhole", None), ("custom", lenses.BrownConrady())):
+        scene, _ = walking_scene(frames=3)
+        scene.camera.lens = lens
+        out[name] = base.create("blender", scene, tmp_path / name, samples_per_pixel=1).render(
+            return_layers=("depth", "segmentation", "forward_flow", "backward_flow"))
+    a, b = out["pinhole"], out["custom"]
+    seg = a["segmentation"][..., 0]
+    assert np.array_equal(seg, b["segmentation"][..., 0])
+    single = maximum_filter(seg, size=(1, 3, 3)) == minimum_filter(seg, size=(1, 3, 3))
+    person = single & (seg == 1)  # the person is the first asset
+    assert person.sum() > 100
+    rel = np.abs(a["depth"] - b["depth"])[..., 0][single & (seg > 0)] / a["depth"][..., 0][
+        single & (seg > 0)]
+    assert rel.max() < 5e-6
+    for name in ("forward_flow", "backward_flow"):
+        assert np.abs(a[name][person]).max() > 0.5  # the person moves
+        assert np.abs(a[name] - b[name])[person].max() < 1e-3
+
+
+def test_pose_estimation_keypoints_through_a_lens_are_opencvs(tmp_path):
+    """A real pose_estimation scene with lens=fisheye: every person's keypoints_2d is
+    cv2.fisheye.projectPoints of its keypoints_3d with the recorded camera (< 1e-3 px)."""
+    import json
+
+    import cv2
+
+    from tests.collection_fixtures import run_worker
+    from tests.test_pose_estimation import PROCEDURAL
+
+    run_worker("pose_estimation", 3, tmp_path, ["resolution=64", "frame_end=3", "quality=draft",
+                                                "max_num_people=2", "lens=fisheye",
+                                                "lens_coefficients=0.2,-0.05,0.01,-0.002",
+                                                *PROCEDURAL])
+    meta = json.loads((tmp_path / "scene_00000003" / "metadata.json").read_text())
+    cam = meta["camera"]
+    assert cam["distortion_model"] == "fisheye"
+    k = np.asarray(cam["intrinsics_pixels"], np.float64)
+    dist = np.asarray(cam["distortion_coefficients"][:4], np.float64)
+    checked = 0
+    for person in meta["instances"]:
+        if "keypoints_3d" not in person:
+            continue
+        for t, ext in enumerate(cam["extrinsics_opencv"]):
+            ext = np.asarray(ext, np.float64)
+            kp3 = np.asarray(person["keypoints_3d"][t], np.float64)
+            xy = cv2.fisheye.projectPoints(kp3[:, None], cv2.Rodrigues(ext[:3, :3])[0],
+                                           ext[:3, 3], k, dist)[0][:, 0]
+            assert np.abs(np.asarray(person["keypoints_2d"][t]) - xy).max() < 1e-3
+            checked += 1
+    assert checked >= 3

@@ -263,16 +263,6 @@ def test_pinhole_only_exports_refuse_a_lens_scene(scene, tmp_path):
         export_bop(scene_dir, tmp_path / "bop")
 
 
-def test_lens_with_characters_is_refused_before_rendering():
-    with pytest.raises(OptionError, match=r"movi_e: lens=opencv with skinned characters "
-                                          r"\(characters=1\): they are rendered through a "
-                                          r"pinhole camera only"):
-        get_recipe("movi_e").from_assignments(["lens=opencv", "characters=1"])
-    with pytest.raises(OptionError, match=r"pose_estimation: lens=fisheye with skinned "
-                                          r"characters \(the pose_estimation recipe\)"):
-        get_recipe("pose_estimation").from_assignments(["lens=fisheye"])
-
-
 def test_sampled_lens_is_recorded_and_leaves_the_rest_of_the_scene(tmp_path):
     """lens_coefficients_high: each seed draws its own coefficients within the ranges (recorded
     in metadata.json), after every other draw: the objects are those of the pinhole scene."""

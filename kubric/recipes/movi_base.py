@@ -121,11 +121,6 @@ class MoviBase(ExposureOptions, RenderQuality, Recipe, LensOptions):
                               f"of frame_rate={self.frame_rate}")
         check_source_options(self)
         self.check_lens()
-        people = self.renderer_requests().get("characters")  # characters=N, pose_estimation
-        if self.lens != "none" and people:
-            raise OptionError(f"{self.name}: lens={self.lens} with skinned characters ({people}): "
-                              "they are rendered through a pinhole camera only (their flow "
-                              "needs Cycles' motion vectors)")
         self.check_renderer()
         self.check_tracks()
         check_min_max(self)

@@ -19,8 +19,9 @@ against Blender's own perspective camera: identical labels, and): Cycles' Depth 
 project through a custom camera). So :func:`lens_layers` takes ``depth`` from the Depth pass,
 ``z`` = :func:`~kubric.core.camera_geometry.depth_to_z`, and the flow as the raycast backend does:
 the surface point of the ``object_coordinates`` AOV (the object's unscaled local frame) moved with
-its object's pose at t ± 1 and projected through the lens. Skinned characters (whose AOV is the
-rest pose) are refused with a lens.
+its object's pose at t ± 1 and projected through the lens. On a skinned character the AOV is the
+rest-pose point: :func:`rest_anchors` finds its (triangle, barycentric) on the rest mesh and the
+point moves with the skinned mesh (``Character.surface_points`` at t ± 1).
 """
 
 from __future__ import annotations
@@ -33,6 +34,7 @@ import numpy as np
 
 from kubric.core import camera_geometry as geo
 from kubric.core import lenses
+from kubric.core.characters import Character
 
 _TEXT_NAME = "kubric_lens.osl"
 
@@ -216,10 +218,15 @@ def lens_layers(passes, camera, frame, assets, wanted) -> dict:
         for i in np.unique(owners):
             sel = owners == i
             asset = assets[i - 1]
+            local = aov[rows[sel], cols[sel]]
+            if isinstance(asset, Character):  # the AOV is the rest-pose point: its material point
+                tri, bary = rest_anchors(asset, local)
+                moved[sel] = asset.surface_points(tri, bary, frame + step)
+                continue
             with asset.at_frame(frame + step):
                 m = asset.matrix_world
                 scale = np.asarray(asset.scale, np.float64)
-            moved[sel] = (aov[rows[sel], cols[sel]] * scale) @ m[:3, :3].T + m[:3, 3]
+            moved[sel] = (local * scale) @ m[:3, :3].T + m[:3, 3]
         xy, _ = geo.project_to_pixels(camera, moved, frame=frame + step, resolution=(w, h))
         flow = np.zeros((h, w, 2), np.float32)
         delta = xy - centres[rows, cols]
@@ -228,15 +235,47 @@ def lens_layers(passes, camera, frame, assets, wanted) -> dict:
     return out
 
 
+def rest_anchors(character, points, candidates: int = 16):
+    """(triangle (N,), barycentric (N, 3)) of rest-pose points (N, 3) (model frame) on the
+    character's rest mesh: among the ``candidates`` triangles with the nearest centroids, the
+    one nearest to the point, and the point's barycentric coordinates on it (clipped to the
+    triangle)."""
+    from scipy.spatial import cKDTree
+    faces = np.asarray(character.faces, np.int64)
+    tris = np.asarray(character.vertices, np.float64)[faces]                 # (F, 3, 3)
+    k = min(candidates, len(faces))
+    _, near = cKDTree(tris.mean(axis=1)).query(points, k=k)
+    near = np.asarray(near).reshape(len(points), k)
+    best = np.full(len(points), np.inf)
+    tri = np.zeros(len(points), np.int64)
+    bary = np.zeros((len(points), 3))
+    for j in range(k):
+        b = _barycentric(tris[near[:, j]], points)
+        dist = np.linalg.norm(np.einsum("nk,nkj->nj", b, tris[near[:, j]]) - points, axis=1)
+        better = dist < best
+        best[better], tri[better], bary[better] = dist[better], near[better, j], b[better]
+    return tri, bary
+
+
+def _barycentric(tris, points):
+    """Barycentric coordinates (N, 3) of the points' projections onto triangles (N, 3, 3),
+    clipped to the triangle (then renormalised)."""
+    a, e1, e2 = tris[:, 0], tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0]
+    d = points - a
+    g11, g12, g22 = (np.einsum("ij,ij->i", x, y) for x, y in ((e1, e1), (e1, e2), (e2, e2)))
+    r1, r2 = np.einsum("ij,ij->i", d, e1), np.einsum("ij,ij->i", d, e2)
+    det = np.where(np.abs(g11 * g22 - g12 * g12) > 1e-300, g11 * g22 - g12 * g12, 1e-300)
+    u = (g22 * r1 - g12 * r2) / det
+    v = (g11 * r2 - g12 * r1) / det
+    b = np.clip(np.stack([1 - u - v, u, v], -1), 0.0, None)
+    return b / np.maximum(b.sum(axis=1, keepdims=True), 1e-300)
+
+
 def check_scene(scene) -> str | None:
     """Why the blender backend cannot render this scene's lens (one line), or None."""
     camera = scene.camera
     if not geo.has_distortion(camera):
         return None
-    from kubric.core.characters import Character
-    if any(isinstance(a, Character) for a in scene.assets):
-        return (f"camera {camera.name!r} has a lens: the blender backend renders a lens camera "
-                "without skinned characters only (their flow needs Cycles' motion vectors)")
     keyed = [n for n in ("focal_length", "shift_x", "shift_y") if camera.keyframes.get(n)]
     if keyed:
         return (f"camera {camera.name!r} has a lens and keyframed {keyed}: the lens shader "
