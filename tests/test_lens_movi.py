@@ -178,6 +178,9 @@ def test_lens_options_are_checked():
                                  "lens_coefficients=0,0,0,0", "lens_coefficients_high=0.1,0"])
     with pytest.raises(OptionError, match="lens"):
         movi_a.from_assignments(["renderer=raycast", "lens=kb4"])
+    with pytest.raises(OptionError, match=r"lens=fisheye with dof=True: a lens-model camera is a "
+                                          r"pinhole aperture"):
+        movi_a.from_assignments(["lens=fisheye", "dof=true"])
 
 
 def test_lens_ranges_are_drawn_from_the_scene_rng():

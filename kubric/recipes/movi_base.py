@@ -121,6 +121,9 @@ class MoviBase(ExposureOptions, RenderQuality, Recipe, LensOptions):
                               f"of frame_rate={self.frame_rate}")
         check_source_options(self)
         self.check_lens()
+        if self.lens != "none" and self.dof:
+            raise OptionError(f"{self.name}: lens={self.lens} with dof=True: a lens-model camera "
+                              "is a pinhole aperture (no depth of field); drop one")
         self.check_renderer()
         self.check_tracks()
         check_min_max(self)
