@@ -34,6 +34,20 @@ def timed(fn):
     return value, time.perf_counter() - w, cpu_seconds() - c
 
 
+def simulated_scene(recipe: str, size: int, frames: int, seed: int, *options: str):
+    """The recipe's scene for ``seed`` (size², frames 1..frames, ``options`` as ``key=value``),
+    populated and simulated, not rendered."""
+    rec = get_recipe(recipe).from_assignments([f"resolution={size}", f"frame_end={frames}",
+                                               *options])
+    with tempfile.TemporaryDirectory() as scratch:
+        scene = rec.make_scene()
+        sim = kb.simulator.PyBullet(scene, scratch)
+        rec.populate(scene, sim, np.random.RandomState(seed), rec.open_sources())
+        sim.run(frame_start=0, frame_end=scene.frame_end + 1)
+        sim.close()
+    return scene
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--recipe", default="movi_a")
@@ -41,14 +55,8 @@ def main() -> None:
     ap.add_argument("--frames", type=int, default=8)
     ap.add_argument("--seed", type=int, default=3)
     args = ap.parse_args()
-    rec = get_recipe(args.recipe).from_assignments([f"resolution={args.size}",
-                                                    f"frame_end={args.frames}"])
+    scene = simulated_scene(args.recipe, args.size, args.frames, args.seed)
     with tempfile.TemporaryDirectory() as scratch:
-        scene = rec.make_scene()
-        sim = kb.simulator.PyBullet(scene, scratch)
-        rec.populate(scene, sim, np.random.RandomState(args.seed), rec.open_sources())
-        sim.run(frame_start=0, frame_end=scene.frame_end + 1)
-        sim.close()
         n = args.frames
         ray = create("raycast", scene)
         _, setup_r, _ = timed(lambda: ray.render(frames=[1], return_layers=("segmentation",)))

@@ -153,7 +153,8 @@ def test_backend_example_touches_two_files_and_renders(tmp_path):
     base = package / "kubric" / "renderer" / "base.py"
     row = code[("row", "kubric/renderer/base.py")]
     text = base.read_text()
-    anchor = '    "raycast": Backend("kubric.renderer.raycast:Raycast", Capabilities(photoreal=False)),\n'
+    anchor = ('    "raycast": Backend("kubric.renderer.raycast:Raycast", Capabilities(photoreal=False, '
+              'lenses=True)),\n')
     assert anchor in text
     base.write_text(text.replace(anchor, anchor + row))
     changed = _changed_files(ROOT / "kubric", package / "kubric")

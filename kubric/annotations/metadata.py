@@ -23,7 +23,11 @@ CAMERA_CONVENTIONS = (
     "-> world with Blender camera axes (x right, y up, looking down -z). K is upstream Kubric's "
     "normalised form: (u, v, 1) ~ K @ p_cam with u, v in [0, 1], origin at the top-left image "
     "corner, v down. intrinsics_pixels is OpenCV's (x right, y down, looking down +z, pixel "
-    "(row r, col c) centred at (c+0.5, r+0.5)). depth = Euclidean distance to the camera centre.")
+    "(row r, col c) centred at (c+0.5, r+0.5)). depth = Euclidean distance to the camera centre. "
+    "distortion_model / distortion_coefficients: OpenCV's lens model (none, opencv = "
+    "cv2.projectPoints' k1,k2,p1,p2,k3,k4,k5,k6; fisheye = cv2.fisheye's k1..k4, zero-padded to 8) "
+    "with intrinsics_pixels as its cameraMatrix; extrinsics_opencv (T,4,4) maps world -> OpenCV "
+    "camera axes.")
 
 
 def _frames(scene, frames) -> list[int]:
@@ -86,8 +90,11 @@ def get_camera_info(camera, frames: Sequence[float] | None = None, resolution=No
     Returns: ``focal_length`` and ``sensor_width`` (mm), ``field_of_view`` (horizontal, rad)
     (perspective) or ``orthographic_scale`` (m); ``positions`` (T,3) and ``quaternions`` (T,4
     WXYZ); ``K`` (3,3 normalised), ``R`` (4,4 camera→world at the first frame),
-    ``matrices_world`` (T,4,4), ``intrinsics_pixels`` (3,3, perspective only), ``resolution``
-    and a ``conventions`` note (see :mod:`kubric.core.camera_geometry`).
+    ``matrices_world`` (T,4,4), ``extrinsics_opencv`` (T,4,4 world → OpenCV camera axes),
+    ``intrinsics_pixels`` (3,3, perspective only: OpenCV's cameraMatrix), ``distortion_model``
+    and ``distortion_coefficients`` (perspective only: the lens, OpenCV's order, zero-padded to
+    8; :mod:`kubric.core.lenses`), ``resolution`` and a ``conventions`` note (see
+    :mod:`kubric.core.camera_geometry`).
     """
     scene = camera.active_scene
     if frames is None and scene is None:
@@ -102,6 +109,7 @@ def get_camera_info(camera, frames: Sequence[float] | None = None, resolution=No
         "K": geo.normalised_intrinsics(camera, resolution),
         "R": matrices[0],
         "matrices_world": matrices,
+        "extrinsics_opencv": np.stack([_to_opencv(camera, f) for f in frames]),
         "positions": camera.get_values_over_time("position", frames),
         "quaternions": camera.get_values_over_time("quaternion", frames),
         "resolution": [int(v) for v in resolution],
@@ -114,8 +122,19 @@ def get_camera_info(camera, frames: Sequence[float] | None = None, resolution=No
         info["sensor_width"] = float(camera.sensor_width)
         info["field_of_view"] = float(camera.field_of_view)
         info["intrinsics_pixels"] = geo.pixel_intrinsics(camera, resolution)
+        lens = geo.lens_of(camera)
+        info["distortion_model"] = lens.name
+        info["distortion_coefficients"] = np.pad(np.asarray(lens.coefficients, np.float64),
+                                                 (0, 8 - len(lens.coefficients)))
     info.update(extra)
     return info
+
+
+def _to_opencv(camera, frame) -> np.ndarray:
+    """(4, 4) world → OpenCV camera (x right, y down, looking down +z) at ``frame``."""
+    out = geo.world_to_camera(camera, frame)
+    out[:3] = geo.CAMERA_TO_OPENCV @ out[:3]
+    return out
 
 
 def bboxes_3d_over_time(asset, frames: Sequence[float]) -> np.ndarray:

@@ -19,15 +19,29 @@ horizontal sensor fit):
     ``cy = 0.5 + shift_y·W/H``; ``(u, v, 1) ∝ K @ p_cam``.
   * pixel intrinsics (OpenCV): ``[[fx, 0, cx·W], [0, fy, cy·H], [0, 0, 1]]``, ``fx = fy = f/sw·W``.
   * **depth** = Euclidean distance from the camera centre; **z** = distance along the view axis.
+Lens (``PerspectiveCamera.lens``, :mod:`kubric.core.lenses`; default none = the pinhole above):
+OpenCV's models with OpenCV's conventions. A camera-frame point ``p`` is turned into the OpenCV
+frame (``CAMERA_TO_OPENCV @ p``), the lens maps it to distorted normalised coordinates
+``(xd, yd)``, and the pixel intrinsics above (they are OpenCV's ``cameraMatrix``) give the pixel
+``(fx·xd + cx·W, fy·yd + cy·H)``, exactly what ``cv2.projectPoints`` (Brown–Conrady) or
+``cv2.fisheye.projectPoints`` (fisheye) return for the same K and coefficients. Each pixel means
+the ray the lens gives it (:func:`pixel_rays`): every exact layer, track and keypoint describes the
+distorted image. Points outside the lens's domain (behind the camera, or past the radius where
+the model folds back) have no image position: NaN pixels, sign −1 in :func:`project_points`;
+pixels outside the lens's image have no ray: NaN directions.
+
 Orthographic camera (``orthographic_scale`` = visible width in metres): ``u = x_cam / scale + cx``,
 ``v = -y_cam / (scale·H/W) + cy``; depth and z are both the distance from the image plane.
 """
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Sequence
 
 import numpy as np
+
+from kubric.core.lenses import PINHOLE
 
 #: Depth / z written where a pixel-centre ray hits nothing (metres).
 BACKGROUND_DEPTH = 10000.0
@@ -81,6 +95,17 @@ def is_orthographic(camera) -> bool:
     return hasattr(camera, "orthographic_scale")
 
 
+def lens_of(camera):
+    """The camera's lens model (:mod:`kubric.core.lenses`); orthographic cameras: the pinhole
+    identity."""
+    return getattr(camera, "lens", PINHOLE)
+
+
+def has_distortion(camera) -> bool:
+    """Whether the camera's lens is not the pinhole identity."""
+    return not lens_of(camera).is_pinhole
+
+
 def camera_to_world(camera, frame: float | None = None) -> np.ndarray:
     """(4, 4) camera → world matrix at ``frame`` (interpolated from keyframes; None = now)."""
     with camera.at_frame(frame):
@@ -116,6 +141,10 @@ def _project_camera_points(camera, cam: np.ndarray, resolution) -> np.ndarray:
     """(u, v, ±1) of points (..., 3) already in the camera frame."""
     w, h = image_size(camera, resolution)
     cx, cy = principal_point(camera, (w, h))
+    if has_distortion(camera):
+        xy = _lens_pixels(camera, cam, (w, h))
+        inside = np.isfinite(xy).all(axis=-1)
+        return np.stack([xy[..., 0] / w, xy[..., 1] / h, np.where(inside, 1.0, -1.0)], axis=-1)
     if is_orthographic(camera):
         s = float(camera.orthographic_scale)
         u = cam[..., 0] / s + cx
@@ -132,6 +161,14 @@ def _project_camera_points(camera, cam: np.ndarray, resolution) -> np.ndarray:
     return np.stack([u, v, sign], axis=-1)
 
 
+def _lens_pixels(camera, cam: np.ndarray, resolution) -> np.ndarray:
+    """Pixel positions (..., 2) of camera-frame points (..., 3) through the camera's lens (NaN
+    outside its domain)."""
+    k = pixel_intrinsics(camera, resolution)
+    xy_d = lens_of(camera).project(cam @ CAMERA_TO_OPENCV.T)
+    return np.stack([k[0, 0] * xy_d[..., 0] + k[0, 2], k[1, 1] * xy_d[..., 1] + k[1, 2]], -1)
+
+
 def project_to_pixels(camera, points, frame: float | None = None, resolution=None):
     """World points (..., 3) → (pixel xy (..., 2), depth (...)): depth is the distance to the camera
     centre (perspective) or to the image plane (orthographic)."""
@@ -143,20 +180,25 @@ def project_to_pixels(camera, points, frame: float | None = None, resolution=Non
     return xy, depth
 
 
-def pinhole_rays(intrinsics_pixels, camera_to_world, pixels_xy):
-    """The one pixel-ray function of a pinhole camera: rays through pixel positions (..., 2)
-    (x right, y down; the centre of pixel (row r, column c) is (c + 0.5, r + 0.5)) of a camera
-    with OpenCV intrinsics ``intrinsics_pixels`` (3, 3: fx, fy, cx, cy in pixels, no skew) and
-    ``camera_to_world`` (4, 4) in Blender camera axes (x right, y up, −z forward). Returns world
-    (origins (..., 3), unit directions (..., 3)), float64."""
+def pinhole_rays(intrinsics_pixels, camera_to_world, pixels_xy, lens=None):
+    """The one pixel-ray function of a camera given by numbers: rays through pixel positions
+    (..., 2) (x right, y down; the centre of pixel (row r, column c) is (c + 0.5, r + 0.5)) of a
+    camera with OpenCV intrinsics ``intrinsics_pixels`` (3, 3: fx, fy, cx, cy in pixels, no skew),
+    ``camera_to_world`` (4, 4) in Blender camera axes (x right, y up, −z forward) and an
+    optional ``lens`` (:mod:`kubric.core.lenses`; None = pinhole; NaN directions where the lens's
+    image has no ray). Returns world (origins (..., 3), unit directions (..., 3)), float64."""
     k = np.asarray(intrinsics_pixels, dtype=np.float64)
     if k.shape != (3, 3) or k[0, 1] != 0:
         raise ValueError(f"pinhole_rays: intrinsics must be a 3×3 matrix without skew, got "
                          f"{k.tolist()}")
     xy = np.asarray(pixels_xy, dtype=np.float64)
-    local = np.stack([(xy[..., 0] - k[0, 2]) / k[0, 0], -(xy[..., 1] - k[1, 2]) / k[1, 1],
-                      -np.ones(xy.shape[:-1])], axis=-1)
-    local /= np.linalg.norm(local, axis=-1, keepdims=True)
+    if lens is not None and not lens.is_pinhole:
+        xy_d = np.stack([(xy[..., 0] - k[0, 2]) / k[0, 0], (xy[..., 1] - k[1, 2]) / k[1, 1]], -1)
+        local = _directions_of(lens.undistort(xy_d))
+    else:
+        local = np.stack([(xy[..., 0] - k[0, 2]) / k[0, 0], -(xy[..., 1] - k[1, 2]) / k[1, 1],
+                          -np.ones(xy.shape[:-1])], axis=-1)
+        local /= np.linalg.norm(local, axis=-1, keepdims=True)
     m = np.asarray(camera_to_world, dtype=np.float64)
     dirs = local @ m[:3, :3].T
     return np.broadcast_to(m[:3, 3], dirs.shape).copy(), dirs
@@ -170,11 +212,12 @@ def pixel_centres(height: int, width: int) -> np.ndarray:
 
 def pixel_rays(camera, pixels_xy, frame: float | None = None, resolution=None):
     """Rays through pixel positions (..., 2): returns (origins (..., 3), unit directions (..., 3))
-    in world coordinates (perspective cameras: :func:`pinhole_rays`)."""
+    in world coordinates (perspective cameras: :func:`pinhole_rays`, through the camera's lens:
+    NaN directions where the lens's image has no ray)."""
     w, h = image_size(camera, resolution)
     m = camera_to_world(camera, frame)
     if not is_orthographic(camera):
-        return pinhole_rays(pixel_intrinsics(camera, (w, h)), m, pixels_xy)
+        return pinhole_rays(pixel_intrinsics(camera, (w, h)), m, pixels_xy, lens_of(camera))
     xy = np.asarray(pixels_xy, dtype=np.float64)
     u, v = xy[..., 0] / w, xy[..., 1] / h
     cx, cy = principal_point(camera, (w, h))
@@ -186,6 +229,38 @@ def pixel_rays(camera, pixels_xy, frame: float | None = None, resolution=None):
     return origins, dirs
 
 
+def pixel_centre_rays(camera, frame: float | None = None, resolution=None):
+    """:func:`pixel_rays` through every pixel centre, (H·W, 3) each, row-major (pixel (r, c) at
+    index r·W + c); a lens's camera-frame directions are computed once per (lens, intrinsics,
+    size) and reused for every frame."""
+    w, h = image_size(camera, resolution)
+    if not has_distortion(camera):
+        return pixel_rays(camera, pixel_centres(h, w).reshape(-1, 2), frame, (w, h))
+    m = camera_to_world(camera, frame)
+    dirs = _centre_directions(camera, w, h).reshape(-1, 3) @ m[:3, :3].T
+    return np.broadcast_to(m[:3, 3], dirs.shape).copy(), dirs
+
+
+def _centre_directions(camera, w: int, h: int) -> np.ndarray:
+    """(H, W, 3) camera-frame lens directions of the pixel centres (cached, read-only)."""
+    k = pixel_intrinsics(camera, (w, h))
+    return _cached_directions(lens_of(camera), tuple(k.ravel().tolist()), w, h)
+
+
+@functools.lru_cache(maxsize=8)
+def _cached_directions(lens, k: tuple, w: int, h: int) -> np.ndarray:
+    dirs = pinhole_rays(np.asarray(k).reshape(3, 3), np.eye(4), pixel_centres(h, w), lens)[1]
+    dirs.setflags(write=False)
+    return dirs
+
+
+def _directions_of(ab: np.ndarray) -> np.ndarray:
+    """Unit Blender-camera-frame directions (..., 3) of pinhole positions (..., 2) (OpenCV)."""
+    opencv = np.concatenate([ab, np.ones(ab.shape[:-1] + (1,))], axis=-1)
+    opencv /= np.linalg.norm(opencv, axis=-1, keepdims=True)
+    return opencv @ CAMERA_TO_OPENCV.T  # the matrix is its own inverse
+
+
 def unproject_pixels(camera, pixels_xy, depth, frame: float | None = None, resolution=None):
     """Inverse of :func:`project_to_pixels`: pixel positions (..., 2) and depth (...) → world
     points (..., 3)."""
@@ -194,9 +269,11 @@ def unproject_pixels(camera, pixels_xy, depth, frame: float | None = None, resol
 
 
 def _depth_per_z(camera, w: int, h: int) -> np.ndarray:
-    """(H, W) factor depth / z at every pixel centre."""
+    """(H, W) factor depth / z at every pixel centre (1 at pixels with no ray through a lens)."""
     if is_orthographic(camera):
         return np.ones((h, w))
+    if has_distortion(camera):
+        return np.nan_to_num(-1.0 / _centre_directions(camera, w, h)[..., 2], nan=1.0)
     cx, cy = principal_point(camera, (w, h))
     fx = camera.focal_length / camera.sensor_width
     fy = fx * w / h

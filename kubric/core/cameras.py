@@ -8,6 +8,7 @@ import numpy as np
 from kubric.core import camera_geometry as geo
 from kubric.core import traits as kt
 from kubric.core.assets import UndefinedAsset
+from kubric.core.lenses import PINHOLE, Lens
 from kubric.core.objects import Object3D
 
 
@@ -55,6 +56,9 @@ class PerspectiveCamera(Camera):
       focal_length: mm (default 50). sensor_width: mm (default 36), horizontal.
       field_of_view: horizontal, radians (setting it changes focal_length).
       use_dof, focus_distance (m), aperture_fstop: thin-lens depth of field (renderer only).
+      lens: the lens model (:mod:`kubric.core.lenses`: ``BrownConrady``, ``Fisheye``; default
+        the pinhole identity); projections, pixel rays and every exact layer go through it
+        (:mod:`kubric.core.camera_geometry`). Not keyframed.
     """
 
     focal_length = kt.Float(50.0, 1e-3, 1e5, "focal length (mm)")
@@ -62,6 +66,8 @@ class PerspectiveCamera(Camera):
     use_dof = kt.Property(False, kt.as_bool(), "render with depth of field")
     focus_distance = kt.Float(10.0, 0.0, doc="distance to the plane in focus (m)")
     aperture_fstop = kt.Float(2.8, 1e-3, doc="f-number of the aperture")
+    lens = kt.Property(PINHOLE, lambda v, o, n: _as_lens(v, o, n),
+                       "lens model (kubric.core.lenses; OpenCV's conventions)")
 
     @property
     def field_of_view(self) -> float:
@@ -78,6 +84,15 @@ class PerspectiveCamera(Camera):
         """mm, from the scene's aspect ratio (square pixels)."""
         w, h = geo.image_size(self)
         return self.sensor_width * h / w
+
+
+def _as_lens(value, owner, name):
+    if value is None:
+        return PINHOLE
+    if not isinstance(value, Lens):
+        raise TypeError(f"{type(owner).__name__}.{name} must be a kubric.core.lenses lens "
+                        f"(Pinhole, BrownConrady, Fisheye) or None, got {value!r}")
+    return value
 
 
 class OrthographicCamera(Camera):

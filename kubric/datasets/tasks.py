@@ -8,9 +8,12 @@ task=NAME, **options)`` uses it. Built in:
   (keep every k-th frame), ``num_frames`` (keep the first n after striding) and ``resize``
   ((height, width), area-averaged when shrinking, bilinear otherwise);
 * ``frames``: one item per (scene, frame): ``image`` (H, W, 3) uint8, ``intrinsics_pixels``
-  (3, 3; OpenCV), ``camera_to_world`` (4, 4; Blender camera axes), ``frame``, ``video_name``;
+  (3, 3; OpenCV), ``camera_to_world`` (4, 4; Blender camera axes), ``frame``, ``video_name``,
+  and where the dataset records the lens ``distortion_model`` and ``distortion_coefficients``
+  (OpenCV's order, zero-padded to 8: :mod:`kubric.core.lenses`);
 * ``nerf_rays``: one item per (scene, frame): ``ray_origins`` and unit ``ray_directions``
-  (H, W, 3) in world space for every pixel centre, ``rgb`` (H, W, 3) float32 in [0, 1] and
+  (H, W, 3) in world space for every pixel centre (through the camera's lens model when the
+  dataset records one: ``camera/distortion_model``), ``rgb`` (H, W, 3) float32 in [0, 1] and
   ``depth`` (H, W) in metres (distance along the ray: ``origin + depth · direction`` is the
   surface point), plus ``frame`` and ``video_name``; on multi-view datasets a frame is a view;
 * ``multiview`` and ``svr`` (multi-view datasets): :mod:`kubric.datasets.multiview_tasks`;
@@ -42,6 +45,7 @@ from __future__ import annotations
 import numpy as np
 
 from kubric.core import camera_geometry as geo
+from kubric.core import lenses
 from kubric.datasets.layout import DatasetError
 from kubric.datasets.task_registry import (  # noqa: F401  (the registry's public names)
     TASKS,
@@ -89,22 +93,28 @@ def video_task(example, frame, frame_stride: int = 1, num_frames: int | None = N
 def frames_task(example, frame):
     """Single RGB frames with their camera (OpenCV intrinsics, camera-to-world pose)."""
     camera = example["camera"]
-    return {"image": example["video"][frame].copy(),  # the source keeps the scene for its next frame
-            "intrinsics_pixels": camera["intrinsics_pixels"].copy(),
-            "camera_to_world": camera["matrices_world"][frame].copy(), "frame": np.int32(frame),
-            "video_name": example["metadata"]["video_name"]}
+    out = {"image": example["video"][frame].copy(),  # the source keeps the scene for its next frame
+           "intrinsics_pixels": camera["intrinsics_pixels"].copy(),
+           "camera_to_world": camera["matrices_world"][frame].copy(), "frame": np.int32(frame),
+           "video_name": example["metadata"]["video_name"]}
+    if "distortion_model" in camera:  # the lens, where the dataset records one
+        out["distortion_model"] = camera["distortion_model"]
+        out["distortion_coefficients"] = np.asarray(camera["distortion_coefficients"]).copy()
+    return out
 
 
 def pixel_rays(intrinsics_pixels: np.ndarray, camera_to_world: np.ndarray, height: int,
-               width: int) -> tuple[np.ndarray, np.ndarray]:
+               width: int, lens=None) -> tuple[np.ndarray, np.ndarray]:
     """World-space ray origins and unit directions (H, W, 3) through every pixel centre.
 
     ``intrinsics_pixels`` is OpenCV's (x right, y down, +z forward, pixel (r, c) centred at
     (c + 0.5, r + 0.5)); ``camera_to_world`` maps Blender camera axes (x right, y up, −z
-    forward) to the world.
+    forward) to the world; ``lens``: the camera's lens model
+    (:func:`kubric.core.lenses.from_camera_record`; None = pinhole; NaN directions where its
+    image has no ray).
     """
     origins, dirs = geo.pinhole_rays(intrinsics_pixels, camera_to_world,
-                                     geo.pixel_centres(height, width))
+                                     geo.pixel_centres(height, width), lens)
     return origins.astype(np.float32), dirs.astype(np.float32)
 
 
@@ -125,7 +135,7 @@ def nerf_rays_task(example, frame):
     camera = example["camera"]
     height, width = example["video"].shape[1:3]
     origins, dirs = pixel_rays(camera["intrinsics_pixels"], camera["matrices_world"][frame],
-                               height, width)
+                               height, width, lenses.from_camera_record(camera))
     depth = metric_depth(example, frame)
     return {"ray_origins": origins, "ray_directions": dirs,
             "rgb": example["video"][frame].astype(np.float32) / 255.0, "depth": depth,

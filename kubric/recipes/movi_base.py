@@ -5,7 +5,8 @@ order. Steps (each a method the variants override):
 
 1. ``open_sources``: asset sources (KuBasic; for C–F the mesh collection and the HDRIs);
 2. ``build_background``: floor / dome, lamps, ambient light, backdrop;
-3. ``build_camera``: fixed, random in a half-sphere shell, or moving on a straight line;
+3. ``build_camera``: fixed, random in a half-sphere shell, or moving on a straight line; its
+   lens (``lens=``, :mod:`kubric.recipes.lens_options`) is set after step 4;
 4. ``add_objects``: objects placed without overlap by the simulator (D–F: static objects first
    settle for ``settle_frames`` frames with friction 1 and restitution 0, then are stopped);
 5. simulate frames ``0 .. frame_end + 1`` (so flow is defined at both ends of the rendered range);
@@ -44,6 +45,7 @@ from kubric.recipes.common import (
     source_location,
 )
 from kubric.recipes.exposure_options import ExposureOptions
+from kubric.recipes.lens_options import LensOptions
 from kubric.recipes.render_quality import RenderQuality
 
 DYNAMIC_SPAWN_REGION = ((-5.0, -5.0, 1.0), (5.0, 5.0, 5.0))
@@ -84,7 +86,7 @@ def place_without_overlap(obj, simulator, region, rng, max_trials: int = 1000) -
     return False
 
 
-class MoviBase(ExposureOptions, RenderQuality, Recipe):
+class MoviBase(ExposureOptions, RenderQuality, Recipe, LensOptions):
     """Common options and steps of the MOVi recipes (not registered itself).
 
     ``schema``: the variant's output contract (:mod:`kubric.recipes.movi_schema`).
@@ -122,6 +124,10 @@ class MoviBase(ExposureOptions, RenderQuality, Recipe):
             raise OptionError(f"{self.name}: option step_rate={self.step_rate} must be a multiple "
                               f"of frame_rate={self.frame_rate}")
         check_source_options(self)
+        self.check_lens()
+        if self.lens != "none" and self.dof:
+            raise OptionError(f"{self.name}: lens={self.lens} with dof=True: a lens-model camera "
+                              "is a pinhole aperture (no depth of field); drop one")
         self.check_renderer()
         self.check_tracks()
         check_min_max(self)
@@ -133,7 +139,7 @@ class MoviBase(ExposureOptions, RenderQuality, Recipe):
             out["save_state"] = "save_state=True"
         if getattr(self, "max_motion_blur", 0.0) > 0:
             out["motion_blur"] = f"max_motion_blur={self.max_motion_blur}"
-        return {**out, **self.exposure_requests()}
+        return {**out, **self.exposure_requests(), **self.lens_requests()}
 
     def check_tracks(self) -> None:
         """Bad track options fail here, before anything renders (one line)."""
@@ -225,6 +231,7 @@ class MoviBase(ExposureOptions, RenderQuality, Recipe):
             simulator = kb.simulator.PyBullet(scene, scratch)
             background, blur = self.populate(scene, simulator, rng, sources)
             self.sample_lens(scene, seed)  # dof=True (an rng derived from the seed)
+            scene.camera.lens = self.make_lens(rng)  # drawn after the rest (lens_options)
             state = pathlib.Path(scratch) / "state"  # saved here, moved in by write_scene
             files = {}
             if self.save_state:  # the initial state, before the simulation (as upstream)

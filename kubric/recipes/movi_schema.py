@@ -26,6 +26,10 @@ CAMERA_LENS = (
       doc="sensor width"),
     F("camera/field_of_view", "float32", (), "camera:field_of_view", unit="rad",
       doc="horizontal"),
+    F("camera/distortion_model", "str", (), "camera:distortion_model", "text",
+      doc=ADD + "lens model: none, opencv (Brown-Conrady) or fisheye (Kannala-Brandt)"),
+    F("camera/distortion_coefficients", "float32", (8,), "camera:distortion_coefficients",
+      doc=ADD + "OpenCV's order (opencv: k1,k2,p1,p2,k3,k4,k5,k6; fisheye: k1..k4, then 0)"),
 )
 
 MOVI_BASE = Schema("movi", (
@@ -78,6 +82,8 @@ MOVI_BASE = Schema("movi", (
       doc=ADD + "camera → world, Blender camera axes (x right, y up, looking down −z)"),
     F("camera/intrinsics_pixels", "float32", (3, 3), "camera:intrinsics_pixels", unit="px",
       doc=ADD + "OpenCV pixel intrinsics (x right, y down, +z forward; pixel centres +0.5)"),
+    F("camera/extrinsics_opencv", "float32", ("T", 4, 4), "camera:extrinsics_opencv",
+      doc=ADD + "world → OpenCV camera (x right, y down, looking down +z) per frame"),
     F("camera/K", "float32", (3, 3), "camera:K",
       doc=ADD + "upstream's normalised intrinsics"),
     # ---------------------------------------------------------------- events

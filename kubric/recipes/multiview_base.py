@@ -52,6 +52,7 @@ from kubric.recipes.common import (
     source_location,
 )
 from kubric.recipes.common import open_existing_source as open_source
+from kubric.recipes.lens_options import LensOptions
 from kubric.recipes.movi import add_clevr_lights
 from kubric.recipes.movi_base import new_camera
 from kubric.recipes.render_quality import RenderQuality
@@ -171,7 +172,7 @@ class ExtraOutputs:
     files: dict[str, object] = dataclasses.field(default_factory=dict)
 
 
-class MultiviewBase(RenderQuality, Recipe):
+class MultiviewBase(RenderQuality, Recipe, LensOptions):
     """Common options and steps of the multi-view recipes (not registered itself)."""
 
     resolution = Option((128, 128), "(width, height) in pixels: N or WxH", type=resolution)
@@ -192,7 +193,16 @@ class MultiviewBase(RenderQuality, Recipe):
             raise OptionError(message)
         check_source_options(self, names=("objects",))
         check_min_max(self)
+        self.check_lens()
+        rational = [v for values in (self.lens_coefficients, self.lens_coefficients_high)
+                    for v in (values or ())[5:] if v]
+        if self.lens == "opencv" and rational:
+            raise OptionError(f"{self.name}: the NeRF transforms (nerfstudio's OPENCV model) have "
+                              f"no k4, k5, k6; got {rational} (give k1,k2,p1,p2[,k3])")
         self.check_renderer()
+
+    def renderer_requests(self) -> dict[str, str]:
+        return {**super().renderer_requests(), **self.lens_requests()}
 
     def prepare(self) -> None:
         self.open_sources()
@@ -292,6 +302,7 @@ class MultiviewBase(RenderQuality, Recipe):
             self.add_objects(scene, rng, sources)
             self.key_camera(scene, self.camera_positions(rng))
             self.animate(scene, rng, splits, sources)
+            scene.camera.lens = self.make_lens(rng)  # drawn after the rest (lens_options)
             renderer = kb.renderer.create(self.renderer, scene, self.scratch / "render",
                                           **self.renderer_settings(**self.renderer_options()))
             layers = renderer.render(return_layers=RENDERED_LAYERS)

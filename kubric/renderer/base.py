@@ -70,6 +70,8 @@ class Capabilities:
       characters: it renders skinned characters (:class:`kubric.core.characters.Character`).
       quality_profiles: it takes the recipes' RGB quality settings (``samples_per_pixel``,
         ``use_denoising``, ``adaptive_sampling``, ...; docs/render-cost.md).
+      lenses: it renders a camera with a lens model (``PerspectiveCamera.lens``,
+        :mod:`kubric.core.lenses`) exactly: RGB and every layer through each pixel's lens ray.
     """
 
     photoreal: bool = False
@@ -78,6 +80,7 @@ class Capabilities:
     state_file_suffix: str | None = None
     characters: bool = False
     quality_profiles: bool = False
+    lenses: bool = False
 
     def __post_init__(self):
         object.__setattr__(self, "layers", tuple(self.layers))
@@ -110,6 +113,7 @@ NEEDS = {
     "characters": "render skinned characters",
     "save_state": "save its state as a scene file",
     "quality_profiles": "take the RGB quality settings (samples, denoising)",
+    "lenses": "render through a lens model (distortion)",
     **{effect: f"render {effect.replace('_', ' ')}" for effect in EFFECTS},
     **{layer: f"make the {layer} layer" for layer in ALL_LAYERS},
 }
@@ -128,8 +132,8 @@ class Backend:
 BACKENDS = {
     "blender": Backend("kubric.renderer.blender:Blender", Capabilities(
         photoreal=True, effects={"motion_blur", "depth_of_field"}, state_file_suffix=".blend",
-        characters=True, quality_profiles=True)),
-    "raycast": Backend("kubric.renderer.raycast:Raycast", Capabilities(photoreal=False)),
+        characters=True, quality_profiles=True, lenses=True)),
+    "raycast": Backend("kubric.renderer.raycast:Raycast", Capabilities(photoreal=False, lenses=True)),
 }
 
 

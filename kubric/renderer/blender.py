@@ -56,17 +56,19 @@ from pathlib import Path
 import bpy
 import numpy as np
 
+from kubric.core import camera_geometry as geo
 from kubric.core import cameras, characters, lights, materials, objects
 from kubric.core.scene import Scene
 from kubric.core.views import TableView
 from kubric.renderer import allocator
 from kubric.renderer import blender_characters as bc
+from kubric.renderer import blender_lens as bl
 from kubric.renderer import blender_materials as bm
 from kubric.renderer import blender_objects as bo
 from kubric.renderer import blender_passes as bp
 from kubric.renderer import blender_shadows as bs
 from kubric.renderer import blender_world as bw
-from kubric.renderer.base import Renderer
+from kubric.renderer.base import CapabilityError, Renderer
 from kubric.renderer.render_progress import frame_bar
 
 
@@ -393,6 +395,7 @@ class Blender(TableView, Renderer):
             raise ValueError("the scene has no camera: add a PerspectiveCamera or "
                              "OrthographicCamera before rendering")
         s.camera = obj
+        bl.apply(obj, cam, self.scene.resolution)
         linear_interpolation()
         bs.update_shadow_catchers(self)
 
@@ -503,6 +506,9 @@ class Blender(TableView, Renderer):
                 raise FileNotFoundError(f"Blender.render: missing texture file(s) {missing}; "
                                         "pass ignore_missing_textures=True to render anyway")
         frames, wanted = self.check_request(frames, return_layers)
+        refusal = bl.check_scene(self.scene)
+        if refusal:
+            raise CapabilityError(f"Blender.render: {refusal}")
         self._sync()
         out = _FrameStack(len(frames))
         if "rgba" in wanted:
@@ -523,6 +529,9 @@ class Blender(TableView, Renderer):
             for i, f in enumerate(frames):
                 passes = bp.read_multilayer_exr(files[f])
                 layers = bp.decode(passes, self.scene.camera, f, labels, bounds, ann)
+                if geo.has_distortion(self.scene.camera):
+                    layers.update(bl.lens_layers(passes, self.scene.camera, f, self.scene.assets,
+                                                 ann))
                 del passes
                 for k in ann:
                     out.put(k, i, layers.pop(k))

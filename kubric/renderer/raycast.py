@@ -1,6 +1,6 @@
 """A CPU ray-casting renderer: the exact annotation layers from the scene model alone (no bpy).
 
-One ray per pixel centre (:func:`kubric.core.camera_geometry.pixel_rays`) is cast with Embree
+One ray per pixel centre (:func:`kubric.core.camera_geometry.pixel_centre_rays`) is cast with Embree
 (``embreex`` through trimesh; ``pip install kubric[raycast]``) into the scene's meshes posed at
 the frame; Embree only finds the triangle, and the hit is then recomputed in float64 on that
 triangle, so every layer is the value at the surface point seen through the pixel centre, as the
@@ -18,6 +18,10 @@ Blender backend's exact annotation render (:mod:`kubric.renderer.blender_passes`
 * ``forward_flow`` / ``backward_flow``: the hit point moves with its object's pose (position,
   quaternion, scale at frame t ± 1, from the model's keyframes; held outside them) and is projected
   with the camera of frame t ± 1; flow = that position − the pixel centre, as (Δrow, Δcol).
+* lenses (``PerspectiveCamera.lens``, :mod:`kubric.core.lenses`): the pixel-centre rays come
+  from the lens model, so RGB and every layer describe the distorted image exactly; flow projects
+  the moved point through the lens too (0 where it leaves the lens's domain at t ± 1). Pixels
+  outside the lens's image (no ray) are background in every layer, with rgba (0, 0, 0, 0).
 * ``rgba``: NOT photoreal — base colour × (ambient + Lambert direct light from every lamp with a
   hard shadow ray) / π, Standard view transform (sRGB, clipped): enough to look at a scene and
   to make it complete against a recipe's schema; see docs/renderers.md for what it ignores.
@@ -371,11 +375,12 @@ class Raycast(Renderer):
     def render_frame(self, camera, geometry, frame, wanted) -> dict[str, np.ndarray]:
         """One frame's layers ``wanted`` → {layer: (H, W, C)}."""
         w, h = self.scene.resolution
-        cols, rows = np.meshgrid(np.arange(w) + 0.5, np.arange(h) + 0.5)
-        centres = np.stack([cols, rows], -1).reshape(-1, 2)
-        origins, dirs = geo.pixel_rays(camera, centres, frame=frame, resolution=(w, h))
+        centres = geo.pixel_centres(h, w).reshape(-1, 2)
+        origins, dirs = geo.pixel_centre_rays(camera, frame=frame, resolution=(w, h))
         posed = _PosedScene(geometry, frame)
-        tri_id = posed.first_hits(origins, dirs)
+        has_ray = np.isfinite(dirs).all(axis=1)  # a lens's image may not fill the frame
+        tri_id = np.full(len(dirs), -1, np.int64)
+        tri_id[has_ray] = posed.first_hits(origins[has_ray], dirs[has_ray])
         hit = tri_id >= 0
         idx = np.flatnonzero(hit)
         tid = tri_id[idx]
@@ -409,11 +414,13 @@ class Raycast(Renderer):
                 world = geometry.to_world(local, owner, geometry.poses(frame + step))
                 xy, _ = geo.project_to_pixels(camera, world, frame=frame + step,
                                               resolution=(w, h))
-                res[name] = image(xy[:, ::-1] - centres[idx, ::-1], 2)  # (Δrow, Δcol)
+                flow = xy[:, ::-1] - centres[idx, ::-1]  # (Δrow, Δcol)
+                res[name] = image(np.nan_to_num(flow, nan=0.0), 2)  # NaN: left the lens's domain
         if "rgba" in wanted:
             points = origins[idx] + dirs[idx] * t[:, None]
             res["rgba"] = self._shade(geometry, posed, owner, uv, points, normals, frame, hit,
                                       (h, w))
+            res["rgba"][~has_ray.reshape(h, w)] = 0  # outside the lens's image: no light
         return {k: res[k] for k in wanted}
 
     @staticmethod

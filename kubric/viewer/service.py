@@ -11,7 +11,8 @@ import threading
 import numpy as np
 
 from kubric.annotations import pictures as render
-from kubric.core.camera_geometry import BACKGROUND_DEPTH, CAMERA_TO_OPENCV
+from kubric.core.camera_geometry import BACKGROUND_DEPTH, pinhole_rays
+from kubric.core.lenses import from_camera_record
 from kubric.viewer.source import SceneError, SceneSource
 
 #: default cache size in bytes (decoded frames + PNG bytes)
@@ -198,12 +199,11 @@ class _Json:
 
 def _unproject(camera: dict, index: int, col: int, row: int, depth: float) -> list | None:
     """World point of pixel (row, col) at ``depth`` metres along its pixel-centre ray (camera
-    conventions of :mod:`kubric.core.camera_geometry`); None for cameras without pixel
-    intrinsics (orthographic)."""
+    conventions of :mod:`kubric.core.camera_geometry`, through the camera's lens); None for
+    cameras without pixel intrinsics (orthographic) and pixels without a lens ray."""
     if "intrinsics_pixels" not in camera or "matrices_world" not in camera:
         return None
     k = np.asarray(camera["intrinsics_pixels"], dtype=np.float64)
     m = np.asarray(camera["matrices_world"][index], dtype=np.float64)
-    ray_cv = np.array([(col + 0.5 - k[0, 2]) / k[0, 0], (row + 0.5 - k[1, 2]) / k[1, 1], 1.0])
-    ray_cam = CAMERA_TO_OPENCV @ (ray_cv / np.linalg.norm(ray_cv))
-    return (m[:3, :3] @ ray_cam * depth + m[:3, 3]).tolist()
+    origin, ray = pinhole_rays(k, m, [col + 0.5, row + 0.5], from_camera_record(camera))
+    return None if not np.isfinite(ray).all() else (origin + ray * depth).tolist()

@@ -38,6 +38,7 @@ import sys
 
 import numpy as np
 
+from kubric.core.lenses import pinhole_refusal
 from kubric.datasets.exports import models as mdl
 from kubric.datasets.exports.coco import amodal_masks, mask_bbox
 from kubric.datasets.exports.scenes import ExportError, Scene, find_scenes, load_scene, model_sources
@@ -161,6 +162,9 @@ def export_scene(scene: Scene, out: pathlib.Path, store: ModelStore, depth_scale
                  ) -> tuple[int, int, int]:
     """Write one scene's BOP folder; returns (images, annotations, clipped depth pixels)."""
     meta, camera = scene.metadata, scene.metadata["camera"]
+    refusal = pinhole_refusal(camera, f"export_bop ({scene.path.name}): BOP's cam_K")
+    if refusal:
+        raise ExportError(refusal)
     w, h = scene.resolution
     k = opencv_k(camera["intrinsics_pixels"])
     background = float(meta["metadata"].get("background_depth", 10000.0))

@@ -51,6 +51,7 @@ import shutil
 import numpy as np
 
 from kubric.core import camera_geometry as geo
+from kubric.core.lenses import pinhole_refusal
 from kubric.core.quaternion import Quaternion
 from kubric.errors import InputError
 from kubric.io import json_io, png_io
@@ -193,6 +194,9 @@ def export_lasr(scene_dir, out_dir, sequence: str | None = None,
     if out_dir.exists():
         raise FileExistsError(f"export_lasr: {str(out_dir)!r} already exists")
     meta = json_io.read_json(scene_dir / METADATA_FILE)
+    refusal = pinhole_refusal(meta["camera"], "export_lasr: LASR's [fx, fy, px, py] camera")
+    if refusal:
+        raise InputError(refusal)
     infos = meta["instances"]
     chosen = list(range(len(infos))) if instances is None else [int(k) for k in instances]
     bad = [k for k in chosen if not 0 <= k < len(infos)]

@@ -12,6 +12,10 @@ scene's images, readable unchanged by the original NeRF code, instant-ngp and ne
 * ``fl_x``, ``fl_y``, ``cx``, ``cy``, ``w``, ``h``: pinhole intrinsics in pixels as instant-ngp and
   nerfstudio read them (origin at the top-left image corner, pixel (row r, col c) centred at
   ``(c + 0.5, r + 0.5)``, so ``cx = w / 2`` for an unshifted camera);
+* the lens, nerfstudio's fields: ``camera_model`` ``OPENCV`` with ``k1``, ``k2``, ``k3``,
+  ``p1``, ``p2`` (OpenCV's Brown–Conrady; all 0 for a pinhole camera) or ``OPENCV_FISHEYE`` with
+  ``k1`` … ``k4`` (OpenCV's fisheye) — :mod:`kubric.core.lenses`; a rational lens (k4–k6 of
+  Brown–Conrady) has no nerfstudio model and is refused;
 * ``frames``: one entry per view of the split, in view order, with ``file_path`` (the RGBA image
   without its ``.png`` extension, relative to the JSON file: ``./rgba_00007``, as in the NeRF
   "blender" data sets, whose loaders append ``.png``), ``transform_matrix`` (4×4 camera → world,
@@ -21,8 +25,9 @@ scene's images, readable unchanged by the original NeRF code, instant-ngp and ne
 
 Reading a pixel's ray from the JSON alone (what the tests do): for pixel (row i, col j),
 ``d_cam = ((j + 0.5 − cx) / fl_x, −(i + 0.5 − cy) / fl_y, −1)``, ``d = R · d_cam / |d_cam|`` with
-``R = transform_matrix[:3, :3]``, origin ``transform_matrix[:3, 3]``; the surface point is
-``origin + depth[i, j] · d`` (depth is the Euclidean distance to the camera centre).
+``R = transform_matrix[:3, :3]``, origin ``transform_matrix[:3, 3]`` (with a lens, ``d_cam``
+comes from undistorting the pixel with the recorded coefficients, as ``cv2.undistortPoints``);
+the surface point is ``origin + depth[i, j] · d`` (depth is the Euclidean distance to the camera centre).
 :func:`iter_views` does exactly this for every view of a split (rays, RGB and depth per view).
 """
 
@@ -38,6 +43,7 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 
 from kubric.core import camera_geometry as geo
+from kubric.core import lenses
 from kubric.errors import InputError
 from kubric.io import png_io, tiff_io
 from kubric.io import scene_dir as scene_dirs
@@ -102,9 +108,29 @@ def intrinsics_entry(camera, resolution) -> dict:
         "camera_angle_x": 2.0 * math.atan(0.5 * w / fl_x),
         "camera_angle_y": 2.0 * math.atan(0.5 * h / fl_y),
         "fl_x": fl_x, "fl_y": fl_y, "cx": cx, "cy": cy, "w": w, "h": h,
-        "k1": 0.0, "k2": 0.0, "p1": 0.0, "p2": 0.0,
-        "camera_model": "OPENCV",
+        **lens_entry(geo.lens_of(camera)),
     }
+
+
+def lens_entry(lens) -> dict:
+    """nerfstudio's distortion fields of ``lens`` (see module doc)."""
+    if isinstance(lens, lenses.Fisheye):
+        return {**{f"k{i}": float(v) for i, v in enumerate(lens.coefficients, 1)},
+                "camera_model": "OPENCV_FISHEYE"}
+    k1, k2, p1, p2, k3, k4, k5, k6 = lens.coefficients if not lens.is_pinhole else (0.0,) * 8
+    if k4 or k5 or k6:
+        raise InputError(f"NeRF transforms: nerfstudio's OPENCV model has no k4..k6, got "
+                         f"{[k4, k5, k6]} (use k1, k2, p1, p2, k3 only)")
+    entry = {"k1": k1, "k2": k2, "p1": p1, "p2": p2, "camera_model": "OPENCV"}
+    return {**entry, "k3": k3} if k3 else entry
+
+
+def lens_of_entry(data: Mapping):
+    """The lens of a transforms file's fields (the inverse of :func:`lens_entry`)."""
+    get = [float(data.get(k, 0.0)) for k in ("k1", "k2", "p1", "p2", "k3", "k4")]
+    if data.get("camera_model", "OPENCV") == "OPENCV_FISHEYE":
+        return lenses.Fisheye(get[0], get[1], get[4], get[5])
+    return lenses.BrownConrady(*get[:5])
 
 
 def nerf_transforms(camera, frames: Sequence[int], resolution, splits: Sequence[str],
@@ -144,7 +170,9 @@ def pixel_rays_from_transforms(data: Mapping, entry: Mapping):
     entry of a transforms file, built from the file's fields alone (see module doc)."""
     w, h = int(data["w"]), int(data["h"])
     k = [[data["fl_x"], 0.0, data["cx"]], [0.0, data["fl_y"], data["cy"]], [0.0, 0.0, 1.0]]
-    return geo.pinhole_rays(k, entry["transform_matrix"], geo.pixel_centres(h, w))
+    lens = lens_of_entry(data)
+    return geo.pinhole_rays(k, entry["transform_matrix"], geo.pixel_centres(h, w),
+                            None if lens == lenses.BrownConrady() else lens)
 
 
 def iter_views(scene_dir, split: str = "train"):
