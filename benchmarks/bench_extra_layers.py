@@ -14,7 +14,9 @@ PNG per object and frame (what re-rendering per object gives), (c) COCO compress
 compressed npz. Bytes per scene.
 
 Run: ``python benchmarks/bench_extra_layers.py [--recipe movi_a] [--size 64] [--frames 4]
-[--set KEY=VALUE ...]`` (cost) and ``[--storage-size 256]`` (storage; 0 skips it).
+[--set KEY=VALUE ...] [--baseline raycast|blender]`` (cost; ``--baseline blender`` divides by
+the recipe's default Blender render of the same simulated scene, in the same process) and
+``[--storage-size 256]`` (storage; 0 skips it).
 """
 
 from __future__ import annotations
@@ -51,19 +53,24 @@ def timed(fn):
     return value, cpu_seconds() - c
 
 
-def cost(recipe: str, size: int, frames: int, seed: int, options=()) -> None:
+def cost(recipe: str, size: int, frames: int, seed: int, options=(), baseline="raycast") -> None:
     rec = get_recipe(recipe).from_assignments([f"resolution={size}", f"frame_end={frames}",
-                                               "renderer=raycast", *options])
+                                               f"renderer={baseline}", *options])
     with tempfile.TemporaryDirectory() as scratch:
         scene = rec.make_scene()
         sim = kb.simulator.PyBullet(scene, scratch)
         rec.populate(scene, sim, np.random.RandomState(seed), rec.open_sources())
         sim.run(frame_start=0, frame_end=scene.frame_end + 1)
         sim.close()
-    layers, base = timed(lambda: create("raycast", scene).render(return_layers=ALL_LAYERS))
+        if baseline == "raycast":
+            layers, base = timed(lambda: create("raycast", scene).render(
+                return_layers=ALL_LAYERS))
+        else:  # the recipe's default quality setting, as its worker renders
+            layers, base = timed(lambda: create(baseline, scene, scratch,
+                                                **rec.renderer_settings()).render())
     instances = [a for a in scene.foreground_assets if isinstance(a, kb.PhysicalObject)]
     print(f"{recipe} seed {seed}, {size}², {frames} frames, {len(instances)} objects: default "
-          f"raycast scene (all layers) {base:.2f} CPU-s")
+          f"{baseline} scene (every layer it writes) {base:.2f} CPU-s")
     print("| extra_layers | CPU-s | × default scene |")
     print("|---|---|---|")
     for names in [(n,) for n in extra.EXTRA_LAYERS] + [extra.EXTRA_LAYERS]:
@@ -125,9 +132,12 @@ def main() -> None:
     ap.add_argument("--frames", type=int, default=4)
     ap.add_argument("--seed", type=int, default=3)
     ap.add_argument("--storage-size", type=int, default=256)
+    ap.add_argument("--baseline", choices=("raycast", "blender"), default="raycast",
+                    help="the default scene the layers' cost is divided by: raycast (all "
+                    "layers) or blender (the recipe's default quality, rendered in this process)")
     args = ap.parse_args()
     start = time.perf_counter()
-    cost(args.recipe, args.size, args.frames, args.seed, args.set)
+    cost(args.recipe, args.size, args.frames, args.seed, args.set, args.baseline)
     if args.storage_size:
         storage(args.storage_size)
     print(f"\n({time.perf_counter() - start:.1f} s wall)")
