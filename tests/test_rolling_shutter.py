@@ -17,6 +17,7 @@ import pytest
 import kubric as kb
 from kubric.annotations import tracks as tr
 from kubric.core import rolling_shutter as rs
+from kubric.core.lenses import BrownConrady
 from kubric.errors import InputError
 from kubric.renderer import base
 from kubric.renderer.raycast_subframes import subframe_layers
@@ -32,9 +33,13 @@ def _axis_angle(axis, angle):
     return np.concatenate([[np.cos(angle / 2)], np.sin(angle / 2) * axis])
 
 
-def _scene(duration=D):
+LENS = (-0.12, 0.03, 0.002, -0.001, 0.0)  # Brown–Conrady k1, k2, p1, p2, k3
+
+
+def _scene(duration=D, lens=None):
     scene = kb.Scene(resolution=(W, H), frame_start=1, frame_end=3)
-    cam = kb.PerspectiveCamera(focal_length=30, rolling_shutter_duration=duration)
+    cam = kb.PerspectiveCamera(focal_length=30, rolling_shutter_duration=duration,
+                               lens=lens and BrownConrady.from_opencv(lens))
     scene += cam
     scene += kb.DirectionalLight(position=(1, -1, 5), look_at=(0, 0, 0), intensity=2.0)
     scene += kb.Cube(name="floor", scale=(6, 6, 0.1), position=(0, 0, -0.1), background=True,
@@ -57,8 +62,9 @@ def _scene(duration=D):
     return scene
 
 
-def _cv2_project(camera, point, t):
-    """Pixel (x, y) of world point (3,) with the camera posed at time t, by OpenCV."""
+def _cv2_project(camera, point, t, lens=None):
+    """Pixel (x, y) of world point (3,) with the camera posed at time t, by OpenCV (``lens``:
+    Brown–Conrady coefficients)."""
     with camera.at_frame(float(t)):
         m = np.array(camera.matrix_world)
     r_cw = m[:3, :3] @ np.diag([1.0, -1.0, -1.0])  # OpenCV camera axes in world
@@ -67,7 +73,8 @@ def _cv2_project(camera, point, t):
     rvec, _ = cv2.Rodrigues(r_wc)
     f = camera.focal_length / camera.sensor_width * W
     k = np.array([[f, 0, W / 2], [0, f, H / 2], [0, 0, 1.0]])
-    xy, _ = cv2.projectPoints(np.asarray(point, float).reshape(1, 3), rvec, tvec, k, None)
+    dist = None if lens is None else np.asarray(lens, float)
+    xy, _ = cv2.projectPoints(np.asarray(point, float).reshape(1, 3), rvec, tvec, k, dist)
     return xy.reshape(2)
 
 
@@ -91,8 +98,9 @@ def test_rows_equal_global_renders_at_each_row_time():
     assert not np.array_equal(glob["segmentation"], out["segmentation"])  # the effect is there
 
 
-def test_track_pixels_are_projections_at_their_row_time():
-    scene = _scene()
+@pytest.mark.parametrize("lens", [None, LENS], ids=["pinhole", "brown_conrady"])
+def test_track_pixels_are_projections_at_their_row_time(lens):
+    scene = _scene(lens=lens)
     layers = base.create("raycast", scene).render(return_layers=("depth", "segmentation"))
     rng = np.random.RandomState(4)
     got = tr.scene_tracks(scene, layers, [a for a in scene.assets if a.name in ("cube", "ball")],
@@ -109,7 +117,7 @@ def test_track_pixels_are_projections_at_their_row_time():
             time = f + D * (y / H - 0.5)  # the time the row at height y is read
             p = got["points_object"][n]
             world = p if asset is None else _posed(asset, p, time)
-            assert np.abs(_cv2_project(scene.camera, world, time) - (x, y)).max() < 1e-3
+            assert np.abs(_cv2_project(scene.camera, world, time, lens) - (x, y)).max() < 1e-3
             checked += 1
     assert checked > 100 and (~occl).sum() > 60
     qt = got["query_points"][:, 0].astype(int)
@@ -119,7 +127,7 @@ def test_track_pixels_are_projections_at_their_row_time():
     fg = np.flatnonzero(got["instance_id"])
     assert len(fg) >= 10
     shift = [np.abs(_cv2_project(scene.camera, _posed(by_id[int(got["instance_id"][n])],
-                                                      got["points_object"][n], f), f)
+                                                      got["points_object"][n], f), f, lens)
                     - xy[n, t]).max() for n in fg for t, f in enumerate(FRAMES)]
     assert max(shift) > 0.3
 

@@ -26,6 +26,9 @@ How a track is made (:func:`compute_tracks`):
    (:func:`kubric.core.camera_geometry.project_to_pixels`). **Pixel convention: pixel centres at
    +0.5** — the centre of pixel (row r, column c) is ``(x, y) = (c + 0.5, r + 0.5)``, the image
    spans ``[0, W] × [0, H]``; this is TAP-Vid's "raster" convention too.
+4. **Rolling shutter** (the camera's ``rolling_shutter_duration`` > 0): step 1 unprojects at
+   the query row's time and step 3 puts each point where it is seen when the row it lands on
+   is read (:mod:`kubric.annotations.rolling_tracks`).
 
 Occlusion of track n at frame t (``occluded[n, t]``, with the reasons in ``occlusion_reason``
 bits): the point is **behind the camera** (1), **outside the image** (2: x ∉ [0, W) or
