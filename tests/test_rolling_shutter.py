@@ -162,14 +162,15 @@ def test_solver_matches_closed_form_and_refuses_divergence():
     y0, v, f = 10.0, 6.0, 4.0  # y(t) = y0 + v·(t − f) px
 
     def linear(speed):
-        return lambda t: (np.stack([np.zeros_like(t), y0 + speed * (t - f)], -1), np.ones_like(t))
+        return lambda t, idx: (np.stack([np.zeros_like(t), y0 + speed * (t - f)], -1),
+                               np.ones_like(t))
 
     xy, _, time = rs.solve_rows(linear(v), f, 2.0, H, 1)
     # y = y0 + v·d·(y/H − 1/2)  ⇒  y = (y0 − v·d/2) / (1 − v·d/H)
     assert abs(xy[0, 1] - (y0 - v * 1.0) / (1 - v * 2.0 / H)) < 1e-6
     assert abs(time[0] - (f + 2.0 * (xy[0, 1] / H - 0.5))) < 1e-12
     # no fixed point: the image position jumps across the middle row at the frame time
-    def jump(t):
+    def jump(t, idx):
         return np.stack([np.zeros_like(t), np.where(t < f, float(H), 0.0)], -1), np.ones_like(t)
 
     with pytest.raises(InputError, match=r"rolling_shutter_duration=2.0: no row-time fixed point"):

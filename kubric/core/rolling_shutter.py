@@ -58,35 +58,45 @@ def solve_rows(project_at: Callable, frame: float, duration: float, height: int,
                count: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Image positions of ``count`` points under the rolling shutter of ``frame``.
 
-    ``project_at(times)`` (times: (count,) frames) returns the points' pixel positions
-    (count, 2) (x, y; NaN where they have none) and depths (count,) with everything posed at
-    each point's own time. Returns (xy (count, 2), depth (count,), time (count,)) at the fixed
-    point ``time = frame + row_offset(duration, clip(y, 0, H))`` (module doc: secant steps on
-    ``proj_y(t(y)) − y``; refuses in one line when they do not converge)."""
+    ``project_at(times, idx)`` (idx: indices of points, times: (len(idx),) frames) returns those
+    points' pixel positions (len(idx), 2) (x, y; NaN where they have none) and depths
+    (len(idx),), each point and the camera posed at its own time. Returns (xy (count, 2),
+    depth (count,), time (count,)) at the fixed point ``time = frame + row_offset(duration,
+    clip(y, 0, H))`` (module doc: secant steps on ``proj_y(t(y)) − y``, only the points not yet
+    converged are projected again; refuses in one line when they do not converge)."""
     frame = float(frame)
-
-    def residual(y):
-        rows = np.clip(y, 0.0, float(height))
-        times = np.where(np.isfinite(y), frame + row_offset(duration, rows, height), frame)
-        xy, depth = project_at(times)
-        return xy, depth, times, xy[:, 1] - y
-
-    xy, depth = project_at(np.full(count, frame))
+    every = np.arange(count)
+    times = np.full(count, frame)
+    xy, depth = project_at(times, every)
     if duration == 0.0 or count == 0:
-        return xy, depth, np.full(count, frame)
-    y_prev = xy[:, 1]
-    xy, depth, times, g_prev = residual(y_prev)
-    y = xy[:, 1]  # one fixed-point step, then secant steps
+        return xy, depth, times
+
+    def time_of(y):
+        rows = np.clip(y, 0.0, float(height))
+        return np.where(np.isfinite(y), frame + row_offset(duration, rows, height), frame)
+
+    # one fixed-point step: (y_prev, g_prev) = (frame-time y, its residual)
+    y_prev = xy[:, 1].copy()
+    times = time_of(y_prev)
+    xy, depth = project_at(times, every)
+    g_prev = xy[:, 1] - y_prev
+    y = xy[:, 1].copy()
+    active = every
     for _ in range(MAX_ITERATIONS):
-        xy, depth, times, g = residual(y)
-        if not np.any(np.abs(g) >= TOLERANCE_PX):  # NaN (no image position) counts as done
+        times[active] = time_of(y[active])
+        xy[active], depth[active] = project_at(times[active], active)
+        g = xy[active, 1] - y[active]
+        going = np.abs(g) >= TOLERANCE_PX  # NaN (no image position) counts as done
+        if not going.any():
             return xy, depth, times
-        slope = g - g_prev
+        ya, yp, gp = y[active], y_prev[active], g_prev[active]
+        slope = g - gp
         with np.errstate(divide="ignore", invalid="ignore"):
-            secant = y - g * (y - y_prev) / slope
-        step = np.where(np.isfinite(secant) & (np.abs(slope) > 1e-15), secant, y + g)
-        y_prev, g_prev = y, g
-        y = np.where(np.abs(g) >= TOLERANCE_PX, step, y)
+            secant = ya - g * (ya - yp) / slope
+        step = np.where(np.isfinite(secant) & (np.abs(slope) > 1e-15), secant, ya + g)
+        y_prev[active], g_prev[active] = ya, g
+        y[active] = np.where(going, step, ya)
+        active = active[going]
     worst = float(np.nanmax(np.abs(g)))
     raise InputError(f"rolling_shutter_duration={duration!r}: no row-time fixed point found in "
                      f"{MAX_ITERATIONS} steps (last |Δy| {worst:.3g} px): a point's image "
@@ -134,13 +144,15 @@ def rolling_projection(camera, groups, frame: float, resolution):
     Returns (xy (n, 2), depth (n,), time (n,)) over the groups' points in order
     (:func:`solve_rows` with the camera's ``rolling_shutter_duration``)."""
     w, h = resolution
-    sizes = [len(points) for _, points in groups]
-    bounds = np.cumsum([0] + sizes)
+    local = (np.concatenate([np.asarray(p, np.float64).reshape(-1, 3) for _, p in groups])
+             if groups else np.zeros((0, 3)))
+    group_of = np.repeat(np.arange(len(groups)), [len(p) for _, p in groups])
 
-    def project_at(times):
-        world = np.concatenate([posed_points(asset, points, times[a:b]) for (asset, points), a, b
-                                in zip(groups, bounds[:-1], bounds[1:], strict=True)]
-                               ) if groups else np.zeros((0, 3))
+    def project_at(times, idx):
+        world = np.empty((len(idx), 3))
+        for k in np.unique(group_of[idx]):
+            sel = group_of[idx] == k
+            world[sel] = posed_points(groups[k][0], local[idx[sel]], times[sel])
         return project_at_times(camera, world, times, (w, h))
 
-    return solve_rows(project_at, float(frame), duration_of(camera), h, int(bounds[-1]))
+    return solve_rows(project_at, float(frame), duration_of(camera), h, len(local))
