@@ -26,6 +26,9 @@ How a track is made (:func:`compute_tracks`):
    (:func:`kubric.core.camera_geometry.project_to_pixels`). **Pixel convention: pixel centres at
    +0.5** — the centre of pixel (row r, column c) is ``(x, y) = (c + 0.5, r + 0.5)``, the image
    spans ``[0, W] × [0, H]``; this is TAP-Vid's "raster" convention too.
+4. **Rolling shutter** (the camera's ``rolling_shutter_duration`` > 0): step 1 unprojects at
+   the query row's time and step 3 puts each point where it is seen when the row it lands on
+   is read (:mod:`kubric.annotations.rolling_tracks`).
 
 Occlusion of track n at frame t (``occluded[n, t]``, with the reasons in ``occlusion_reason``
 bits): the point is **behind the camera** (1), **outside the image** (2: x ∉ [0, W) or
@@ -86,9 +89,11 @@ from collections.abc import Sequence
 import numpy as np
 
 from kubric.annotations.character_tracks import follow_character
+from kubric.annotations.rolling_tracks import rolling_positions
 from kubric.annotations.segmentation import instance_labels
 from kubric.core import camera_geometry as geo
 from kubric.core.characters import Character
+from kubric.core.rolling_shutter import duration_of, row_offset
 from kubric.errors import InputError
 
 #: Relative depth tolerance of the self-occlusion test (see module doc).
@@ -349,10 +354,12 @@ def compute_tracks(camera, frames: Sequence[int], depth, segmentation, assets: S
     qdepth = np.array([_query_depth(depth, labels, tq[i], q[i, 1], q[i, 2], qlabel[i])
                        for i in range(n)])
     world_q = np.zeros((n, 3))
-    for t in np.unique(tq):
-        sel = tq == t
+    # the query's time: its frame, or under a rolling shutter the time its row is read
+    qtime = np.asarray(frames, np.float64)[tq] + row_offset(duration_of(camera), q[:, 1], h)
+    for t in np.unique(qtime):
+        sel = qtime == t
         world_q[sel] = geo.unproject_pixels(camera, q[sel][:, [2, 1]], qdepth[sel],
-                                            frame=frames[t], resolution=(w, h))
+                                            frame=float(t), resolution=(w, h))
     points_object = world_q.copy()
     points_world = np.repeat(world_q[:, None, :], num_frames, axis=1)
     for uid in {a.uid for a, fg in zip(qassets, is_fg, strict=False) if fg}:
@@ -363,10 +370,10 @@ def compute_tracks(camera, frames: Sequence[int], depth, segmentation, assets: S
                 asset, camera, frames, tq[sel], q[sel][:, [2, 1]], world_q[sel], (w, h))
             continue
         mats, scales = _poses(asset, frames)
-        for t in np.unique(tq[sel]):
-            s = sel & (tq == t)
-            rot, pos = mats[t, :3, :3], mats[t, :3, 3]
-            points_object[s] = (world_q[s] - pos) @ rot / scales[t]
+        for t in np.unique(qtime[sel]):
+            s = sel & (qtime == t)
+            (qmat,), (qscale,) = _poses(asset, [float(t)])
+            points_object[s] = (world_q[s] - qmat[:3, 3]) @ qmat[:3, :3] / qscale
         local = points_object[sel][:, None, :] * scales[None]          # (n, T, 3)
         points_world[sel] = np.einsum("tij,ntj->nti", mats[:, :3, :3], local) + mats[:, :3, 3]
 
@@ -379,6 +386,9 @@ def compute_tracks(camera, frames: Sequence[int], depth, segmentation, assets: S
                                                      resolution=(w, h))
         m = geo.world_to_camera(camera, f)
         cam[:, t] = points_world[:, t] @ m[:3, :3].T + m[:3, 3]
+    if duration_of(camera) > 0:  # each point at the time of the row it lands on
+        xy, dist, cam, points_world = rolling_positions(camera, frames, qassets, is_fg,
+                                                        points_object, (w, h))
 
     # occlusion
     slope = depth_slope(depth, labels)

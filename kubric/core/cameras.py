@@ -18,6 +18,9 @@ class Camera(Object3D):
     property_defaults = {"background": True}
     shift_x = kt.Float(0.0, -10.0, 10.0, "horizontal lens shift, in units of the sensor width")
     shift_y = kt.Float(0.0, -10.0, 10.0, "vertical lens shift, in units of the sensor width")
+    rolling_shutter_duration = kt.Float(
+        0.0, 0.0, 10.0, "rolling shutter: readout time from the image's top edge to its bottom "
+        "edge, in frames (0 = global shutter; row times: kubric.core.rolling_shutter)")
 
     @property
     def intrinsics(self) -> np.ndarray:

@@ -12,6 +12,9 @@ motion blur (``coverage_samples``); the ground truth is :mod:`kubric.annotations
   from K raycast sub-frame renders per frame (with any backend: the raycast backend supplies the
   sub-frames), and the ``exposure_flow`` layer: the seen surface point's motion from shutter open
   to close.
+* ``rolling_shutter=d`` (> 0): the camera reads rows top to bottom over d frames
+  (:mod:`kubric.core.rolling_shutter`); RGB, every layer and the tracks are at each row's time;
+  the raycast renderer only; recorded in ``metadata.rolling_shutter``.
 * ``events=True``: ``events.h5`` (DSEC's layout, :mod:`kubric.io.event_h5`), the event stream of
   the sensor model of :mod:`kubric.annotations.event_camera` (``event_threshold`` ±
   ``event_threshold_spread`` per pixel, drawn from an rng derived from the seed;
@@ -31,6 +34,8 @@ from kubric.annotations.exposure import COVERAGE_FILE, coverage_archive, defocus
 from kubric.annotations.segmentation import adjust_segmentation_idxs
 from kubric.pipeline import Option, OptionError
 
+#: when row y (pixel height; centres at r + 0.5) of frame f is read (kubric.core.rolling_shutter)
+ROW_TIME = "t = f + duration * (y / H - 1/2); y = r + 0.5 for row r"
 #: tags of the rngs the lens and the event thresholds are drawn from (derived from the seed:
 #: RandomState([seed, tag]))
 LENS_RNG_TAG, EVENTS_RNG_TAG = 0x6C656E73, 0x65767473
@@ -50,6 +55,9 @@ class ExposureOptions:
     coverage_samples = Option(0, "sub-frame raycast renders per frame for coverage.npz, the "
                               "fraction of the exposure each pixel shows each instance "
                               "(0 = none)", low=0, high=256)
+    rolling_shutter = Option(0.0, "rolling-shutter readout time from the image's top edge to "
+                             "its bottom edge (frames; 0 = global shutter; raycast renderer "
+                             "only)", low=0.0, high=10.0)
     events = Option(False, "write events.h5: an event-camera stream (DSEC layout)")
     event_subframes = Option(0, "event intensity samples per frame: 0 = the rendered frames, "
                              "log intensity linear between them; K = K raycast sub-frames",
@@ -64,7 +72,19 @@ class ExposureOptions:
 
     def exposure_requests(self) -> dict[str, str]:
         """Renderer capabilities the exposure options ask for (see ``renderer_requests``)."""
-        return {"depth_of_field": "dof=True"} if self.dof else {}
+        out = {"depth_of_field": "dof=True"} if self.dof else {}
+        if self.rolling_shutter:
+            out["rolling_shutter"] = f"rolling_shutter={self.rolling_shutter}"
+        return out
+
+    def set_rolling_shutter(self, scene) -> None:
+        """With ``rolling_shutter`` > 0: the camera's readout time, recorded in
+        ``scene.metadata["rolling_shutter"]`` {duration (frames), row_time (the convention)}."""
+        if not self.rolling_shutter:
+            return
+        scene.camera.rolling_shutter_duration = float(self.rolling_shutter)
+        scene.metadata["rolling_shutter"] = {"duration": float(self.rolling_shutter),
+                                             "row_time": ROW_TIME}
 
     def check_exposure(self) -> None:
         """``coverage_samples`` needs a shutter: a recipe with ``max_motion_blur`` > 0."""

@@ -1,8 +1,9 @@
 """Schemas of the MOVi scenes made with the exposure options
 (:mod:`kubric.recipes.exposure_options`): for every MOVi variant ``X``, ``X_dof`` (``--set
 dof=True``: the ``defocus`` layer and the lens), ``X_events`` (``--set events=true``:
-``events.h5``) and, for MOVi-F, ``movi_f_coverage`` (``--set coverage_samples=K``:
-``coverage.npz``, ``exposure_flow``), each packed with ``kubric pack DIR --schema NAME``."""
+``events.h5``), ``X_rolling_shutter`` (``--set rolling_shutter=d``) and, for MOVi-F,
+``movi_f_coverage`` (``--set coverage_samples=K``: ``coverage.npz``, ``exposure_flow``), each
+packed with ``kubric pack DIR --schema NAME``."""
 
 from __future__ import annotations
 
@@ -21,6 +22,12 @@ DOF_FEATURES = (
       doc="f-number N: aperture diameter = focal_length / N"),
     F("camera/focus_distance", "float32", (), "meta:depth_of_field.focus_distance", unit="m",
       doc="distance of the plane in focus, along the view axis"),
+)
+#: the features ``rolling_shutter=d`` adds
+ROLLING_FEATURES = (
+    F("camera/rolling_shutter_duration", "float32", (), "meta:rolling_shutter.duration",
+      unit="frames", doc="readout time from the top edge to the bottom edge; row r of frame f "
+      "is read at f + d·((r + 0.5)/H − 1/2) and every layer and track is at its row's time"),
 )
 #: the features ``coverage_samples=K`` adds (one row per (frame, pixel, label) entry P)
 COVERAGE_FEATURES = (
@@ -53,14 +60,17 @@ EVENT_FEATURES = (
 )
 _BASES = {s.name: s for s in (movi_schema.MOVI_A, movi_schema.MOVI_B, movi_schema.MOVI_C,
                               movi_schema.MOVI_D, movi_schema.MOVI_E, movi_schema.MOVI_F)}
-#: MOVi variant name → its ``_dof`` and ``_events`` schemas, and for MOVi-F (the one with a
-#: shutter) its ``_coverage`` schema
+#: MOVi variant name → its ``_dof``, ``_events`` and ``_rolling_shutter`` schemas, and for MOVi-F
+#: (the one with a shutter) its ``_coverage`` schema
 EXPOSURE_VARIANTS = {name: (
     register_schema(base.extend(f"{name}_dof", DOF_FEATURES, description=f"{base.description} "
                                 "With depth of field (dof=True): the defocus layer.")),
     register_schema(base.extend(f"{name}_events", EVENT_FEATURES,
                                 description=f"{base.description} With the event stream "
                                 "(events=true): events.h5.")),
+    register_schema(base.extend(f"{name}_rolling_shutter", ROLLING_FEATURES,
+                                description=f"{base.description} With a rolling shutter "
+                                "(rolling_shutter=d, raycast renderer).")),
     *((register_schema(base.extend(f"{name}_coverage", COVERAGE_FEATURES,
                                    description=f"{base.description} With the exposure coverage "
                                    "(coverage_samples=K): coverage.npz and exposure_flow.")),)

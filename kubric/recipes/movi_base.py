@@ -231,6 +231,7 @@ class MoviBase(ExposureOptions, RenderQuality, Recipe, LensOptions):
             simulator = kb.simulator.PyBullet(scene, scratch)
             background, blur = self.populate(scene, simulator, rng, sources)
             self.sample_lens(scene, seed)  # dof=True (an rng derived from the seed)
+            self.set_rolling_shutter(scene)  # rolling_shutter=d
             scene.camera.lens = self.make_lens(rng)  # drawn after the rest (lens_options)
             state = pathlib.Path(scratch) / "state"  # saved here, moved in by write_scene
             files = {}

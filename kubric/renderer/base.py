@@ -133,7 +133,8 @@ BACKENDS = {
     "blender": Backend("kubric.renderer.blender:Blender", Capabilities(
         photoreal=True, effects={"motion_blur", "depth_of_field"}, state_file_suffix=".blend",
         characters=True, quality_profiles=True, lenses=True)),
-    "raycast": Backend("kubric.renderer.raycast:Raycast", Capabilities(photoreal=False, lenses=True)),
+    "raycast": Backend("kubric.renderer.raycast:Raycast", Capabilities(
+        photoreal=False, lenses=True, effects={"rolling_shutter"})),
 }
 
 

@@ -57,7 +57,7 @@ import bpy
 import numpy as np
 
 from kubric.core import camera_geometry as geo
-from kubric.core import cameras, characters, lights, materials, objects
+from kubric.core import cameras, characters, lights, materials, objects, rolling_shutter
 from kubric.core.scene import Scene
 from kubric.core.views import TableView
 from kubric.renderer import allocator
@@ -506,6 +506,10 @@ class Blender(TableView, Renderer):
                 raise FileNotFoundError(f"Blender.render: missing texture file(s) {missing}; "
                                         "pass ignore_missing_textures=True to render anyway")
         frames, wanted = self.check_request(frames, return_layers)
+        cam = self.scene.camera
+        readout = rolling_shutter.duration_of(cam)
+        self.require_effects({"rolling_shutter": readout > 0 and
+                              f"camera {cam.name!r} rolling_shutter_duration={readout!r}"})
         refusal = bl.check_scene(self.scene)
         if refusal:
             raise CapabilityError(f"Blender.render: {refusal}")

@@ -43,9 +43,10 @@ import numpy as np
 import trimesh
 
 from kubric.core import camera_geometry as geo
-from kubric.core import lights, materials, objects
+from kubric.core import lights, materials, objects, rolling_shutter
 from kubric.core.color import Color, linear_to_srgb, srgb_to_linear
 from kubric.renderer.base import ALL_LAYERS, Renderer
+from kubric.renderer.raycast_rolling import rolling_flow_ends, rolling_frame
 
 _SPHERE_SEGMENTS, _SPHERE_RINGS = 128, 64  # as kubric.renderer.blender_objects
 #: glTF's y-up → Blender's z-up: (x, y, z) → (x, −z, y)
@@ -364,21 +365,30 @@ class Raycast(Renderer):
                               f"camera {camera.name!r} use_dof=True"})
         geometry = self.geometry()
         out: dict[str, np.ndarray] = {}
+        rolling = rolling_shutter.duration_of(camera) > 0
         for i, frame in enumerate(frames):
-            layers = self.render_frame(camera, geometry, frame, wanted)
+            layers = (rolling_frame(self, camera, geometry, frame, wanted) if rolling else
+                      self.render_frame(camera, geometry, frame, wanted))
             for name in wanted:
                 if name not in out:
                     out[name] = np.empty((len(frames),) + layers[name].shape, layers[name].dtype)
                 out[name][i] = layers[name]
         return out
 
-    def render_frame(self, camera, geometry, frame, wanted) -> dict[str, np.ndarray]:
-        """One frame's layers ``wanted`` → {layer: (H, W, C)}."""
+    def render_frame(self, camera, geometry, frame, wanted, rows=None,
+                     rolling_from=None) -> dict[str, np.ndarray]:
+        """One frame's layers ``wanted`` → {layer: (H, W, C)} at time ``frame`` (fractional
+        allowed). Rolling shutter (:mod:`kubric.renderer.raycast_rolling`): ``rows`` casts only
+        these image rows' rays (the others read as background), and ``rolling_from`` (a frame
+        number) makes the flows end at the rolling-shutter positions in frame
+        ``rolling_from ± 1``."""
         w, h = self.scene.resolution
         centres = geo.pixel_centres(h, w).reshape(-1, 2)
         origins, dirs = geo.pixel_centre_rays(camera, frame=frame, resolution=(w, h))
         posed = _PosedScene(geometry, frame)
         has_ray = np.isfinite(dirs).all(axis=1)  # a lens's image may not fill the frame
+        if rows is not None:
+            has_ray &= np.isin(np.arange(h * w) // w, rows)
         tri_id = np.full(len(dirs), -1, np.int64)
         tri_id[has_ray] = posed.first_hits(origins[has_ray], dirs[has_ray])
         hit = tri_id >= 0
@@ -411,9 +421,13 @@ class Raycast(Renderer):
         res["uv"] = image(np.concatenate([np.mod(uv, 1.0), np.zeros((len(idx), 1))], 1), 3)
         for name, step in (("forward_flow", 1), ("backward_flow", -1)):
             if name in wanted:
-                world = geometry.to_world(local, owner, geometry.poses(frame + step))
-                xy, _ = geo.project_to_pixels(camera, world, frame=frame + step,
-                                              resolution=(w, h))
+                if rolling_from is not None:
+                    xy = rolling_flow_ends(camera, geometry, local, owner, rolling_from + step,
+                                           (w, h))
+                else:
+                    world = geometry.to_world(local, owner, geometry.poses(frame + step))
+                    xy, _ = geo.project_to_pixels(camera, world, frame=frame + step,
+                                                  resolution=(w, h))
                 flow = xy[:, ::-1] - centres[idx, ::-1]  # (Δrow, Δcol)
                 res[name] = image(np.nan_to_num(flow, nan=0.0), 2)  # NaN: left the lens's domain
         if "rgba" in wanted:
