@@ -141,25 +141,31 @@ def test_recipe_layer_and_task_examples_run_as_written(tmp_path, monkeypatch):
         getattr(m, "__file__", None) == str(tmp_path / "spheres.py") for m in list(sys.modules.values()))
 
 
-def test_backend_example_touches_two_files_and_renders(tmp_path):
-    from kubric.asset_tools import ensure_kubasic
-    ensure_kubasic()  # built here (bpy makes one of its shapes), so the worker below needs no bpy
+def package_with_example(tmp_path, file: str, registry: str, table: str) -> pathlib.Path:
+    """A copy of the package with the page's ``file`` block written and its ``row`` block added
+    as the last row of ``table`` (a dict literal ``TABLE = {...}`` in ``registry``); checks that
+    exactly those two files differ from the package."""
     code = blocks()
     package = tmp_path / "pkg"
     shutil.copytree(ROOT / "kubric", package / "kubric",
                     ignore=shutil.ignore_patterns("__pycache__"))
-    (package / "kubric" / "renderer" / "labels.py").write_text(
-        code[("file", "kubric/renderer/labels.py")])
-    base = package / "kubric" / "renderer" / "base.py"
-    row = code[("row", "kubric/renderer/base.py")]
-    text = base.read_text()
-    anchor = ('    "raycast": Backend("kubric.renderer.raycast:Raycast", Capabilities(photoreal=False, '
-              'lenses=True)),\n')
-    assert anchor in text
-    base.write_text(text.replace(anchor, anchor + row))
+    (package / file).write_text(code[("file", file)])
+    path = package / registry
+    text = path.read_text()
+    start = text.index(f"\n{table} = {{")
+    end = text.index("\n}\n", start) + 1   # the table's closing brace
+    path.write_text(text[:end] + code[("row", registry)] + text[end:])
     changed = _changed_files(ROOT / "kubric", package / "kubric")
-    assert changed == ["renderer/base.py", "renderer/labels.py"]
-    assert len(changed) == files_touched("Example 3")
+    assert changed == sorted(str(pathlib.Path(f).relative_to("kubric")) for f in (file, registry))
+    return package
+
+
+def test_backend_example_touches_two_files_and_renders(tmp_path):
+    from kubric.asset_tools import ensure_kubasic
+    ensure_kubasic()  # built here (bpy makes one of its shapes), so the worker below needs no bpy
+    package = package_with_example(tmp_path, "kubric/renderer/labels.py",
+                                   "kubric/renderer/base.py", "BACKENDS")
+    assert files_touched("Example 3") == 2
     kubric("worker", "movi_a", "--seed", 2, "--out", tmp_path / "out", "--set", "renderer=labels",
            "--set", "resolution=32", "--set", "frame_end=2", "--set", "max_num_objects=4",
            cwd=tmp_path, pythonpath=[NO_BPY, package])
@@ -187,20 +193,9 @@ def test_export_example_touches_two_files_and_matches_the_segmentation(tmp_path)
     from kubric.asset_tools import ensure_kubasic
     from kubric.io.layers import read_layer
     ensure_kubasic()
-    code = blocks()
-    package = tmp_path / "pkg"
-    shutil.copytree(ROOT / "kubric", package / "kubric",
-                    ignore=shutil.ignore_patterns("__pycache__"))
-    exports = package / "kubric" / "datasets" / "exports"
-    (exports / "yolo.py").write_text(code[("file", "kubric/datasets/exports/yolo.py")])
-    registry = exports / "__init__.py"
-    text = registry.read_text()
-    anchor = '        "the LASR folder to create"),\n'
-    assert text.count(anchor) == 1
-    registry.write_text(text.replace(anchor, anchor + code[("row", "kubric/datasets/exports/__init__.py")]))
-    changed = _changed_files(ROOT / "kubric", package / "kubric")
-    assert changed == ["datasets/exports/__init__.py", "datasets/exports/yolo.py"]
-    assert len(changed) == files_touched("Example 5")
+    package = package_with_example(tmp_path, "kubric/datasets/exports/yolo.py",
+                                   "kubric/datasets/exports/__init__.py", "FORMATS")
+    assert files_touched("Example 5") == 2
     kubric("worker", "movi_a", "--seed", 5, "--out", tmp_path / "out", "--set", "renderer=raycast",
            "--set", "resolution=32", "--set", "frame_end=2", "--set", "max_num_objects=5",
            cwd=tmp_path, pythonpath=[NO_BPY, package])
