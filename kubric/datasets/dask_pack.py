@@ -282,12 +282,14 @@ def make_plan(scenes_dir, name, split_fractions: dict, schema, examples_per_shar
                                "digits, _)")
         assignment: dict[str, list[str]] = {s: [] for s in split_fractions}
         corrupt: list[tuple[str, str]] = []
+        seeds = []
         for location, folder in zip(locations, folders, strict=True):
             try:
-                assignment[layout.split_of(packer.scene_seed(folder), split_fractions)].append(
-                    location)
+                seeds.append((packer.scene_seed(folder), location))
+                assignment[layout.split_of(seeds[-1][0], split_fractions)].append(location)
             except (packer.SceneError, ValueError) as err:
                 corrupt.append((location, str(err).replace(str(folder), location)))
+        scene_dir.check_unique_seeds(seeds)
     plan = PackPlan(scenes_dir, name, schema, dims, split_fractions, examples_per_shard,
                     assignment, corrupt, incomplete, schema_origin=origin)
     described = {"engine": "sharded", "schema": schema.name, "name": name,
@@ -351,6 +353,7 @@ def pack_sharded(scenes_dir, out, executor=None, name: str | None = None,
     ``executor``: a :class:`DaskExecutor`, or None for ``workers`` local processes;
     ``class_names`` as for :func:`~kubric.datasets.packer.pack`. ``out`` is a directory; a URL
     is packed by :func:`kubric.datasets.store_commit.pack_to_store` (:func:`pack_into`)."""
+    packer.check_pack_output(out, scenes_dir)
     if storage.is_url(str(out)):
         raise DatasetUsageError(f"pack_sharded: --out {str(out)!r} is a URL; use "
                                 "kubric.datasets.store_commit.pack_to_store (pack_into)")

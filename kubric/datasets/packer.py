@@ -54,6 +54,7 @@ from kubric.datasets.layout import DatasetError, DatasetUsageError
 from kubric.datasets.pack_schema import check_scene_schema, schema_origin_and_dims
 from kubric.io import scene_dir
 from kubric.io.json_io import read_json, write_json
+from kubric.io.output_check import check_output, scene_folders
 from kubric.io.output_lock import OutputBusy, OutputLock
 from kubric.io.scene_reader import SceneError, SceneReader
 from kubric.io.schema import Schema, SchemaError
@@ -275,6 +276,11 @@ def check_options(splits, workers: int, examples_per_shard: int, out: pathlib.Pa
     return split_fractions
 
 
+def check_pack_output(out, scenes_dir) -> None:
+    """:func:`kubric.io.output_check.check_output` for a pack (URL outputs allowed)."""
+    check_output(out, scene_folders(scenes_dir), [scenes_dir], urls=True, command="kubric pack")
+
+
 # ------------------------------------------------------------------------ the packer
 def pack(scenes_dir, out, name: str | None = None, splits=DEFAULT_SPLITS, workers: int = 1,
          schema: Schema | str | None = None, examples_per_shard: int = 256,
@@ -285,6 +291,7 @@ def pack(scenes_dir, out, name: str | None = None, splits=DEFAULT_SPLITS, worker
     (:func:`resolve_names`). Raises :class:`~kubric.datasets.layout.DatasetError` (one line) on
     bad input before writing anything."""
     start = time.perf_counter()
+    check_pack_output(out, scenes_dir)
     scenes_dir, out = pathlib.Path(scenes_dir), pathlib.Path(out)
     if not scenes_dir.is_dir():
         raise DatasetError(f"SCENES_DIR {str(scenes_dir)!r} is not a directory")
@@ -300,11 +307,14 @@ def pack(scenes_dir, out, name: str | None = None, splits=DEFAULT_SPLITS, worker
         raise DatasetError(f"--name {name!r} must be a lower-case identifier (letters, digits, _)")
     assignment: dict[str, list[pathlib.Path]] = {s: [] for s in split_fractions}
     corrupt: list[tuple[str, str]] = []
+    seeds = []
     for scene in complete:
         try:
-            assignment[layout.split_of(scene_seed(scene), split_fractions)].append(scene)
+            seeds.append((scene_seed(scene), scene))
+            assignment[layout.split_of(seeds[-1][0], split_fractions)].append(scene)
         except (SceneError, ValueError) as err:
             corrupt.append((str(scene), str(err)))
+    scene_dir.check_unique_seeds(seeds)
 
     plan = {"schema": schema.name, "name": name, "splits": split_fractions, "dims": dims,
             "examples_per_shard": examples_per_shard, "format_version": layout.FORMAT_VERSION,

@@ -158,6 +158,7 @@ def pack_to_store(scenes_dir, out, executor=None, name=None, splits=packer.DEFAU
     if verify:
         raise DatasetError("--verify reads the dataset from a local directory; pack to one, or "
                            "load the URL and compare (kubric.datasets.load)")
+    packer.check_pack_output(out, scenes_dir)
     try:
         out = storage.normalise(str(out))
         if out.startswith("memory://"):

@@ -43,6 +43,7 @@ from kubric.datasets.exports import models as mdl
 from kubric.datasets.exports.coco import amodal_masks, mask_bbox
 from kubric.datasets.exports.scenes import ExportError, Scene, find_scenes, load_scene, model_sources
 from kubric.io.layers import read_frame
+from kubric.io.output_check import OutputError
 from kubric.io.png_io import encode_png
 
 #: our camera axes (x right, y up, looking down -z) → OpenCV's
@@ -242,11 +243,11 @@ def export_bop(root, out, split: str = "train_pbr", depth_scale: float = 1.0,
 
     root, out = pathlib.Path(root), pathlib.Path(out)
     if out.exists() and not out.is_dir():
-        raise ExportError(f"--out {str(out)!r} is a file; give a folder (the BOP dataset root)")
+        raise OutputError(f"--out {str(out)!r} is a file; give a folder (the BOP dataset root)")
     if not split or "/" in split or split.startswith("."):
-        raise ExportError(f"--split {split!r}: give a folder name such as train_pbr")
+        raise OutputError(f"--split {split!r}: give a folder name such as train_pbr")
     if (out / "models" / "models_info.json").exists():
-        raise ExportError(f"--out {str(out)!r} already holds a BOP export (models/models_info.json"
+        raise OutputError(f"--out {str(out)!r} already holds a BOP export (models/models_info.json"
                           "); remove it or choose another folder (object ids are numbered per "
                           "export)")
     paths, skipped = find_scenes(root)

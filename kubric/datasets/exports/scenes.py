@@ -71,7 +71,8 @@ def annotation_id(image: int, label: int) -> int:
 
 def find_scenes(root) -> tuple[list[pathlib.Path], int]:
     """(complete scene directories under ``root``, or ``root`` itself; number of incomplete
-    ones skipped). One-line ExportError when ``root`` is not a folder or holds no scene."""
+    ones skipped). One-line ExportError when ``root`` is not a folder or holds no scene, and a
+    DuplicateSeedError when two scenes share a seed (their ids would clash)."""
     root = pathlib.Path(root)
     if not root.is_dir():
         raise ExportError(f"{str(root)!r} is not a directory (expected a folder of scene_* "
@@ -82,6 +83,7 @@ def find_scenes(root) -> tuple[list[pathlib.Path], int]:
     if not complete:
         raise ExportError(f"{str(root)!r} holds no complete scene directory (scene_* with "
                           f"{scene_dir.SUCCESS_FILE})")
+    scene_dir.check_unique_seeds((load_scene(root, p).seed, p) for p in complete)
     return complete, incomplete
 
 

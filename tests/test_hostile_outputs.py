@@ -1,0 +1,129 @@
+"""Round three (issue 41), integrity of every writer's output: an output inside, equal to or
+holding its input, a URL output where a command writes local files only, and two complete scenes
+with one seed — on real scenes (MOVi-A rendered by the raycast backend) and the real ``kubric``
+command in a subprocess."""
+
+import hashlib
+import json
+import os
+import pathlib
+import shutil
+import subprocess
+import sys
+
+import pytest
+
+ROOT = pathlib.Path(__file__).resolve().parents[1]
+OPTIONS = ["renderer=raycast", "resolution=24x16", "frame_end=2", "min_num_objects=2",
+           "max_num_objects=3"]
+
+
+def kubric(*args, cwd=ROOT, timeout=300):
+    env = dict(os.environ, PYTHONPATH=f"{ROOT}{os.pathsep}{os.environ.get('PYTHONPATH', '')}")
+    return subprocess.run([sys.executable, "-m", "kubric", *map(str, args)], cwd=cwd, env=env,
+                          capture_output=True, text=True, timeout=timeout)
+
+
+def one_line(proc, code, *words):
+    lines = proc.stderr.strip().splitlines()
+    assert proc.returncode == code, proc.stderr[-2000:]
+    assert len(lines) == 1 and "Traceback" not in proc.stderr, proc.stderr[-2000:]
+    for word in words:
+        assert word in lines[0], lines[0]
+
+
+def digest(folder: pathlib.Path) -> dict:
+    return {str(p.relative_to(folder)): hashlib.sha256(p.read_bytes()).hexdigest()
+            for p in sorted(folder.rglob("*")) if p.is_file()}
+
+
+@pytest.fixture(scope="module")
+def scenes(tmp_path_factory):
+    root = tmp_path_factory.mktemp("outputs") / "scenes"
+    sets = [a for o in OPTIONS for a in ("--set", o)]
+    for seed in (1, 2):
+        proc = kubric("worker", "movi_a", "--seed", seed, "--out", root, *sets)
+        assert proc.returncode == 0, proc.stderr[-2000:]
+    return root
+
+
+@pytest.fixture
+def copy(scenes, tmp_path):
+    """A fresh copy of the scenes (tests may damage it)."""
+    target = tmp_path / "scenes"
+    shutil.copytree(scenes, target, symlinks=True)
+    return target
+
+
+def test_outputs_inside_or_holding_their_inputs_are_refused_untouched(copy, tmp_path):
+    scene = copy / "scene_00000001"
+    before = digest(copy)
+    cases = [
+        ("export", "coco", scene, "--out", scene / "metadata.json"),
+        ("export", "coco", copy, "--out", scene / "coco.json"),
+        ("export", "tapvid", copy, "--out", scene / "tracks.npz"),
+        ("export", "bop", copy, "--out", copy),
+        ("export", "bop", copy, "--out", copy.parent),
+        ("export", "nerf", copy, "--out", scene / "nerf"),
+        ("export", "lasr", scene, "--out", scene / "lasr2"),
+        ("pack", copy, "--out", scene),
+        ("pack", copy, "--out", scene / "ds"),
+        ("pack", copy, "--out", copy.parent),
+    ]
+    for args in cases:
+        proc = kubric(*args)
+        one_line(proc, 2, "--out", "outside every scene")
+    assert digest(copy) == before  # nothing written, nothing replaced
+    assert sorted(p.name for p in copy.parent.iterdir()) == ["scenes"]
+    # a symlink to a scene is the scene
+    (tmp_path / "alias").symlink_to(scene)
+    one_line(kubric("export", "coco", copy, "--out", tmp_path / "alias" / "x.json"), 2,
+             "outside every scene")
+    # beside the scenes, inside their folder, is allowed (it is not a scene)
+    proc = kubric("export", "coco", copy, "--out", copy / "coco.json", "--no-progress")
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert len(json.loads((copy / "coco.json").read_text())["images"]) == 2 * 2
+
+
+@pytest.mark.parametrize("fmt,extra", [("coco", []), ("bop", []), ("tapvid", []),
+                                       ("nerf", []), ("lasr", [])])
+def test_url_outputs_of_local_writers_are_refused_not_written_as_a_folder(scenes, tmp_path,
+                                                                          fmt, extra):
+    src = scenes / "scene_00000001" if fmt == "lasr" else scenes
+    for out in ("s3://bucket/out", "s3:/bucket/out", "gs://b/x.json"):
+        proc = kubric("export", fmt, src, "--out", out, *extra, cwd=tmp_path)
+        one_line(proc, 2, repr(out))
+    assert list(tmp_path.iterdir()) == []  # no local folder named 's3:' or 'gs:'
+
+
+def _scenes_with_duplicate(copy, how):
+    original = copy / "scene_00000001"
+    if how == "copy":
+        shutil.copytree(original, copy / "scene_00000001_again")
+    elif how == "symlink":
+        (copy / "scene_00000009").symlink_to(original)
+    else:  # a re-render under another name: same seed in its metadata
+        shutil.copytree(original, copy / "rerender")
+    return copy
+
+
+@pytest.mark.parametrize("how", ["copy", "symlink", "rename"])
+def test_two_scenes_with_one_seed_are_refused_by_every_writer(copy, tmp_path, how):
+    scenes = _scenes_with_duplicate(copy, how)
+    for args in [("export", "coco", scenes, "--out", tmp_path / "c.json", "--no-progress"),
+                 ("export", "bop", scenes, "--out", tmp_path / "bop", "--no-progress"),
+                 ("export", "tapvid", scenes, "--out", tmp_path / "t.pkl"),
+                 ("pack", scenes, "--out", tmp_path / "ds", "--no-progress")]:
+        one_line(kubric(*args), 1, "same seed 1", "keep one of them")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["scenes"]
+
+
+def test_coco_ids_are_unique_once_the_copy_is_gone(copy, tmp_path):
+    proc = kubric("export", "coco", copy, "--out", tmp_path / "c.json", "--no-progress")
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    coco = json.loads((tmp_path / "c.json").read_text())
+    ids = [im["id"] for im in coco["images"]]
+    anns = [a["id"] for a in coco["annotations"]]
+    assert len(ids) == len(set(ids)) == 4 and len(anns) == len(set(anns)) > 0
+    # independent derivation of the expected ids: seeds 1 and 2, frames 0 and 1
+    assert sorted(ids) == [10_000, 10_001, 20_000, 20_001]
