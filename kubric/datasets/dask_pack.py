@@ -117,6 +117,7 @@ def encode_chunk(work: str, file: str, scenes: list[str], schema, dims: dict) ->
             record["scenes"].append(name)
             record["num_bytes"] += len(data)
         writer.close()
+        record["sha256"] = layout.file_sha256(tmp)
     storage.write_bytes(storage.join(work, f".{file}.json"),
                         json.dumps(record, indent=2).encode())
     return record
@@ -124,7 +125,7 @@ def encode_chunk(work: str, file: str, scenes: list[str], schema, dims: dict) ->
 
 def recut_shard(work: str, file: str, pieces: list[tuple[str, list[int]]]) -> dict:
     """Write ``work/file`` from records of chunk files: ``pieces`` = [(chunk file, [record
-    indices])] in order; returns ``{"file", "num_bytes"}``."""
+    indices])] in order; returns ``{"file", "num_bytes", "sha256"}``."""
     from array_record.python import array_record_module
     _require_work(work)
     num_bytes = 0
@@ -143,7 +144,8 @@ def recut_shard(work: str, file: str, pieces: list[tuple[str, list[int]]]) -> di
             finally:
                 reader.close()
         writer.close()
-    return {"file": file, "num_bytes": num_bytes}
+        digest = layout.file_sha256(tmp)
+    return {"file": file, "num_bytes": num_bytes, "sha256": digest}
 
 
 # ------------------------------------------------------------------------ executors
@@ -414,7 +416,8 @@ def _recut(work: str, executor, name: str, assignment: dict, chunk_of: dict,
         chunks = [records[key] for key in sorted(k for k in records if k[0] == split)]
         if not any(r["corrupt"] for r in chunks):
             state["shards"][split] = [{"file": r["file"], "scenes": r["scenes"],
-                                       "num_bytes": r["num_bytes"]} for r in chunks]
+                                       "num_bytes": r["num_bytes"], "sha256": r.get("sha256")}
+                                      for r in chunks]
             continue
         good = [(r["file"], i, scene) for r in chunks for i, scene in enumerate(r["scenes"])]
         shards = []
@@ -432,7 +435,7 @@ def _recut(work: str, executor, name: str, assignment: dict, chunk_of: dict,
         state["shards"][split] = shards
 
     def done(k, result):
-        targets[k]["num_bytes"] = result["num_bytes"]
+        targets[k]["num_bytes"], targets[k]["sha256"] = result["num_bytes"], result["sha256"]
     _run(executor, calls, done)
     if not storage.is_url(work):  # a URL's work area goes as a whole after the commit
         keep = {sh["file"] for shards in state["shards"].values() for sh in shards}

@@ -55,7 +55,7 @@ from kubric.datasets.pack_schema import check_scene_schema, schema_origin_and_di
 from kubric.io import scene_dir
 from kubric.io.json_io import read_json, write_json
 from kubric.io.output_check import check_output, scene_folders
-from kubric.io.output_lock import OutputBusy, OutputLock
+from kubric.io.output_lock import OutputLock
 from kubric.io.scene_reader import SceneError, SceneReader
 from kubric.io.schema import Schema, SchemaError
 
@@ -367,10 +367,7 @@ def output_lock(out: pathlib.Path):
     @contextlib.contextmanager
     def held():
         lock = OutputLock(out.parent / f".{out.name}.lock", f"--out {str(out)!r}")
-        try:
-            lock.acquire()
-        except OutputBusy as err:
-            raise DatasetUsageError(str(err)) from None
+        lock.acquire()  # OutputBusy: exit status 3, as every command's busy output
         try:
             yield lock
         finally:
@@ -538,20 +535,27 @@ def _finish_shard(work: pathlib.Path, state: dict, writer: _ShardWriter) -> None
     write_json(state, work / PROGRESS_FILE)
 
 
-def finalise(work, state, schema, name, dims, split_fractions, incomplete, features) -> dict:
-    """Final shard names, TFDS metadata and the kubric marker; returns counts per split."""
+def finalise(work, state, schema, name, dims, split_fractions, incomplete, features,
+             hash_files: bool = True) -> dict:
+    """Final shard names, TFDS metadata and the kubric marker; returns counts per split. A
+    shard's checksum is its state entry's ``sha256``, else (``hash_files``) its file's."""
     import tensorflow_datasets as tfds
 
     from kubric import __version__
-    split_infos, counts, scenes, shard_lengths = [], {}, {}, {}
+    split_infos, counts, scenes, shard_lengths, digests = [], {}, {}, {}, {}
     # the record goes before the renames: a kill among them leaves no record naming moved files
     # (the next run starts afresh), never one that a rerun would trust
     (work / PROGRESS_FILE).unlink()
     for split in split_fractions:
         shards = [sh for sh in state["shards"].get(split, []) if sh["scenes"]]
         for i, shard in enumerate(shards):
-            os.replace(work / shard["file"], work / layout.shard_name(name, split, i, len(shards)))
+            final = layout.shard_name(name, split, i, len(shards))
+            os.replace(work / shard["file"], work / final)
             faults.point("pack.shard_renamed")
+            digest = shard.get("sha256") or (layout.file_sha256(work / final) if hash_files
+                                             else None)
+            if digest:
+                digests[final] = digest
         counts[split] = sum(len(sh["scenes"]) for sh in shards)
         scenes[split] = [s for sh in shards for s in sh["scenes"]]
         shard_lengths[split] = [len(sh["scenes"]) for sh in shards]
@@ -570,7 +574,7 @@ def finalise(work, state, schema, name, dims, split_fractions, incomplete, featu
                 "shard_lengths": shard_lengths, "scenes": scenes,
                 "incomplete_skipped": incomplete, "kubric_version": __version__,
                 "shard_writer_options": layout.SHARD_WRITER_OPTIONS,
-                "schema_json": schema.to_json()},
+                "shard_sha256": digests, "schema_json": schema.to_json()},
                work / layout.INFO_FILE)
     return counts
 
