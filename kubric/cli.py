@@ -4,9 +4,11 @@
 Errors: :func:`main` is the one top-level handler. An expected error (a
 :class:`~kubric.errors.KubricError`: a bad option, invalid input data, ...; or an ``OSError``: a
 missing or unreadable file, a full disk) prints one line
-``kubric <command>: error: <message>`` on stderr and exits 2 for a usage error (a bad option or
-flag) or 1 for a failure; the traceback is printed only with the global ``--debug`` flag (or
-``KUBRIC_DEBUG=1``). Ctrl-C exits 130 with one line. Anything else is a bug and keeps its traceback.
+``kubric <command>: error: <message>`` on stderr and exits with the error's status
+(docs/exit-codes.md: 2 for a usage error or a refused output, 1 for a failure, 3 for a busy
+output); the traceback is printed only with the global ``--debug`` flag (or
+``KUBRIC_DEBUG=1``). Ctrl-C exits 130 with one line, SIGTERM 143 after the same unwinding.
+Anything else is a bug and keeps its traceback.
 """
 
 from __future__ import annotations
@@ -14,6 +16,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import os
+import signal
 import sys
 import traceback
 
@@ -74,6 +77,12 @@ def exit_code(err: BaseException) -> int | None:
     return None
 
 
+def _terminated(signum, _frame):
+    """SIGTERM (``kill``, Slurm): unwind like Ctrl-C, so ``finally`` blocks remove temporary
+    files; exit status 128 + 15 (docs/exit-codes.md)."""
+    raise SystemExit(128 + signum)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
@@ -81,6 +90,8 @@ def main(argv: list[str] | None = None) -> int:
         parser.print_help()
         return 2
     debug = args.debug or os.environ.get("KUBRIC_DEBUG", "") not in ("", "0")
+    if signal.getsignal(signal.SIGTERM) is signal.SIG_DFL:
+        signal.signal(signal.SIGTERM, _terminated)  # unwind: every command's cleanup runs
     try:
         return int(args.func(args) or 0)
     except KeyboardInterrupt:

@@ -18,8 +18,9 @@ OPTIONS = ["renderer=raycast", "resolution=24x16", "frame_end=2", "min_num_objec
            "max_num_objects=3"]
 
 
-def kubric(*args, cwd=ROOT, timeout=300):
-    env = dict(os.environ, PYTHONPATH=f"{ROOT}{os.pathsep}{os.environ.get('PYTHONPATH', '')}")
+def kubric(*args, cwd=ROOT, timeout=300, env=None):
+    env = dict(os.environ, PYTHONPATH=f"{ROOT}{os.pathsep}{os.environ.get('PYTHONPATH', '')}",
+               **(env or {}))
     return subprocess.run([sys.executable, "-m", "kubric", *map(str, args)], cwd=cwd, env=env,
                           capture_output=True, text=True, timeout=timeout)
 
@@ -127,3 +128,15 @@ def test_coco_ids_are_unique_once_the_copy_is_gone(copy, tmp_path):
     assert len(ids) == len(set(ids)) == 4 and len(anns) == len(set(anns)) > 0
     # independent derivation of the expected ids: seeds 1 and 2, frames 0 and 1
     assert sorted(ids) == [10_000, 10_001, 20_000, 20_001]
+
+
+def test_sigterm_during_export_coco_leaves_no_temporary_file(scenes, tmp_path):
+    out = tmp_path / "out"
+    out.mkdir()
+    proc = kubric("export", "coco", scenes, "--out", out / "c.json", "--no-progress",
+                  env={"KUBRIC_FAULT": "export.scene_written:term"})
+    assert proc.returncode == 143, proc.stderr[-2000:]  # 128 + SIGTERM, after unwinding
+    assert "Traceback" not in proc.stderr
+    assert list(out.iterdir()) == []  # neither c.json nor a hidden .tmp / side file
+    proc = kubric("export", "coco", scenes, "--out", out / "c.json", "--no-progress")
+    assert proc.returncode == 0 and [p.name for p in out.iterdir()] == ["c.json"]

@@ -33,6 +33,7 @@ import sys
 
 import numpy as np
 
+from kubric import faults
 from kubric.datasets.exports import rle
 from kubric.datasets.exports.categories import scheme_for
 from kubric.datasets.exports.scenes import (
@@ -184,6 +185,7 @@ def export_coco(root, out, progress: bool = True, compressed: bool = True,
                         anns.write(("," if n_annotations else "") + _dump(item))
                         n_annotations += 1
                     bar.update(1)
+                    faults.point("export.scene_written")
             main.write('],"annotations":[')
             anns.seek(0)
             shutil.copyfileobj(anns, main, 1 << 16)
