@@ -150,3 +150,64 @@ def test_a_corrupt_cached_shard_is_fetched_again_and_a_corrupt_store_names_the_u
         load(url, "train")
     assert "\n" not in str(err.value)
     assert not list((tmp_path / "cache2").rglob(shard.name))
+
+
+def _stalled_server():
+    """A TCP server on 127.0.0.1 that accepts connections and never answers (a stalled store)."""
+    import socket
+    import threading
+    server = socket.socket()
+    server.bind(("127.0.0.1", 0))
+    server.listen(64)
+    held = []
+
+    def accept():
+        while True:
+            try:
+                held.append(server.accept()[0])
+            except OSError:
+                return
+    threading.Thread(target=accept, daemon=True).start()
+    return server, held
+
+
+def test_a_stalled_store_ends_in_one_line_within_its_deadline(store):
+    server, held = _stalled_server()
+    try:
+        endpoint = f"http://127.0.0.1:{server.getsockname()[1]}"
+        start = time.monotonic()
+        proc = kubric("pack", store["scenes"], "--out", "s3://stalled/ds", *PACK, timeout=120,
+                      env={"FSSPEC_S3_ENDPOINT_URL": endpoint, "KUBRIC_STORE_TIMEOUT": "2"})
+        took = time.monotonic() - start
+    finally:
+        server.close()
+        for conn in held:
+            conn.close()
+    lines = proc.stderr.strip().splitlines()
+    assert proc.returncode in (1, 2) and len(lines) == 1, proc.stderr[-3000:]
+    assert "'s3://stalled/ds'" in lines[0] and "no answer within the deadline" in lines[0]
+    assert took < 60, took  # one operation's deadline (10 × 2 s), not minutes
+    assert held, "the pack never reached the stalled server"
+
+
+def test_the_store_dying_mid_pack_is_one_line_and_nothing_is_published(tmp_path):
+    (tmp_path / "killstore.py").write_text(
+        "import os, signal\n"
+        "def kill(point):\n"
+        "    os.kill(int(os.environ['MOTO_PID']), signal.SIGKILL)\n")
+    with processes() as procs, pytest.MonkeyPatch.context() as mp:
+        fs = point_at_s3(mp, start_s3(procs, tmp_path))
+        fs.mkdir("dying")
+        from kubric.recipes.bench import Bench
+        for seed in range(4):
+            run_scene(Bench(), seed, tmp_path / "scenes")
+        proc = kubric("pack", tmp_path / "scenes", "--out", "s3://dying/ds", *PACK, timeout=200,
+                      env={"KUBRIC_FAULT": "pack.encode_scene:call",
+                           "KUBRIC_FAULT_CALL": "killstore:kill",
+                           "MOTO_PID": str(procs[-1].pid), "KUBRIC_STORE_TIMEOUT": "2",
+                           "PYTHONPATH": f"{tmp_path}{os.pathsep}{ROOT}"})
+    lines = proc.stderr.strip().splitlines()
+    assert proc.returncode == 1 and len(lines) == 1, proc.stderr[-3000:]
+    assert lines[0].startswith("kubric pack: error: --out 's3://dying/ds': the object store "
+                               "failed during the pack"), lines[0]
+    assert "rerun the same command to resume" in lines[0]

@@ -162,13 +162,19 @@ def pack_to_store(scenes_dir, out, executor=None, name=None, splits=packer.DEFAU
         raise DatasetUsageError(str(err)) from None
     plan = dask_pack.make_plan(scenes_dir, name, split_fractions, schema, examples_per_shard,
                                class_names, verify)
-    with StoreLease(out):  # one pack of ``out`` at a time: nothing below touches another's files
-        check_output(out, overwrite)
-        work = _open_work(out, plan.key)
-        state, corrupt, resumed = dask_pack.run_plan(plan, work, executor, workers, progress)
-        with tempfile.TemporaryDirectory(prefix="kubric-commit-") as scratch:
-            counts, renames, files = _metadata(plan, state, pathlib.Path(scratch))
-            commit(out, work, renames, files)
+    try:
+        with StoreLease(out):  # one pack of ``out`` at a time: nothing below touches another's
+            check_output(out, overwrite)
+            work = _open_work(out, plan.key)
+            state, corrupt, resumed = dask_pack.run_plan(plan, work, executor, workers, progress)
+            with tempfile.TemporaryDirectory(prefix="kubric-commit-") as scratch:
+                counts, renames, files = _metadata(plan, state, pathlib.Path(scratch))
+                commit(out, work, renames, files)
+    except storage.backend_errors() as err:  # a store that failed or stalled past its deadline
+        raise storage.StorageError(f"--out {out!r}: the object store failed during the pack "
+                                   f"({storage.failure(err)}); nothing was published "
+                                   "unless kubric_dataset.json exists: rerun the same command "
+                                   "to resume") from None
     return packer.PackResult(out, counts, plan.incomplete, corrupt,
                              time.perf_counter() - start, resumed, plan.schema_origin)
 
