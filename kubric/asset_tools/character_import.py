@@ -35,12 +35,15 @@ from pathlib import Path
 import numpy as np
 
 from kubric.asset_tools import retarget
+from kubric.asset_tools.bvh import BVHError, read_bvh
 from kubric.asset_tools.character_writer import package_character, package_motion
 from kubric.asset_tools.writer import write_manifest
 from kubric.assets.gltf_refs import GltfReferenceError, check_gltf
 from kubric.errors import InputError
 
 EXTENSIONS = (".gltf", ".glb", ".fbx", ".bvh")
+#: the largest ``--scale`` (file units → metres; 1000 turns kilometres into metres)
+MAX_SCALE = 1000.0
 
 
 class CharacterImportError(InputError):
@@ -149,8 +152,9 @@ def import_characters(src: str | Path, out: str | Path, name: str = "UserCharact
     src, out = Path(src), Path(out)
     if not src.exists():
         raise FileNotFoundError(f"{src}: no such file or folder")
-    if not scale > 0:
-        raise InputError(f"--scale must be > 0, got {scale!r}")
+    if not 0 < scale <= MAX_SCALE:
+        raise InputError(f"--scale must be in (0, {MAX_SCALE:g}] (file units → metres), got "
+                         f"{scale!r}")
     if bvh_up not in ("y", "z"):
         raise InputError(f"--bvh-up must be 'y' or 'z', got {bvh_up!r}")
     files = [src] if not src.is_dir() else sorted(p for p in src.rglob("*")
@@ -168,10 +172,12 @@ def import_characters(src: str | Path, out: str | Path, name: str = "UserCharact
         try:
             if path.suffix.lower() in (".gltf", ".glb"):
                 check_gltf(path, root)  # before bpy follows a URI out of SRC or into a device
+            elif path.suffix.lower() == ".bvh":
+                read_bvh(path)  # NaN, impossible frame counts and times, absurd lengths
             extracted.append((path, *extract(path, bvh_up=bvh_up)))
             if progress:
                 print(f"  [{i + 1}/{len(files)}] read {path.name}", flush=True)
-        except (CharacterImportError, GltfReferenceError) as err:
+        except (CharacterImportError, GltfReferenceError, BVHError) as err:
             skipped.append({"id": path.stem, "source": str(path), "reason": str(err)})
     characters, char_entries = {}, {}
     for path, arrays, info in extracted:
