@@ -60,6 +60,10 @@ def error_line(err: BaseException) -> str:
         message = f"{err.filename}{target}: {err.strerror}"
     elif isinstance(err, OSError) and err.strerror and str(err).startswith("[Errno"):
         message = err.strerror  # no path known: the bare reason, without "[Errno N]"
+    elif isinstance(err, MemoryError):
+        detail = f" ({err})" if str(err) else ""
+        message = (f"out of memory{detail}: lower the resolution, frames or workers, or give "
+                   "this process more memory")
     else:
         message = str(err) or type(err).__name__
     return " ".join(message.split())
@@ -72,7 +76,7 @@ def exit_code(err: BaseException) -> int | None:
         return err.exit_code
     if missing_extra(err):  # an optional package not installed: its extra named in one line
         return 1
-    if isinstance(err, OSError):
+    if isinstance(err, OSError | MemoryError):  # a MemoryError: the machine's limit, not a bug
         return 1
     return None
 

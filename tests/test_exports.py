@@ -165,7 +165,7 @@ def test_coco_bad_input(tmp_path):
     assert proc.returncode == 1 and "no complete scene" in proc.stderr
     proc = kubric("export", "bop", tmp_path / "empty", "--out", tmp_path / "b",
                   "--depth-scale", "0")
-    assert proc.returncode == 2 and "--depth-scale must be > 0" in proc.stderr
+    assert proc.returncode == 2 and "--depth-scale must be a finite number > 0" in proc.stderr
 
 
 def test_one_export_command_per_registered_format(tmp_path):

@@ -89,3 +89,29 @@ def test_the_documented_table_is_the_error_classes():
                     "143": "terminated"}
     assert (UsageError.exit_code, InputError.exit_code, KubricError.exit_code,
             OutputBusy.exit_code) == (2, 1, 1, 3)
+
+
+MEMORY_LIMITED = """
+import resource, sys
+resource.setrlimit(resource.RLIMIT_AS, (3 << 30, 3 << 30))
+from kubric.cli import main
+sys.exit(main(sys.argv[1:]))
+"""
+
+
+def test_running_out_of_memory_within_the_option_bounds_is_one_line(tmp_path):
+    """resolution=8192 is allowed; under a 3 GiB address-space limit it cannot be rendered: one
+    line, exit status 1, no scene."""
+    import os
+    import subprocess
+    import sys
+    env = dict(os.environ, PYTHONPATH=f"{ROOT}{os.pathsep}{os.environ.get('PYTHONPATH', '')}")
+    proc = subprocess.run([sys.executable, "-c", MEMORY_LIMITED, "worker", "movi_a", "--seed", "1",
+                           "--out", str(tmp_path / "o"), "--set", "renderer=raycast", "--set",
+                           "resolution=8192", "--set", "frame_end=2", "--set",
+                           "max_num_objects=3"], cwd=ROOT, env=env, capture_output=True,
+                          text=True, timeout=600)
+    lines = [ln for ln in proc.stderr.strip().splitlines() if not ln.startswith("pybullet build")]
+    assert proc.returncode == 1 and len(lines) == 1, proc.stderr[-3000:]
+    assert lines[0].startswith("kubric worker: error: out of memory"), lines[0]
+    assert not list((tmp_path / "o").glob("scene_*"))

@@ -140,3 +140,38 @@ def test_sigterm_during_export_coco_leaves_no_temporary_file(scenes, tmp_path):
     assert list(out.iterdir()) == []  # neither c.json nor a hidden .tmp / side file
     proc = kubric("export", "coco", scenes, "--out", out / "c.json", "--no-progress")
     assert proc.returncode == 0 and [p.name for p in out.iterdir()] == ["c.json"]
+
+
+def test_malformed_keypoints_in_export_coco_are_one_line(tmp_path):
+    from test_exports import synthetic_scenes
+
+    from kubric import file_io
+    root = tmp_path / "scenes"
+    synthetic_scenes(root, [3], frames=2)
+    meta_file = root / "scene_00000003" / "metadata.json"
+    meta = file_io.read_json(meta_file)
+    person = {"keypoint_names": ["nose", "eye"], "keypoint_skeleton": [[0, 1]],
+              "keypoints_2d": [[[1.0, 2.0], [3.0, 4.0]]] * 2,
+              "keypoints_visibility": [[2, 1]] * 2}
+    meta["instances"][0].update(person)
+    file_io.write_json(meta, meta_file)
+    good = kubric("export", "coco", root, "--out", tmp_path / "ok.json", "--no-progress")
+    assert good.returncode == 0, good.stderr[-2000:]
+    people = [a for a in json.loads((tmp_path / "ok.json").read_text())["annotations"]
+              if "keypoints" in a]
+    assert people and people[0]["keypoints"] == [0.5, 1.5, 2, 2.5, 3.5, 1]
+    cases = [({"keypoints_2d": [[[1.0, 2.0]]] * 2}, "keypoints_2d has shape (2, 1, 2)"),
+             ({"keypoints_2d": [[[1.0, 2.0], [3.0]]] * 2}, "keypoints_2d is not an array"),
+             ({"keypoints_2d": [[["a", "b"], [3.0, 4.0]]] * 2}, "keypoints_2d is not an array"),
+             ({"keypoints_visibility": [[2, 7]] * 2}, "keypoints_visibility holds 7.0"),
+             ({"keypoints_visibility": None}, "keypoints_visibility has shape ()"),
+             ({"keypoints_2d": [[[float("nan"), 2.0], [3.0, 4.0]]] * 2}, "NaN/inf"),
+             ({"keypoint_names": "nose"}, "keypoint_names nose is not a list of names"),
+             ({"keypoint_skeleton": [[0]]}, "is not a list of [i, j] pairs")]
+    for change, says in cases:
+        bad = json.loads(json.dumps(meta))
+        bad["instances"][0].update(change)
+        file_io.write_json(bad, meta_file)
+        proc = kubric("export", "coco", root, "--out", tmp_path / "bad.json", "--no-progress")
+        one_line(proc, 1, says)
+        assert not (tmp_path / "bad.json").exists()

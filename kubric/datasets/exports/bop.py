@@ -244,6 +244,9 @@ def export_bop(root, out, split: str = "train_pbr", depth_scale: float = 1.0,
     root, out = pathlib.Path(root), pathlib.Path(out)
     if out.exists() and not out.is_dir():
         raise OutputError(f"--out {str(out)!r} is a file; give a folder (the BOP dataset root)")
+    if not 0 < depth_scale < float("inf"):  # inf would write every depth as 0
+        raise OutputError(f"--depth-scale must be a finite number > 0 (millimetres per depth "
+                          f"unit), got {depth_scale}")
     if not split or "/" in split or split.startswith("."):
         raise OutputError(f"--split {split!r}: give a folder name such as train_pbr")
     if (out / "models" / "models_info.json").exists():

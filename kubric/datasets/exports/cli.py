@@ -45,9 +45,9 @@ def cmd_coco(args) -> int:
 
 
 def cmd_bop(args) -> int:
-    if not args.depth_scale > 0:
-        return _error("bop", f"--depth-scale must be > 0 (millimetres per depth unit), got "
-                      f"{args.depth_scale}")
+    if not 0 < args.depth_scale < float("inf"):
+        return _error("bop", f"--depth-scale must be a finite number > 0 (millimetres per depth "
+                      f"unit), got {args.depth_scale}")
     summary, code = _run("bop", args, split=args.split, depth_scale=args.depth_scale,
                          progress=not args.no_progress, sources=args.source)
     if summary:
