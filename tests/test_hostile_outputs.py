@@ -175,3 +175,21 @@ def test_malformed_keypoints_in_export_coco_are_one_line(tmp_path):
         proc = kubric("export", "coco", root, "--out", tmp_path / "bad.json", "--no-progress")
         one_line(proc, 1, says)
         assert not (tmp_path / "bad.json").exists()
+
+
+def test_bop_leaves_people_out_instead_of_failing_the_folder(copy, tmp_path):
+    """A person (a deforming character) has no rigid BOP model: the export of scenes with people
+    is the export of the same scenes without them, plus a count in the summary (it failed for
+    the whole folder, advising --source, which cannot help)."""
+    plain = kubric("export", "bop", copy, "--out", tmp_path / "plain", "--no-progress")
+    assert plain.returncode == 0, plain.stderr[-2000:]
+    meta_file = copy / "scene_00000001" / "metadata.json"
+    meta = json.loads(meta_file.read_text())
+    person = dict(meta["instances"][0], asset_id="tube_person", character_id="tube_person",
+                  keypoints_2d=[[[1.0, 1.0]]] * 2)
+    meta["instances"].append(person)  # label len + 1: no pixel of the segmentation
+    meta_file.write_text(json.dumps(meta))
+    proc = kubric("export", "bop", copy, "--out", tmp_path / "people", "--no-progress")
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert "1 person instance(s) left out (BOP models are rigid)" in proc.stdout
+    assert digest(tmp_path / "plain") == digest(tmp_path / "people")
