@@ -193,3 +193,25 @@ def test_bop_leaves_people_out_instead_of_failing_the_folder(copy, tmp_path):
     assert proc.returncode == 0, proc.stderr[-2000:]
     assert "1 person instance(s) left out (BOP models are rigid)" in proc.stdout
     assert digest(tmp_path / "plain") == digest(tmp_path / "people")
+
+
+def test_coco_of_svr_scenes_keeps_the_asset_categories(tmp_path):
+    """svr draws KuBasic assets by default (objects_source=None): their categories, not one
+    "object" for everything."""
+    sets = ["renderer=raycast", "resolution=24x16", "num_views=3", "split_ratio=1,1,1"]
+    for seed in (2, 5):
+        proc = kubric("worker", "svr", "--seed", seed, "--out", tmp_path / "svr",
+                      *[a for o in sets for a in ("--set", o)])
+        assert proc.returncode == 0, proc.stderr[-2000:]
+    proc = kubric("export", "coco", tmp_path / "svr", "--out", tmp_path / "c.json",
+                  "--no-progress")
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    coco = json.loads((tmp_path / "c.json").read_text())
+    assert coco["info"]["categories_from"] == "asset category"
+    names = {c["id"]: c["name"] for c in coco["categories"]}
+    images = {im["id"]: im["scene"] for im in coco["images"]}
+    for ann in coco["annotations"]:
+        meta = json.loads((tmp_path / "svr" / images[ann["image_id"]] / "metadata.json")
+                          .read_text())
+        assert names[ann["category_id"]] == meta["instances"][ann["instance"]]["category"]
+    assert len(coco["annotations"]) == 6
