@@ -64,6 +64,8 @@ def test_refused_outputs_and_bad_options_are_2(scenes, tmp_path):
                  ("export", "coco", scenes, "--out", scene / "metadata.json"),
                  ("export", "coco", scenes, "--out", "s3://bucket/c.json"),
                  ("export", "bop", scenes, "--out", tmp_path / "b", "--depth-scale", "0"),
+                 ("export", "bop", scenes, "--out", tmp_path / "b", "--depth-scale", "inf"),
+                 ("export", "bop", scenes, "--out", tmp_path / "b", "--depth-scale", "nan"),
                  ("pack", scenes, "--out", tmp_path / "ds", "--splits", "train=0.5")):
         one_line(kubric(*args), 2)
 
@@ -115,3 +117,36 @@ def test_running_out_of_memory_within_the_option_bounds_is_one_line(tmp_path):
     assert proc.returncode == 1 and len(lines) == 1, proc.stderr[-3000:]
     assert lines[0].startswith("kubric worker: error: out of memory"), lines[0]
     assert not list((tmp_path / "o").glob("scene_*"))
+
+
+SWALLOWER = """
+import os, signal, time
+try:
+    os.kill(os.getpid(), signal.SIGINT)   # Ctrl-C lands while this module imports ...
+    time.sleep(0.5)
+except BaseException:                     # ... and is swallowed, as trimesh's imports do
+    pass
+"""
+
+
+def test_a_ctrl_c_during_a_swallowing_import_is_not_lost(tmp_path):
+    import os
+    import subprocess
+    import sys
+    (tmp_path / "swallow_a.py").write_text(SWALLOWER)
+    (tmp_path / "swallow_b.py").write_text(SWALLOWER)
+    code = ("import importlib, sys\n"
+            "from kubric.core.imports import uninterrupted_import\n"
+            "importlib.import_module('swallow_a')\n"
+            "print('plain import: the interrupt was lost', flush=True)\n"
+            "try:\n"
+            "    uninterrupted_import('swallow_b')\n"
+            "except KeyboardInterrupt:\n"
+            "    print('held import: interrupted after it', flush=True)\n"
+            "    sys.exit(130)\n")
+    env = dict(os.environ, PYTHONPATH=f"{tmp_path}{os.pathsep}{ROOT}")
+    proc = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True,
+                          timeout=60)
+    assert proc.stdout.splitlines() == ["plain import: the interrupt was lost",
+                                        "held import: interrupted after it"], proc.stderr
+    assert proc.returncode == 130
