@@ -92,3 +92,20 @@ def test_pose_estimation_refuses_a_character_without_keypoints_before_rendering(
     one_line(proc, 2, "character 'no_keypoints' of character_source has no keypoint regressor")
     assert time.monotonic() - start < 120
     assert not list((tmp_path / "o").glob("scene_*"))
+
+
+def test_character_and_motion_loaders_name_the_damaged_file(sources, tmp_path):
+    from kubric.assets.characters import CharacterAssetError, character_kwargs, motion_kwargs
+    good_npz = tmp_path / "motion.npz"
+    np.savez(good_npz, rotations=np.tile(np.eye(3), (2, 1, 1, 1)), root_offsets=np.zeros((2, 3)))
+    good_json = tmp_path / "motion.json"
+    good_json.write_text('{"name": "w", "bone_names": ["root"], "fps": 24}')
+    motion_kwargs(good_npz, good_json)  # the undamaged pair loads
+    bad_npz, bad_json = tmp_path / "cut.npz", tmp_path / "bad.json"
+    bad_npz.write_bytes(good_npz.read_bytes()[:40])
+    bad_json.write_text('{"name": ')
+    for load in (character_kwargs, motion_kwargs):
+        with pytest.raises(CharacterAssetError, match=f"{bad_npz} is not a readable .npz"):
+            load(bad_npz, good_json)
+    with pytest.raises(CharacterAssetError, match=f"{bad_json} is not valid JSON"):
+        motion_kwargs(good_npz, bad_json)
