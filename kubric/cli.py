@@ -81,6 +81,19 @@ def exit_code(err: BaseException) -> int | None:
     return None
 
 
+#: the commands whose ``--out`` may be a URL (object storage); every other ``--out`` is local
+URL_OUTPUTS = frozenset({"generate", "worker", "pack"})
+
+
+def check_local_output(args) -> None:
+    """Refuse (exit 2, one line) an ``--out`` URL given to a command that writes local files
+    only, before the command runs: it would otherwise become a local folder named ``s3:``."""
+    out = getattr(args, "out", None)
+    if isinstance(out, str) and args.command not in URL_OUTPUTS:
+        from kubric.io.output_check import check_output
+        check_output(out, command=f"kubric {args.command}")
+
+
 def _terminated(signum, _frame):
     """SIGTERM (``kill``, Slurm): unwind like Ctrl-C, so ``finally`` blocks remove temporary
     files; exit status 128 + 15 (docs/exit-codes.md)."""
@@ -97,6 +110,7 @@ def main(argv: list[str] | None = None) -> int:
     if signal.getsignal(signal.SIGTERM) is signal.SIG_DFL:
         signal.signal(signal.SIGTERM, _terminated)  # unwind: every command's cleanup runs
     try:
+        check_local_output(args)
         return int(args.func(args) or 0)
     except KeyboardInterrupt:
         print(f"kubric {args.command}: interrupted", file=sys.stderr)

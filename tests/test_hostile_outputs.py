@@ -215,3 +215,18 @@ def test_coco_of_svr_scenes_keeps_the_asset_categories(tmp_path):
                           .read_text())
         assert names[ann["category_id"]] == meta["instances"][ann["instance"]]["category"]
     assert len(coco["annotations"]) == 6
+
+
+def test_url_outputs_of_every_local_command_are_refused_before_it_runs(tmp_path):
+    """One check in the `kubric` command for every --out: only generate, worker and pack
+    write URLs."""
+    src = tmp_path / "src"
+    src.mkdir()
+    work = tmp_path / "cwd"
+    work.mkdir()
+    for args in (("assets", "kubasic"), ("assets", "characters", src), ("assets", "humans"),
+                 ("assets", "motions"), ("assets", "hdri", src)):
+        for out in ("s3://bucket/x", "gs:/bucket/x"):
+            proc = kubric(*args, "--out", out, cwd=work)
+            one_line(proc, 2, repr(out))
+    assert list(work.iterdir()) == []
