@@ -89,9 +89,9 @@ def check_local_output(args) -> None:
     """Refuse (exit 2, one line) an ``--out`` URL given to a command that writes local files
     only, before the command runs: it would otherwise become a local folder named ``s3:``."""
     out = getattr(args, "out", None)
-    if isinstance(out, str) and args.command not in URL_OUTPUTS:
+    if isinstance(out, str):  # (also: ``s3:/b/x``, a URL that lost its '//', in every command)
         from kubric.io.output_check import check_output
-        check_output(out, command=f"kubric {args.command}")
+        check_output(out, urls=args.command in URL_OUTPUTS, command=f"kubric {args.command}")
 
 
 def _terminated(signum, _frame):

@@ -229,4 +229,6 @@ def test_url_outputs_of_every_local_command_are_refused_before_it_runs(tmp_path)
         for out in ("s3://bucket/x", "gs:/bucket/x"):
             proc = kubric(*args, "--out", out, cwd=work)
             one_line(proc, 2, repr(out))
+    for args in (("generate", "movi_a", "--scenes", "1"), ("worker", "movi_a", "--seed", "1")):
+        one_line(kubric(*args, "--out", "s3:/bucket/run", cwd=work), 2, "without its '//'")
     assert list(work.iterdir()) == []
