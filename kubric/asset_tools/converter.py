@@ -51,6 +51,7 @@ from pathlib import Path
 from kubric.asset_tools import physics
 from kubric.asset_tools.physics import DECOMPOSITION_METHODS
 from kubric.asset_tools.writer import Collision, dumps, package_object, write_manifest
+from kubric.assets.gltf_refs import check_gltf
 from kubric.core.color import linear_to_srgb
 from kubric.core.imports import uninterrupted_import
 from kubric.errors import InputError
@@ -117,6 +118,8 @@ def discover_jobs(src_dir: str | os.PathLike, license: str, up: str = "z",
     for path in sorted(src.rglob("*")):
         if path.suffix.lower() not in MESH_SUFFIXES or not path.is_file():
             continue
+        if path.suffix.lower() in (".gltf", ".glb"):
+            check_gltf(path, src, malformed_ok=True)  # URIs stay inside SRC (trimesh follows any)
         asset_id = _sanitize_id(path.relative_to(src))
         if asset_id in jobs:
             raise InputError(f"two meshes map to the asset id {asset_id!r}: "

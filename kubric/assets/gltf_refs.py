@@ -37,6 +37,10 @@ class GltfReferenceError(InputError):
     """A glTF file referencing something outside its rules (one line)."""
 
 
+class MalformedGltf(GltfReferenceError):
+    """A file that is no glTF document at all (it references nothing)."""
+
+
 def _regular(path: Path, what: str) -> os.stat_result:
     """``os.stat`` of a regular file (never opened: a FIFO would block)."""
     try:
@@ -56,10 +60,10 @@ def gltf_document(path) -> dict:
         if path.suffix.lower() == ".glb":
             head = fh.read(20)
             if len(head) < 20 or head[:4] != GLB_MAGIC:
-                raise GltfReferenceError(f"{path}: not a GLB file (no 'glTF' header)")
+                raise MalformedGltf(f"{path}: not a GLB file (no 'glTF' header)")
             length, kind = struct.unpack("<II", head[12:20])
             if kind != 0x4E4F534A or length > min(MAX_JSON_BYTES, st.st_size - 20):
-                raise GltfReferenceError(f"{path}: GLB JSON chunk of {length} bytes does not fit "
+                raise MalformedGltf(f"{path}: GLB JSON chunk of {length} bytes does not fit "
                                          f"the file ({st.st_size} bytes, at most "
                                          f"{MAX_JSON_BYTES} read)")
             data = fh.read(length)
@@ -71,18 +75,25 @@ def gltf_document(path) -> dict:
     try:
         doc = json.loads(data)
     except (ValueError, UnicodeDecodeError) as err:
-        raise GltfReferenceError(f"{path}: not glTF JSON ({err})") from None
+        raise MalformedGltf(f"{path}: not glTF JSON ({err})") from None
     if not isinstance(doc, dict):
-        raise GltfReferenceError(f"{path}: the glTF document is not a JSON object")
+        raise MalformedGltf(f"{path}: the glTF document is not a JSON object")
     return doc
 
 
-def check_gltf(path, root=None) -> list[Path]:
+def check_gltf(path, root=None, malformed_ok: bool = False) -> list[Path]:
     """Check every URI of the glTF asset ``path`` against the rules of the module doc, with
-    ``root`` the source folder (default: the file's folder); returns the referenced files."""
+    ``root`` the source folder (default: the file's folder); returns the referenced files.
+    ``malformed_ok``: a file that is no glTF document references nothing (the importer that
+    reads it next reports it) instead of an error."""
     path = Path(path)
     root = Path(root if root is not None else path.parent).resolve()
-    doc = gltf_document(path)
+    try:
+        doc = gltf_document(path)
+    except MalformedGltf:
+        if malformed_ok:
+            return []
+        raise
     found = []
     for kind in ("buffers", "images"):
         items = doc.get(kind, [])
@@ -114,5 +125,5 @@ def check_gltf(path, root=None) -> list[Path]:
     return found
 
 
-__all__ = ["GltfReferenceError", "MAX_FILE_BYTES", "MAX_JSON_BYTES", "check_gltf",
+__all__ = ["GltfReferenceError", "MAX_FILE_BYTES", "MalformedGltf", "MAX_JSON_BYTES", "check_gltf",
            "gltf_document"]
