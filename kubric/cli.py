@@ -4,9 +4,11 @@
 Errors: :func:`main` is the one top-level handler. An expected error (a
 :class:`~kubric.errors.KubricError`: a bad option, invalid input data, ...; or an ``OSError``: a
 missing or unreadable file, a full disk) prints one line
-``kubric <command>: error: <message>`` on stderr and exits 2 for a usage error (a bad option or
-flag) or 1 for a failure; the traceback is printed only with the global ``--debug`` flag (or
-``KUBRIC_DEBUG=1``). Ctrl-C exits 130 with one line. Anything else is a bug and keeps its traceback.
+``kubric <command>: error: <message>`` on stderr and exits with the error's status
+(docs/exit-codes.md: 2 for a usage error or a refused output, 1 for a failure, 3 for a busy
+output); the traceback is printed only with the global ``--debug`` flag (or
+``KUBRIC_DEBUG=1``). Ctrl-C exits 130 with one line, SIGTERM 143 after the same unwinding.
+Anything else is a bug and keeps its traceback.
 """
 
 from __future__ import annotations
@@ -14,6 +16,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import os
+import signal
 import sys
 import traceback
 
@@ -57,6 +60,10 @@ def error_line(err: BaseException) -> str:
         message = f"{err.filename}{target}: {err.strerror}"
     elif isinstance(err, OSError) and err.strerror and str(err).startswith("[Errno"):
         message = err.strerror  # no path known: the bare reason, without "[Errno N]"
+    elif isinstance(err, MemoryError):
+        detail = f" ({err})" if str(err) else ""
+        message = (f"out of memory{detail}: lower the resolution, frames or workers, or give "
+                   "this process more memory")
     else:
         message = str(err) or type(err).__name__
     return " ".join(message.split())
@@ -69,9 +76,28 @@ def exit_code(err: BaseException) -> int | None:
         return err.exit_code
     if missing_extra(err):  # an optional package not installed: its extra named in one line
         return 1
-    if isinstance(err, OSError):
+    if isinstance(err, OSError | MemoryError):  # a MemoryError: the machine's limit, not a bug
         return 1
     return None
+
+
+#: the commands whose ``--out`` may be a URL (object storage); every other ``--out`` is local
+URL_OUTPUTS = frozenset({"generate", "worker", "pack"})
+
+
+def check_local_output(args) -> None:
+    """Refuse (exit 2, one line) an ``--out`` URL given to a command that writes local files
+    only, before the command runs: it would otherwise become a local folder named ``s3:``."""
+    out = getattr(args, "out", None)
+    if isinstance(out, str):  # (also: ``s3:/b/x``, a URL that lost its '//', in every command)
+        from kubric.io.output_check import check_output
+        check_output(out, urls=args.command in URL_OUTPUTS, command=f"kubric {args.command}")
+
+
+def _terminated(signum, _frame):
+    """SIGTERM (``kill``, Slurm): unwind like Ctrl-C, so ``finally`` blocks remove temporary
+    files; exit status 128 + 15 (docs/exit-codes.md)."""
+    raise SystemExit(128 + signum)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -81,7 +107,10 @@ def main(argv: list[str] | None = None) -> int:
         parser.print_help()
         return 2
     debug = args.debug or os.environ.get("KUBRIC_DEBUG", "") not in ("", "0")
+    if signal.getsignal(signal.SIGTERM) is signal.SIG_DFL:
+        signal.signal(signal.SIGTERM, _terminated)  # unwind: every command's cleanup runs
     try:
+        check_local_output(args)
         return int(args.func(args) or 0)
     except KeyboardInterrupt:
         print(f"kubric {args.command}: interrupted", file=sys.stderr)

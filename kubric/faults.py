@@ -15,7 +15,8 @@ Points: ``pack.encode_scene`` (before each scene is encoded, in the encoding pro
 ``pack.shard_write`` (before each record is written), ``pack.shard_renamed`` (after each final
 shard rename), ``pack.finalised`` (the dataset finished in the work folder, before ``--verify``),
 ``pack.before_swap``, ``pack.old_moved`` (an old dataset moved aside, the new one not yet in
-place), ``worker.generated`` (a scene's recipe returned, before ``_SUCCESS``). The hostile tests
+place), ``worker.generated`` (a scene's recipe returned, before ``_SUCCESS``),
+``export.scene_written`` (an export wrote one scene's records into its temporary files). The hostile tests
 (``tests/test_hostile_*.py``) and ``benchmarks/bench_pack_signals.py`` use them.
 """
 

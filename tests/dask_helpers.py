@@ -99,6 +99,21 @@ def s3_env(endpoint: str) -> dict:
             "AWS_SECRET_ACCESS_KEY": "test", "AWS_DEFAULT_REGION": "us-east-1"}
 
 
+def point_at_s3(mp, endpoint: str, cache=None):
+    """Point this process (its environment and fsspec's configuration, through the
+    ``pytest.MonkeyPatch`` ``mp``) and its children at moto's ``endpoint``; with ``cache``, the
+    dataset cache too. Returns a fresh ``s3fs.S3FileSystem``."""
+    for key, value in s3_env(endpoint).items():
+        mp.setenv(key, value)
+    if cache is not None:
+        mp.setenv("KUBRIC_CACHE_DIR", str(cache))
+    import fsspec.config
+    mp.setitem(fsspec.config.conf, "s3", {"endpoint_url": endpoint})
+    import s3fs
+    s3fs.S3FileSystem.clear_instance_cache()
+    return s3fs.S3FileSystem()
+
+
 def cmdline(pid: int) -> list[str]:
     try:
         return pathlib.Path(f"/proc/{pid}/cmdline").read_bytes().decode().split("\0")

@@ -41,7 +41,7 @@ def truncated_tracks(tmp_path):
 def test_item14_truncated_tracks_named_by_export_and_inspect(truncated_tracks, tmp_path):
     where = f"{str(truncated_tracks / 'tracks.npz')!r} is not a readable tracks file (truncated"
     one_line(kubric("export", "tapvid", truncated_tracks.parent, "--out", tmp_path / "t.pkl"),
-             2, where)
+             1, where)  # bad input: 1 in every command (docs/exit-codes.md)
     one_line(kubric("inspect", truncated_tracks, "--sheet", tmp_path / "s.png"), 1, where)
     (truncated_tracks / "tracks.npz").write_bytes(b"\x93NUMPY garbage that is no zip")
     one_line(kubric("inspect", truncated_tracks, "--sheet", tmp_path / "s.png"), 1, where)

@@ -112,7 +112,7 @@ def test_item10_second_generate_on_one_output_refuses(tmp_path):
         run = subprocess.run([sys.executable, "-m", "kubric", "generate", FAKE, "--out",
                               str(out), "--scenes", "2", "--no-progress"],
                              capture_output=True, text=True, timeout=120)
-    assert run.returncode == 1, run.stderr
+    assert run.returncode == 3, run.stderr
     line, = run.stderr.strip().splitlines()
     assert line.startswith(f"kubric generate: error: --out {str(out)!r} is being written by "
                            f"another run (pid {os.getpid()}")

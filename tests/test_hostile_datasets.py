@@ -128,7 +128,7 @@ def test_item2_item10_second_pack_on_one_output_refuses(scenes, tmp_path):
     from kubric.datasets import packer
     with packer.output_lock(out):
         run = kubric("pack", scenes, "--out", out, "--splits", "train=1", "--no-progress")
-    assert run.returncode == 2
+    assert run.returncode == 3
     assert "is being written by another run (pid " in run.stderr
     assert len(run.stderr.strip().splitlines()) == 1 and not out.exists()
     assert not (tmp_path / ".ds.lock").exists()  # released and removed
@@ -311,6 +311,6 @@ def test_item2_two_real_packs_at_once(scenes, tmp_path, dataset):
     second = kubric("pack", scenes, "--out", out, "--splits", "train=1",
                     "--examples-per-shard", "2", "--no-progress")
     assert first.poll() is None, "the first pack ended before the second started"
-    assert second.returncode == 2 and f"(pid {first.pid}," in second.stderr
+    assert second.returncode == 3 and f"(pid {first.pid}," in second.stderr
     assert first.wait(timeout=120) == 0
     assert tree(out) == tree(dataset) and not lock.exists()

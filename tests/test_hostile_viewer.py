@@ -81,6 +81,6 @@ def test_item8_listen_backlog_is_real(folder):
 def test_item17_view_error_has_one_prefix(tmp_path):
     run = subprocess.run([sys.executable, "-m", "kubric", "view", str(tmp_path / "none")],
                          capture_output=True, text=True, timeout=60)
-    assert run.returncode == 2
+    assert run.returncode == 1
     assert run.stderr.strip() == (f"kubric view: error: {str(tmp_path / 'none')!r} is not a "
                                   "directory (give a scene directory or a folder of scenes)")

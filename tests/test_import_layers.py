@@ -29,7 +29,7 @@ ALLOWED = {
     "utils": {"core", "io", "errors", "annotations", "randomness"},
     "renderer": {"core", "io", "errors", "assets", "annotations"},
     "simulator": {"core", "io", "errors", "assets"},
-    "datasets.exports": {"core", "io", "errors", "annotations", "assets", "asset_tools"},
+    "datasets.exports": {"core", "io", "errors", "faults", "annotations", "assets", "asset_tools"},
     "pipeline": ABOVE,
     "recipes": ABOVE,
     "datasets": {"core", "io", "errors", "faults", "extras", "pipeline"},

@@ -199,11 +199,11 @@ def test_command_line(tmp_path):
     assert ok.returncode == 0, ok.stderr
     assert "wrote LASR sequence clip (3 frames)" in ok.stdout
     assert (tmp_path / "o" / "configs" / "clip.config").is_file()
-    for args, says in (((tmp_path / "scene", "--out", tmp_path / "o"), "already exists"),
-                       ((tmp_path / "nowhere", "--out", tmp_path / "p"), "nowhere"),
-                       ((tmp_path / "scene", "--out", tmp_path / "q", "--instances", "a"),
-                        "--instances 'a'")):
+    for args, says, code in (((tmp_path / "scene", "--out", tmp_path / "o"), "already exists", 2),
+                             ((tmp_path / "nowhere", "--out", tmp_path / "p"), "nowhere", 1),
+                             ((tmp_path / "scene", "--out", tmp_path / "q", "--instances", "a"),
+                              "--instances 'a'", 2)):
         bad = kubric(*args)
         lines = bad.stderr.strip().splitlines()
-        assert bad.returncode == 2 and len(lines) == 1, bad.stderr
+        assert bad.returncode == code and len(lines) == 1, bad.stderr  # docs/exit-codes.md
         assert lines[0].startswith("kubric export lasr: error: ") and says in lines[0]

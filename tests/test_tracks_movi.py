@@ -198,7 +198,7 @@ def test_tapvid_export(scene, tmp_path):
     bad = subprocess.run([sys.executable, "-m", "kubric", "export", "tapvid", str(tmp_path),
                           "--out", str(tmp_path / "x.pkl")], cwd=ROOT, capture_output=True,
                          text=True, timeout=60)
-    assert bad.returncode == 2 and len(bad.stderr.strip().splitlines()) == 1
+    assert bad.returncode == 1 and len(bad.stderr.strip().splitlines()) == 1
     assert "no complete scene" in bad.stderr
 
 

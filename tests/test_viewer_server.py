@@ -236,7 +236,7 @@ def test_cli_serves_and_reports_bad_paths(dataset, tmp_path):
     root, _, _ = dataset
     bad = subprocess.run([sys.executable, "-m", "kubric", "view", str(tmp_path / "nope")],
                          capture_output=True, text=True, cwd=ROOT)
-    assert bad.returncode == 2 and "not a directory" in bad.stderr
+    assert bad.returncode == 1 and "not a directory" in bad.stderr
     assert len(bad.stderr.strip().splitlines()) == 1
     proc = subprocess.Popen([sys.executable, "-m", "kubric", "view", str(root), "--port", "0"],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT)

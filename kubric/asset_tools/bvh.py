@@ -6,8 +6,9 @@ channels in the order listed (``Zrotation Yrotation Xrotation`` → ``Rz · Ry �
 world = parent world · local. ``End Site`` offsets give the tip of a chain. Units and axes are
 the file's (CMU files: Y up, character facing +Z at zero rotation).
 
-Every problem (truncated file, a non-number, NaN, unknown channel, a frame count that does not
-match the data) raises :class:`BVHError` with one line naming the file and what is wrong.
+Every problem (truncated file, a non-number, NaN, unknown channel, a frame count that is not a
+whole number ≥ 1 or does not match the data, a frame time ≤ 0, an offset or position beyond
+±:data:`MAX_LENGTH`) raises :class:`BVHError` with one line naming the file and what is wrong.
 """
 
 from __future__ import annotations
@@ -20,6 +21,10 @@ import numpy as np
 from kubric.errors import InputError
 
 CHANNELS = ("Xposition", "Yposition", "Zposition", "Xrotation", "Yrotation", "Zrotation")
+
+
+#: the largest offset or root position a file may hold, in its own units (CMU's are inches)
+MAX_LENGTH = 1e6
 
 
 class BVHError(InputError):
@@ -178,7 +183,10 @@ def read_bvh(path: str | Path) -> BVHMotion:
         fail("HIERARCHY is incomplete (unclosed joint or no joint)")
     if take() != "Frames:":
         fail("expected 'Frames:' after MOTION")
-    n_frames = int(number("Frames"))
+    n_frames = number("Frames")
+    if n_frames != int(n_frames) or n_frames < 1:
+        fail(f"Frames must be a whole number ≥ 1, got {n_frames:g}")
+    n_frames = int(n_frames)
     if take() != "Frame" or take() != "Time:":
         fail("expected 'Frame Time:'")
     frame_time = number("Frame Time")
@@ -196,4 +204,15 @@ def read_bvh(path: str | Path) -> BVHMotion:
     if not np.isfinite(data).all():
         frame = int(np.nonzero(~np.isfinite(data).all(axis=1))[0][0])
         fail(f"MOTION data holds NaN/inf (first at frame {frame})")
+    lengths = [abs(v) for j in joints for v in (*j.offset, *(() if j.end_site is None
+                                                             else j.end_site))]
+    col = 0
+    for joint in joints:
+        for c in joint.channels:
+            if c.endswith("position"):
+                lengths.append(float(np.abs(data[:, col]).max()))
+            col += 1
+    if max(lengths) > MAX_LENGTH:
+        fail(f"an offset or position of {max(lengths):g} file units is beyond ±{MAX_LENGTH:g} "
+             "(a unit or scale error)")
     return BVHMotion(joints, frame_time, data, str(path))

@@ -18,7 +18,10 @@ same axes as the character: BVH files are read as Y up facing +Z (``--bvh-up y``
 convention, e.g. CMU) or as Z up unchanged (``--bvh-up z``, as Blender's BVH exporter writes).
 
 Files that cannot be used (no armature, a mesh not skinned to it, unweighted vertices, NaN in a
-clip, an importer failure) are skipped with one line naming the file and the problem.
+clip, an importer failure, a FIFO or other non-regular file) are skipped with one line naming
+the file and the problem; so is a glTF file whose buffer or image URIs leave SRC or name
+anything but a bounded regular file (:mod:`kubric.assets.gltf_refs`). Two files with one stem
+(``a/dup.gltf`` and ``b/dup.glb``) are refused before anything is read: ids are stems.
 """
 
 from __future__ import annotations
@@ -32,11 +35,15 @@ from pathlib import Path
 import numpy as np
 
 from kubric.asset_tools import retarget
+from kubric.asset_tools.bvh import BVHError, read_bvh
 from kubric.asset_tools.character_writer import package_character, package_motion
 from kubric.asset_tools.writer import write_manifest
+from kubric.assets.gltf_refs import GltfReferenceError, check_gltf
 from kubric.errors import InputError
 
 EXTENSIONS = (".gltf", ".glb", ".fbx", ".bvh")
+#: the largest ``--scale`` (file units → metres; 1000 turns kilometres into metres)
+MAX_SCALE = 1000.0
 
 
 class CharacterImportError(InputError):
@@ -125,6 +132,18 @@ def clip_onto(src_arrays: dict, src_info: dict, target: dict, target_names: list
     return {"rotations": rotations, "root_offsets": offsets}
 
 
+def check_unique_stems(files) -> None:
+    """One-line :class:`InputError` when two files share a stem: a character's and a clip's ids
+    are file stems, so one would silently replace the other."""
+    seen: dict[str, Path] = {}
+    for path in files:
+        if path.stem in seen:
+            raise InputError(f"{seen[path.stem]} and {path} have the same name {path.stem!r} "
+                             "(character and clip ids are file names without extension); "
+                             "rename one")
+        seen[path.stem] = path
+
+
 def import_characters(src: str | Path, out: str | Path, name: str = "UserCharacters",
                       license: str = "unknown (user-provided files)", scale: float = 1.0,
                       progress: bool = True, bvh_up: str = "y") -> dict:
@@ -133,22 +152,32 @@ def import_characters(src: str | Path, out: str | Path, name: str = "UserCharact
     src, out = Path(src), Path(out)
     if not src.exists():
         raise FileNotFoundError(f"{src}: no such file or folder")
-    if not scale > 0:
-        raise InputError(f"--scale must be > 0, got {scale!r}")
+    if not 0 < scale <= MAX_SCALE:
+        raise InputError(f"--scale must be in (0, {MAX_SCALE:g}] (file units → metres), got "
+                         f"{scale!r}")
     if bvh_up not in ("y", "z"):
         raise InputError(f"--bvh-up must be 'y' or 'z', got {bvh_up!r}")
-    files = [src] if src.is_file() else sorted(p for p in src.rglob("*")
-                                                if p.suffix.lower() in EXTENSIONS)
+    files = [src] if not src.is_dir() else sorted(p for p in src.rglob("*")
+                                                   if p.suffix.lower() in EXTENSIONS)
     bad = [p for p in files if p.suffix.lower() not in EXTENSIONS]
     if bad:
         raise InputError(f"{bad[0]}: unsupported file type; allowed: {list(EXTENSIONS)}")
-    skipped, extracted = [], []
+    skipped = [{"id": p.stem, "source": str(p), "reason": f"{p}: not a regular file (a FIFO, "
+                "device or folder is never read)"} for p in files if not p.is_file()]
+    files = [p for p in files if p.is_file()]
+    check_unique_stems(files)
+    extracted = []
+    root = src if src.is_dir() else src.parent
     for i, path in enumerate(files):
         try:
+            if path.suffix.lower() in (".gltf", ".glb"):
+                check_gltf(path, root)  # before bpy follows a URI out of SRC or into a device
+            elif path.suffix.lower() == ".bvh":
+                read_bvh(path)  # NaN, impossible frame counts and times, absurd lengths
             extracted.append((path, *extract(path, bvh_up=bvh_up)))
             if progress:
                 print(f"  [{i + 1}/{len(files)}] read {path.name}", flush=True)
-        except CharacterImportError as err:
+        except (CharacterImportError, GltfReferenceError, BVHError) as err:
             skipped.append({"id": path.stem, "source": str(path), "reason": str(err)})
     characters, char_entries = {}, {}
     for path, arrays, info in extracted:

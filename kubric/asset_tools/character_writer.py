@@ -17,13 +17,12 @@ from __future__ import annotations
 
 import io
 import os
-import tempfile
 import zipfile
 from pathlib import Path
 
 import numpy as np
 
-from kubric.asset_tools.writer import clean_number, dumps
+from kubric.asset_tools.writer import clean_number, dumps, staging
 from kubric.assets.archive import write_archive
 from kubric.errors import InputError
 
@@ -70,8 +69,7 @@ def _package(asset_id: str, asset_type: str, out_dir, stem: str, arrays: dict, i
                           "metadata": dict(metadata)})
     archive = out_dir / f"{asset_id}.tar.gz"
     archive.parent.mkdir(parents=True, exist_ok=True)
-    with tempfile.TemporaryDirectory(prefix=".stage_", dir=archive.parent) as tmp:
-        stage = Path(tmp)
+    with staging(archive.parent) as stage:
         write_npz(stage / f"{stem}.npz", arrays)
         (stage / f"{stem}.json").write_text(dumps(info))
         for name, data in sorted(files.items()):

@@ -51,7 +51,9 @@ from pathlib import Path
 from kubric.asset_tools import physics
 from kubric.asset_tools.physics import DECOMPOSITION_METHODS
 from kubric.asset_tools.writer import Collision, dumps, package_object, write_manifest
+from kubric.assets.gltf_refs import check_gltf
 from kubric.core.color import linear_to_srgb
+from kubric.core.imports import uninterrupted_import
 from kubric.errors import InputError
 
 MESH_SUFFIXES = (".obj", ".glb", ".gltf", ".ply", ".stl")
@@ -116,6 +118,8 @@ def discover_jobs(src_dir: str | os.PathLike, license: str, up: str = "z",
     for path in sorted(src.rglob("*")):
         if path.suffix.lower() not in MESH_SUFFIXES or not path.is_file():
             continue
+        if path.suffix.lower() in (".gltf", ".glb"):
+            check_gltf(path, src, malformed_ok=True)  # URIs stay inside SRC (trimesh follows any)
         asset_id = _sanitize_id(path.relative_to(src))
         if asset_id in jobs:
             raise InputError(f"two meshes map to the asset id {asset_id!r}: "
@@ -149,7 +153,7 @@ def load_visual(path: str, up: str = "z", scale=1.0, color=None,
     without a material of their own.
     """
     import numpy as np
-    import trimesh
+    trimesh = uninterrupted_import("trimesh")
 
     suffix = Path(path).suffix.lower()
     if suffix == ".obj":
@@ -198,7 +202,7 @@ def load_mesh(path: str, up: str = "z", scale=1.0, color=None):
 
 def _split_parts(loaded) -> list:
     """The triangle meshes of a loaded file (scene transforms applied), one per material."""
-    import trimesh
+    trimesh = uninterrupted_import("trimesh")
 
     if isinstance(loaded, trimesh.Scene):
         if not loaded.geometry:
@@ -263,7 +267,7 @@ def _pack_atlas(parts, looks, fallback):
     trimesh packs the images into one atlas and remaps the UVs.
     """
     import numpy as np
-    import trimesh
+    trimesh = uninterrupted_import("trimesh")
     from PIL import Image
     from trimesh.visual.material import PBRMaterial
     from trimesh.visual.texture import TextureVisuals
@@ -309,7 +313,7 @@ def srgb_to_linear(srgb):
 def _with_appearance(parts, fallback, color_from: str):
     """Join ``parts`` into one trimesh whose visual keeps their appearance; see load_visual."""
     import numpy as np
-    import trimesh
+    trimesh = uninterrupted_import("trimesh")
     from trimesh.visual.material import PBRMaterial
     from trimesh.visual.texture import TextureVisuals
 

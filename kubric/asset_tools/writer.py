@@ -14,9 +14,11 @@ source twice gives byte-identical manifests and archives.
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import os
+import re
 import shutil
 import tempfile
 from dataclasses import dataclass, field
@@ -28,9 +30,38 @@ from kubric.asset_tools import physics
 from kubric.assets.archive import write_archive
 from kubric.assets.glb import write_visual_glb
 from kubric.errors import InputError
+from kubric.io.paths import pid_alive
 
 OBJ_IMPORT_KWARGS = {"forward_axis": "Y", "up_axis": "Z"}  # z-up OBJ into Blender unchanged
 
+#: a staging folder of one process beside the archives it writes: ``.stage_{pid}_<random>``
+STAGE_PREFIX = ".stage_"
+_STAGE_RE = re.compile(r"^\.stage_(\d+)_")
+
+
+def remove_stale_stages(parent) -> list[Path]:
+    """Remove the staging folders under ``parent`` of processes that no longer run (left by a
+    ``kill -9`` inside a published source); returns them."""
+    removed = []
+    try:
+        entries = list(Path(parent).iterdir())
+    except OSError:
+        return removed
+    for entry in entries:
+        m = _STAGE_RE.match(entry.name)
+        if m and entry.is_dir() and not entry.is_symlink() and not pid_alive(int(m.group(1))):
+            shutil.rmtree(entry, ignore_errors=True)
+            removed.append(entry)
+    return removed
+
+
+@contextlib.contextmanager
+def staging(parent: Path):
+    """A fresh staging folder beside the archive being written (same file system), removed
+    when the block ends; a dead process's staging folders there are removed first."""
+    remove_stale_stages(parent)
+    with tempfile.TemporaryDirectory(prefix=f"{STAGE_PREFIX}{os.getpid()}_", dir=parent) as tmp:
+        yield Path(tmp)
 
 def clean_number(x):
     """Round floats to 9 significant digits (and -0 → 0) for stable JSON."""
@@ -228,8 +259,7 @@ def package_object(asset_id: str, visual, out_dir: str | os.PathLike, *, collisi
                           "kwargs": kwargs, "metadata": metadata})
     archive = out_dir / f"{asset_id}.tar.gz"
     archive.parent.mkdir(parents=True, exist_ok=True)
-    with tempfile.TemporaryDirectory(prefix=".stage_", dir=archive.parent) as tmp:
-        stage = Path(tmp)
+    with staging(archive.parent) as stage:
         if visual_format == "obj":
             material = None
             if texture_png is not None:
@@ -274,8 +304,7 @@ def package_texture(asset_id: str, image_path: str | os.PathLike, out_dir: str |
                           "kwargs": kwargs, "metadata": dict(metadata or {})})
     archive = out_dir / f"{asset_id}.tar.gz"
     archive.parent.mkdir(parents=True, exist_ok=True)
-    with tempfile.TemporaryDirectory(prefix=".stage_", dir=archive.parent) as tmp:
-        stage = Path(tmp)
+    with staging(archive.parent) as stage:
         shutil.copyfile(image_path, stage / fname)
         (stage / "data.json").write_text(dumps(entry))
         write_archive(stage, archive)

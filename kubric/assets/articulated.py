@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from kubric.assets.glb import write_visual_glb
+from kubric.core.imports import uninterrupted_import
 from kubric.core.objects import FileBasedObject
 from kubric.errors import InputError
 
@@ -39,7 +40,7 @@ def _floats(text, n, default):
 
 
 def _origin_matrix(elem) -> np.ndarray:
-    import trimesh
+    trimesh = uninterrupted_import("trimesh")
 
     origin = elem.find("origin") if elem is not None else None
     xyz = _floats(origin.get("xyz") if origin is not None else None, 3, (0, 0, 0))
@@ -50,7 +51,7 @@ def _origin_matrix(elem) -> np.ndarray:
 
 
 def _geometry_mesh(geom, urdf_dir: Path, where: str):
-    import trimesh
+    trimesh = uninterrupted_import("trimesh")
 
     if geom is None or len(geom) == 0:
         raise InputError(f"{where}: <visual> without <geometry>")
@@ -83,7 +84,7 @@ def _geometry_mesh(geom, urdf_dir: Path, where: str):
 def link_visuals(urdf: str | os.PathLike) -> dict[str, object]:
     """``{link name: trimesh of all its visuals in the link frame}`` (links without visuals are
     left out); the first link of the file is the root."""
-    import trimesh
+    trimesh = uninterrupted_import("trimesh")
 
     urdf = Path(urdf)
     try:

@@ -9,6 +9,7 @@ An asset source entry with ``asset_type`` ``"Character"`` (or ``"MotionClip"``) 
 from __future__ import annotations
 
 import json
+import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -26,12 +27,22 @@ def _load(arrays_path, info_path, names: tuple, where: str):
     for p in (arrays_path, info_path):
         if not p.is_file():
             raise CharacterAssetError(f"{where}: {p.name} is missing from the asset archive")
-    with np.load(arrays_path, allow_pickle=False) as data:
-        arrays = {k: data[k] for k in data.files}
+    try:
+        with np.load(arrays_path, allow_pickle=False) as data:
+            arrays = {k: data[k] for k in data.files}
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as err:
+        raise CharacterAssetError(f"{where}: {arrays_path} is not a readable .npz (truncated or "
+                                  f"corrupt: {' '.join(str(err).split())[:120]})") from None
     missing = [n for n in names if n not in arrays]
     if missing:
         raise CharacterAssetError(f"{where}: {arrays_path.name} lacks arrays {missing}")
-    return arrays, json.loads(info_path.read_text())
+    try:
+        info = json.loads(info_path.read_text())
+    except (ValueError, UnicodeDecodeError) as err:
+        raise CharacterAssetError(f"{where}: {info_path} is not valid JSON ({err})") from None
+    if not isinstance(info, dict):
+        raise CharacterAssetError(f"{where}: {info_path} is not a JSON object")
+    return arrays, info
 
 
 def skin_tone_color(info: dict, skin_tone: str | None, where: str):

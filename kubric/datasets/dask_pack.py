@@ -117,6 +117,7 @@ def encode_chunk(work: str, file: str, scenes: list[str], schema, dims: dict) ->
             record["scenes"].append(name)
             record["num_bytes"] += len(data)
         writer.close()
+        record["sha256"] = layout.file_sha256(tmp)
     storage.write_bytes(storage.join(work, f".{file}.json"),
                         json.dumps(record, indent=2).encode())
     return record
@@ -124,7 +125,7 @@ def encode_chunk(work: str, file: str, scenes: list[str], schema, dims: dict) ->
 
 def recut_shard(work: str, file: str, pieces: list[tuple[str, list[int]]]) -> dict:
     """Write ``work/file`` from records of chunk files: ``pieces`` = [(chunk file, [record
-    indices])] in order; returns ``{"file", "num_bytes"}``."""
+    indices])] in order; returns ``{"file", "num_bytes", "sha256"}``."""
     from array_record.python import array_record_module
     _require_work(work)
     num_bytes = 0
@@ -143,7 +144,8 @@ def recut_shard(work: str, file: str, pieces: list[tuple[str, list[int]]]) -> di
             finally:
                 reader.close()
         writer.close()
-    return {"file": file, "num_bytes": num_bytes}
+        digest = layout.file_sha256(tmp)
+    return {"file": file, "num_bytes": num_bytes, "sha256": digest}
 
 
 # ------------------------------------------------------------------------ executors
@@ -282,12 +284,14 @@ def make_plan(scenes_dir, name, split_fractions: dict, schema, examples_per_shar
                                "digits, _)")
         assignment: dict[str, list[str]] = {s: [] for s in split_fractions}
         corrupt: list[tuple[str, str]] = []
+        seeds = []
         for location, folder in zip(locations, folders, strict=True):
             try:
-                assignment[layout.split_of(packer.scene_seed(folder), split_fractions)].append(
-                    location)
+                seeds.append((packer.scene_seed(folder), location))
+                assignment[layout.split_of(seeds[-1][0], split_fractions)].append(location)
             except (packer.SceneError, ValueError) as err:
                 corrupt.append((location, str(err).replace(str(folder), location)))
+        scene_dir.check_unique_seeds(seeds)
     plan = PackPlan(scenes_dir, name, schema, dims, split_fractions, examples_per_shard,
                     assignment, corrupt, incomplete, schema_origin=origin)
     described = {"engine": "sharded", "schema": schema.name, "name": name,
@@ -351,6 +355,7 @@ def pack_sharded(scenes_dir, out, executor=None, name: str | None = None,
     ``executor``: a :class:`DaskExecutor`, or None for ``workers`` local processes;
     ``class_names`` as for :func:`~kubric.datasets.packer.pack`. ``out`` is a directory; a URL
     is packed by :func:`kubric.datasets.store_commit.pack_to_store` (:func:`pack_into`)."""
+    packer.check_pack_output(out, scenes_dir)
     if storage.is_url(str(out)):
         raise DatasetUsageError(f"pack_sharded: --out {str(out)!r} is a URL; use "
                                 "kubric.datasets.store_commit.pack_to_store (pack_into)")
@@ -411,7 +416,8 @@ def _recut(work: str, executor, name: str, assignment: dict, chunk_of: dict,
         chunks = [records[key] for key in sorted(k for k in records if k[0] == split)]
         if not any(r["corrupt"] for r in chunks):
             state["shards"][split] = [{"file": r["file"], "scenes": r["scenes"],
-                                       "num_bytes": r["num_bytes"]} for r in chunks]
+                                       "num_bytes": r["num_bytes"], "sha256": r.get("sha256")}
+                                      for r in chunks]
             continue
         good = [(r["file"], i, scene) for r in chunks for i, scene in enumerate(r["scenes"])]
         shards = []
@@ -429,7 +435,7 @@ def _recut(work: str, executor, name: str, assignment: dict, chunk_of: dict,
         state["shards"][split] = shards
 
     def done(k, result):
-        targets[k]["num_bytes"] = result["num_bytes"]
+        targets[k]["num_bytes"], targets[k]["sha256"] = result["num_bytes"], result["sha256"]
     _run(executor, calls, done)
     if not storage.is_url(work):  # a URL's work area goes as a whole after the commit
         keep = {sh["file"] for shards in state["shards"].values() for sh in shards}

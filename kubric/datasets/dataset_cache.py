@@ -6,7 +6,10 @@ lists the prefix once, checks that every shard of the split the marker promises 
 missing one is a one-line :class:`DatasetError` naming it), and copies the metadata and that
 split's shards into ``$KUBRIC_CACHE_DIR/datasets/<hash>/`` (default ``~/.cache/kubric``).
 The hash covers the URL and the marker's bytes, so a dataset packed again under the same URL
-gets a new cache folder; a file already cached with the listed size is not fetched again. Files
+gets a new cache folder. A cached shard is kept only with the listed size and the SHA-256 the
+marker records (``shard_sha256``; checked once, then remembered by a stamp of its size and
+mtime): a damaged or truncated cached file is fetched again, and a fetched file that does not
+match is a one-line error naming its URL. Files
 arrive under a temporary name and are renamed when complete (two processes fetching the same
 file both end with the whole file). The reader then works on the local folder exactly as on a
 local dataset: ArrayRecord's random access stays local-disk fast after the first open.
@@ -65,16 +68,51 @@ def fetch(url: str, split: str | None = None) -> pathlib.Path:
                            "pack it again")
     metadata = [n for n in listed if n != layout.INFO_FILE and
                 (n.endswith(".json") or n.endswith(".labels.txt")) and not n.startswith(".")]
+    digests = info.get("shard_sha256") if isinstance(info.get("shard_sha256"), dict) else {}
     for name in (*metadata, *shards):
         target = local / name
-        if target.is_file() and target.stat().st_size == listed[name]:
+        if _cached(target, listed[name], digests.get(name)):
             continue
-        storage.download_file(storage.join(url, name), target)
+        location = storage.join(url, name)
+        storage.download_file(location, target)
         if target.stat().st_size != listed[name]:
             target.unlink()
-            raise DatasetError(f"{storage.join(url, name)!r}: got {target.stat().st_size} bytes, "
-                               f"the store lists {listed[name]}")
+            raise DatasetError(f"{location!r}: got {target.stat().st_size} bytes, the store "
+                               f"lists {listed[name]}")
+        if digests.get(name) and not _verified(target, digests[name]):
+            target.unlink()
+            raise DatasetError(f"{location!r} is damaged: its content does not match the "
+                               f"SHA-256 its {layout.INFO_FILE} records; pack it again")
     return local
+
+
+def _stamp(target: pathlib.Path) -> pathlib.Path:
+    return target.with_name(f".{target.name}.sha256")
+
+
+def _verified(target: pathlib.Path, digest: str) -> bool:
+    """Whether ``target`` hashes to ``digest``; a match is stamped (size, mtime, digest) so the
+    next fetch does not read the file again."""
+    if layout.file_sha256(target) != digest:
+        return False
+    st = target.stat()
+    _stamp(target).write_text(f"{st.st_size} {st.st_mtime_ns} {digest}\n")
+    return True
+
+
+def _cached(target: pathlib.Path, size: int, digest: str | None) -> bool:
+    """A cached file to keep: the listed size and, when the marker records one, its checksum
+    (a stamp of an earlier check when the file has not changed since)."""
+    if not target.is_file() or target.stat().st_size != size:
+        return False
+    if not digest:
+        return True
+    st = target.stat()
+    stamp = _stamp(target)
+    expected = f"{st.st_size} {st.st_mtime_ns} {digest}\n".encode()
+    if stamp.is_file() and stamp.read_bytes() == expected:
+        return True
+    return _verified(target, digest)
 
 
 def remote_info(url: str) -> dict:

@@ -3,9 +3,16 @@
 
 from __future__ import annotations
 
+import json
 import pathlib
 
-from kubric.datasets.layout import DatasetError, read_info, shard_name
+from kubric.datasets.layout import (
+    METADATA_FILES,
+    DatasetError,
+    dataset_files,
+    read_info,
+    shard_name,
+)
 from kubric.datasets.tasks import servable_tasks
 from kubric.io import storage
 from kubric.io.schema import Schema, shape_text
@@ -25,11 +32,16 @@ def dataset_info(dataset_dir) -> str:
         from kubric.datasets.dataset_cache import remote_info
         path = storage.normalise(str(dataset_dir))
         info = remote_info(path)
-        size = sum(storage.sizes(path).values())
+        listed = storage.sizes(path)
+        size = sum(listed.values())
+        problems = [f"{storage.join(path, name)!r}: shard missing"
+                    for name in dataset_files(info) if name not in listed]
     else:
         path = pathlib.Path(dataset_dir)
         info = read_info(path)
         size = sum(p.stat().st_size for p in path.iterdir() if p.is_file())
+        problems = check_shards(path, info)  # a URL's shards are checked when a split is loaded
+    problems = check_metadata(path) + problems
     schema = Schema.from_json(info["schema_json"])
     dims = dict(info["dims"])
     lines = [f"dataset {info['name']} at {path}",
@@ -45,8 +57,6 @@ def dataset_info(dataset_dir) -> str:
                      f"(fraction {info['splits'].get(split, 0):g})"
                      + ("; no scene fell into it: it loads as an empty split" if not count
                         else ""))
-    # a local dataset's shards are opened; a URL's are checked when a split is loaded
-    problems = check_shards(path, info) if isinstance(path, pathlib.Path) else []
     if info.get("incomplete_skipped"):
         lines.append(f"  incomplete scenes skipped when packing: {info['incomplete_skipped']}")
     lines.append(f"  loader tasks: {', '.join(servable_tasks(schema))}")
@@ -61,6 +71,25 @@ def dataset_info(dataset_dir) -> str:
         raise DatasetError(f"{problems[0]}" + (f" (and {len(problems) - 1} more shard problems)"
                                                if len(problems) > 1 else ""))
     return "\n".join(lines)
+
+
+def check_metadata(path) -> list[str]:
+    """One line per TFDS metadata file (``features.json``, ``dataset_info.json``) of the dataset
+    at ``path`` (a folder or URL) that is missing or not a JSON object."""
+    problems = []
+    for name in METADATA_FILES:
+        location = storage.join(str(path), name)
+        try:
+            value = json.loads(storage.read_bytes(location))
+        except FileNotFoundError:
+            problems.append(f"{location!r}: missing")
+            continue
+        except (ValueError, UnicodeDecodeError) as err:
+            problems.append(f"{location!r}: not valid JSON ({' '.join(str(err).split())[:120]})")
+            continue
+        if not isinstance(value, dict):
+            problems.append(f"{location!r}: not a JSON object")
+    return problems
 
 
 def check_shards(path: pathlib.Path, info: dict) -> list[str]:

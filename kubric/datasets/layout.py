@@ -2,8 +2,9 @@
 
 A dataset directory is TFDS's layout (``dataset_info.json``, ``features.json``, label files and
 ``NAME-SPLIT.array_record-0000k-of-0000n`` shards) plus ``kubric_dataset.json``: the format
-version, the recipe schema, the frame count / resolution, the split fractions and the scenes of
-every split (in example order). Readers refuse a format version newer than :data:`FORMAT_VERSION`.
+version, the recipe schema, the frame count / resolution, the split fractions, the scenes of
+every split (in example order) and the SHA-256 of every shard (``shard_sha256``; absent in
+datasets packed before it existed). Readers refuse a format version newer than :data:`FORMAT_VERSION`.
 """
 
 from __future__ import annotations
@@ -36,9 +37,31 @@ class DatasetUsageError(DatasetError):
     exit_code = 2
 
 
+def file_sha256(path) -> str:
+    """The hex SHA-256 of a file's bytes (read in 1 MiB blocks): a shard's checksum in the
+    marker (``shard_sha256``), checked by the cache of a dataset URL."""
+    import hashlib
+
+    digest = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
 def shard_name(name: str, split: str, index: int, count: int) -> str:
     """TFDS's shard file name ``NAME-SPLIT.array_record-0000k-of-0000n``."""
     return f"{name}-{split}.{FILE_FORMAT}-{index:05d}-of-{count:05d}"
+
+
+#: TFDS metadata files a dataset holds besides its shards and marker (and ``*.labels.txt``)
+METADATA_FILES = ("dataset_info.json", "features.json")
+
+
+def dataset_files(info: dict) -> list[str]:
+    """The shard names a dataset's marker (``kubric_dataset.json``) promises, in split order."""
+    return [shard_name(info["name"], split, i, len(lengths))
+            for split, lengths in info["shard_lengths"].items() for i in range(len(lengths))]
 
 
 def is_dataset(path: pathlib.Path) -> bool:

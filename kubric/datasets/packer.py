@@ -54,7 +54,8 @@ from kubric.datasets.layout import DatasetError, DatasetUsageError
 from kubric.datasets.pack_schema import check_scene_schema, schema_origin_and_dims
 from kubric.io import scene_dir
 from kubric.io.json_io import read_json, write_json
-from kubric.io.output_lock import OutputBusy, OutputLock
+from kubric.io.output_check import check_output, scene_folders
+from kubric.io.output_lock import OutputLock
 from kubric.io.scene_reader import SceneError, SceneReader
 from kubric.io.schema import Schema, SchemaError
 
@@ -275,6 +276,11 @@ def check_options(splits, workers: int, examples_per_shard: int, out: pathlib.Pa
     return split_fractions
 
 
+def check_pack_output(out, scenes_dir) -> None:
+    """:func:`kubric.io.output_check.check_output` for a pack (URL outputs allowed)."""
+    check_output(out, scene_folders(scenes_dir), [scenes_dir], urls=True, command="kubric pack")
+
+
 # ------------------------------------------------------------------------ the packer
 def pack(scenes_dir, out, name: str | None = None, splits=DEFAULT_SPLITS, workers: int = 1,
          schema: Schema | str | None = None, examples_per_shard: int = 256,
@@ -285,6 +291,7 @@ def pack(scenes_dir, out, name: str | None = None, splits=DEFAULT_SPLITS, worker
     (:func:`resolve_names`). Raises :class:`~kubric.datasets.layout.DatasetError` (one line) on
     bad input before writing anything."""
     start = time.perf_counter()
+    check_pack_output(out, scenes_dir)
     scenes_dir, out = pathlib.Path(scenes_dir), pathlib.Path(out)
     if not scenes_dir.is_dir():
         raise DatasetError(f"SCENES_DIR {str(scenes_dir)!r} is not a directory")
@@ -300,11 +307,14 @@ def pack(scenes_dir, out, name: str | None = None, splits=DEFAULT_SPLITS, worker
         raise DatasetError(f"--name {name!r} must be a lower-case identifier (letters, digits, _)")
     assignment: dict[str, list[pathlib.Path]] = {s: [] for s in split_fractions}
     corrupt: list[tuple[str, str]] = []
+    seeds = []
     for scene in complete:
         try:
-            assignment[layout.split_of(scene_seed(scene), split_fractions)].append(scene)
+            seeds.append((scene_seed(scene), scene))
+            assignment[layout.split_of(seeds[-1][0], split_fractions)].append(scene)
         except (SceneError, ValueError) as err:
             corrupt.append((str(scene), str(err)))
+    scene_dir.check_unique_seeds(seeds)
 
     plan = {"schema": schema.name, "name": name, "splits": split_fractions, "dims": dims,
             "examples_per_shard": examples_per_shard, "format_version": layout.FORMAT_VERSION,
@@ -357,10 +367,7 @@ def output_lock(out: pathlib.Path):
     @contextlib.contextmanager
     def held():
         lock = OutputLock(out.parent / f".{out.name}.lock", f"--out {str(out)!r}")
-        try:
-            lock.acquire()
-        except OutputBusy as err:
-            raise DatasetUsageError(str(err)) from None
+        lock.acquire()  # OutputBusy: exit status 3, as every command's busy output
         try:
             yield lock
         finally:
@@ -528,20 +535,27 @@ def _finish_shard(work: pathlib.Path, state: dict, writer: _ShardWriter) -> None
     write_json(state, work / PROGRESS_FILE)
 
 
-def finalise(work, state, schema, name, dims, split_fractions, incomplete, features) -> dict:
-    """Final shard names, TFDS metadata and the kubric marker; returns counts per split."""
+def finalise(work, state, schema, name, dims, split_fractions, incomplete, features,
+             hash_files: bool = True) -> dict:
+    """Final shard names, TFDS metadata and the kubric marker; returns counts per split. A
+    shard's checksum is its state entry's ``sha256``, else (``hash_files``) its file's."""
     import tensorflow_datasets as tfds
 
     from kubric import __version__
-    split_infos, counts, scenes, shard_lengths = [], {}, {}, {}
+    split_infos, counts, scenes, shard_lengths, digests = [], {}, {}, {}, {}
     # the record goes before the renames: a kill among them leaves no record naming moved files
     # (the next run starts afresh), never one that a rerun would trust
     (work / PROGRESS_FILE).unlink()
     for split in split_fractions:
         shards = [sh for sh in state["shards"].get(split, []) if sh["scenes"]]
         for i, shard in enumerate(shards):
-            os.replace(work / shard["file"], work / layout.shard_name(name, split, i, len(shards)))
+            final = layout.shard_name(name, split, i, len(shards))
+            os.replace(work / shard["file"], work / final)
             faults.point("pack.shard_renamed")
+            digest = shard.get("sha256") or (layout.file_sha256(work / final) if hash_files
+                                             else None)
+            if digest:
+                digests[final] = digest
         counts[split] = sum(len(sh["scenes"]) for sh in shards)
         scenes[split] = [s for sh in shards for s in sh["scenes"]]
         shard_lengths[split] = [len(sh["scenes"]) for sh in shards]
@@ -560,7 +574,7 @@ def finalise(work, state, schema, name, dims, split_fractions, incomplete, featu
                 "shard_lengths": shard_lengths, "scenes": scenes,
                 "incomplete_skipped": incomplete, "kubric_version": __version__,
                 "shard_writer_options": layout.SHARD_WRITER_OPTIONS,
-                "schema_json": schema.to_json()},
+                "shard_sha256": digests, "schema_json": schema.to_json()},
                work / layout.INFO_FILE)
     return counts
 

@@ -5,6 +5,8 @@ place" becomes a commit protocol whose last write is the dataset's marker
 (``kubric_dataset.json``): a reader (:func:`kubric.datasets.load`, ``kubric datasets info``)
 trusts a prefix only once that object exists and names every shard.
 
+0. **Lease**: one pack of an output at a time (:mod:`kubric.datasets.store_lease`); a second
+   pack of the same URL refuses at once and removes nothing.
 1. **Probe** (before anything is planned): the output can be written — a probe object is
    written and deleted (:func:`kubric.io.storage.check_writable`); an unreachable store, a
    missing bucket or a read-only store is one line.
@@ -38,23 +40,14 @@ import tempfile
 import time
 
 from kubric.datasets import dask_pack, layout, packer, tfds_io
-from kubric.datasets.layout import DatasetError, DatasetUsageError
+from kubric.datasets.layout import METADATA_FILES, DatasetError, DatasetUsageError, dataset_files
+from kubric.datasets.store_lease import LEASES, StoreLease
 from kubric.io import storage
 from kubric.io.json_io import write_json
 
 #: the work prefix inside the output
 WORK = ".kubric-pack"
 COMMIT_FILE = "commit.json"
-#: TFDS metadata files a dataset holds besides its shards and marker (and ``*.labels.txt``)
-METADATA_FILES = ("dataset_info.json", "features.json")
-
-
-def dataset_files(info: dict) -> list[str]:
-    """The shard names a dataset's marker (``kubric_dataset.json``) promises, in split order."""
-    return [layout.shard_name(info["name"], split, i, len(lengths))
-            for split, lengths in info["shard_lengths"].items() for i in range(len(lengths))]
-
-
 def _is_dataset_file(name: str) -> bool:
     return (name in METADATA_FILES or name == layout.INFO_FILE or name.endswith(".labels.txt")
             or re.search(rf"-[a-z0-9_]+\.{layout.FILE_FORMAT}-\d{{5}}-of-\d{{5}}$", name)
@@ -72,7 +65,7 @@ def _read_json(location: str) -> dict | None:
 def check_output(out: str, overwrite: bool) -> None:
     """Raise DatasetError (one line) unless ``out`` may receive a dataset (step 2): empty,
     holding only this protocol's leftovers, or a dataset to be overwritten."""
-    names = [n for n in storage.listdir(out) if n != WORK]
+    names = [n for n in storage.listdir(out) if n not in (WORK, LEASES)]
     if not names:
         return
     if layout.INFO_FILE in names:
@@ -119,7 +112,7 @@ def _metadata(plan, state: dict, scratch: pathlib.Path) -> tuple[dict, dict[str,
     write_json(state, meta / packer.PROGRESS_FILE)
     features = tfds_io.tfds_features(plan.schema, plan.dims)
     counts = packer.finalise(meta, state, plan.schema, plan.name, plan.dims,
-                              plan.split_fractions, plan.incomplete, features)
+                              plan.split_fractions, plan.incomplete, features, hash_files=False)
     files = sorted(p for p in meta.iterdir() if p.name not in renames)
     return counts, renames, files
 
@@ -158,6 +151,7 @@ def pack_to_store(scenes_dir, out, executor=None, name=None, splits=packer.DEFAU
     if verify:
         raise DatasetError("--verify reads the dataset from a local directory; pack to one, or "
                            "load the URL and compare (kubric.datasets.load)")
+    packer.check_pack_output(out, scenes_dir)
     try:
         out = storage.normalise(str(out))
         if out.startswith("memory://"):
@@ -166,14 +160,21 @@ def pack_to_store(scenes_dir, out, executor=None, name=None, splits=packer.DEFAU
         storage.check_writable(out)
     except storage.StorageError as err:  # a bad --out: a usage error, as for a local output
         raise DatasetUsageError(str(err)) from None
-    check_output(out, overwrite)
     plan = dask_pack.make_plan(scenes_dir, name, split_fractions, schema, examples_per_shard,
                                class_names, verify)
-    work = _open_work(out, plan.key)
-    state, corrupt, resumed = dask_pack.run_plan(plan, work, executor, workers, progress)
-    with tempfile.TemporaryDirectory(prefix="kubric-commit-") as scratch:
-        counts, renames, files = _metadata(plan, state, pathlib.Path(scratch))
-        commit(out, work, renames, files)
+    try:
+        with StoreLease(out):  # one pack of ``out`` at a time: nothing below touches another's
+            check_output(out, overwrite)
+            work = _open_work(out, plan.key)
+            state, corrupt, resumed = dask_pack.run_plan(plan, work, executor, workers, progress)
+            with tempfile.TemporaryDirectory(prefix="kubric-commit-") as scratch:
+                counts, renames, files = _metadata(plan, state, pathlib.Path(scratch))
+                commit(out, work, renames, files)
+    except storage.backend_errors() as err:  # a store that failed or stalled past its deadline
+        raise storage.StorageError(f"--out {out!r}: the object store failed during the pack "
+                                   f"({storage.failure(err)}); nothing was published "
+                                   "unless kubric_dataset.json exists: rerun the same command "
+                                   "to resume") from None
     return packer.PackResult(out, counts, plan.incomplete, corrupt,
                              time.perf_counter() - start, resumed, plan.schema_origin)
 

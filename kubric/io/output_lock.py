@@ -18,7 +18,10 @@ from kubric.errors import KubricError
 
 
 class OutputBusy(KubricError, RuntimeError):
-    """The output is being written by another run (one line)."""
+    """The output is being written by another run (one line; exit status 3 in every command,
+    docs/exit-codes.md: try again when that run has ended)."""
+
+    exit_code = 3
 
 
 class OutputLock:

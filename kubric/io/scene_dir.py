@@ -138,6 +138,23 @@ def scenes_under(root) -> list[pathlib.Path]:
     return found
 
 
+class DuplicateSeedError(InputError):
+    """Two complete scenes with one seed (a copy, a symlink, a re-render under another name)."""
+
+
+def check_unique_seeds(pairs) -> None:
+    """Raise :class:`DuplicateSeedError` (one line naming both) when two of the ``(seed,
+    location)`` pairs share a seed: every id an output derives from a seed (COCO ids, BOP scene
+    folders, a packed example's key) would clash. Readers call it before writing anything."""
+    seen: dict[int, str] = {}
+    for seed, location in pairs:
+        if seed in seen:
+            raise DuplicateSeedError(
+                f"scenes {seen[seed]!r} and {str(location)!r} have the same seed {seed} (a copy, "
+                "a symlink or a re-render under another name); keep one of them")
+        seen[seed] = str(location)
+
+
 def looks_like_scene(path: pathlib.Path) -> bool:
     """A folder that is, or was meant to be, a scene directory (complete or not): what a
     browser of scene folders lists, so that a broken scene is shown as broken."""
@@ -146,8 +163,8 @@ def looks_like_scene(path: pathlib.Path) -> bool:
         path.name.startswith(SCENE_PREFIX)
 
 
-__all__ = ["BLEND_FILE", "BULLET_FILE", "DATA_RANGES_FILE", "EVENTS_FILE", "LASR_DIR",
+__all__ = ["BLEND_FILE", "BULLET_FILE", "DATA_RANGES_FILE", "DuplicateSeedError", "EVENTS_FILE", "LASR_DIR",
            "LOGS_DIR", "METADATA_FILE", "SCENE_PREFIX", "SCENE_RE", "SCHEMA_FILE", "SUCCESS_FILE",
-           "TRACKS_FILE", "WORK_RE", "complete_scenes",
+           "TRACKS_FILE", "WORK_RE", "check_unique_seeds", "complete_scenes",
            "is_complete", "is_scene_name", "looks_like_scene", "parse_work_dir", "scene_name",
            "scenes_under", "seed_of", "survey", "work_dir_name", "write_success"]

@@ -14,6 +14,7 @@ Object stores have no atomic directory rename, so a scene is uploaded file by fi
 
 from __future__ import annotations
 
+import inspect
 import os
 import pathlib
 import re
@@ -60,7 +61,40 @@ def _fs(location):
     cached listings are dropped first: other processes write the same store."""
     fs, path = _filesystem(location)
     fs.invalidate_cache()
-    return fs, path
+    return _with_deadline(fs), path
+
+
+class _Deadlined:
+    """An async filesystem (s3fs, gcsfs) whose blocking calls each end within
+    :func:`operation_deadline` seconds (fsspec raises ``FSTimeoutError``): a request the store
+    accepts and never answers (botocore waits for ``100-continue`` without its read timeout)
+    cannot hang a command."""
+
+    def __init__(self, fs, seconds: float):
+        self._fs, self._seconds = fs, seconds
+
+    def __getattr__(self, name):
+        attr = getattr(self._fs, name)
+        coroutine = getattr(self._fs, f"_{name}", None)
+        if name.startswith("_") or not callable(attr) or \
+                not inspect.iscoroutinefunction(coroutine):
+            return attr
+        from fsspec.asyn import sync
+
+        def call(*args, **kwargs):
+            return sync(self._fs.loop, coroutine, *args, timeout=self._seconds, **kwargs)
+        return call
+
+
+def operation_deadline() -> float:
+    """Seconds one store operation (a listing, an upload, a copy) may take in all: 10 × the
+    read timeout (``KUBRIC_STORE_TIMEOUT``, default :data:`READ_TIMEOUT_S`)."""
+    return 10 * _read_timeout()
+
+
+def _with_deadline(fs):
+    from fsspec.asyn import AsyncFileSystem
+    return _Deadlined(fs, operation_deadline()) if isinstance(fs, AsyncFileSystem) else fs
 
 
 def _filesystem(location):
@@ -75,12 +109,75 @@ def _filesystem(location):
     try:
         if scheme in ("file", "local"):  # as local paths: parent directories made on write
             return fsspec.filesystem("file", auto_mkdir=True), _URL_RE.match(location).group(2)
-        return fsspec.core.url_to_fs(location)
+        fs, path = fsspec.core.url_to_fs(location, **deadlines(scheme))
+        if scheme in ("s3", "s3a"):
+            fs.retries = ATTEMPTS  # s3fs's own retries (a class attribute, not an argument)
+        return fs, path
     except ValueError as err:
         raise StorageError(f"{location!r}: unknown storage protocol {scheme!r} ({err})") from err
     except ImportError as err:
         raise StorageError(f"{location!r}: protocol {scheme!r} needs a package that is not "
                            f"installed ({err})") from err
+
+
+#: seconds a request to an object store may wait for a connection / for an answer
+#: (``KUBRIC_STORE_TIMEOUT`` overrides the second), and the client's attempts per request
+CONNECT_TIMEOUT_S = 10.0
+READ_TIMEOUT_S = 60.0
+ATTEMPTS = 3
+
+
+def deadlines(scheme: str) -> dict:
+    """Keyword arguments giving every request of ``scheme``'s filesystem a deadline (S3: botocore's
+    connect / read timeouts, one botocore attempt inside s3fs's own retries, set to
+    :data:`ATTEMPTS` by :func:`_filesystem`), so
+    a stalled store ends in a one-line error instead of a silent wait. Settings of fsspec's
+    configuration (``fsspec.config.conf``) win."""
+    if scheme not in ("s3", "s3a"):
+        return {}
+    import fsspec.config
+    read = _read_timeout()
+    conf = fsspec.config.conf.get(scheme, {})
+    config = {"connect_timeout": min(CONNECT_TIMEOUT_S, read), "read_timeout": read,
+              "retries": {"max_attempts": 1, "mode": "standard"},
+              **conf.get("config_kwargs", {})}
+    return {"config_kwargs": config}
+
+
+def _read_timeout() -> float:
+    try:
+        read = float(os.environ.get("KUBRIC_STORE_TIMEOUT", READ_TIMEOUT_S))
+    except ValueError:
+        raise StorageError(f"KUBRIC_STORE_TIMEOUT={os.environ['KUBRIC_STORE_TIMEOUT']!r} is not "
+                           "a number of seconds") from None
+    if not 0 < read < float("inf"):
+        raise StorageError(f"KUBRIC_STORE_TIMEOUT must be a finite number of seconds > 0, got "
+                           f"{read}")
+    return read
+
+
+def failure(err: BaseException) -> str:
+    """One line describing a failed store request (a timeout names the deadline)."""
+    if type(err).__name__ in ("FSTimeoutError", "TimeoutError", "ReadTimeoutError",
+                              "ConnectTimeoutError"):
+        return (f"no answer within the deadline ({type(err).__name__}; KUBRIC_STORE_TIMEOUT="
+                f"{_read_timeout():g} s per request, {operation_deadline():g} s per operation)")
+    text = " ".join(str(err).split())[:200]
+    return f"{type(err).__name__}: {text}" if text else type(err).__name__
+
+
+def backend_errors() -> tuple[type[BaseException], ...]:
+    """The exception types of a failed, refused or timed-out request to an object store (not a
+    missing object, not a local disk error), for callers that turn them into one line."""
+    found: list[type[BaseException]] = [ConnectionError, TimeoutError]
+    for module, names in (("botocore.exceptions", ("BotoCoreError", "ClientError")),
+                          ("aiohttp", ("ClientError",)), ("fsspec.exceptions", ("FSTimeoutError",))):
+        try:
+            mod = __import__(module, fromlist=list(names))
+        except ImportError:
+            continue
+        found += [getattr(mod, n) for n in names if hasattr(mod, n)]
+    return tuple(found)
 
 
 def exists(location) -> bool:
@@ -121,6 +218,9 @@ def open_file(location, mode: str = "rb"):
 
 
 def read_bytes(location) -> bytes:
+    if is_url(location):  # one call, under the operation's deadline
+        fs, path = _fs(location)
+        return fs.cat_file(path)
     with open_file(location, "rb") as fh:
         return fh.read()
 
@@ -267,7 +367,8 @@ def _exist_many(fs, paths: list[str], concurrency: int = 64) -> list[bool]:
     ``scene_*/_SUCCESS`` walked every scene prefix one listing after the other (measured on
     moto's S3, 1000 scenes: 9.0 s; see benchmarks/bench_scale.py)."""
     from fsspec.asyn import AsyncFileSystem, sync
-    if not isinstance(fs, AsyncFileSystem) or not paths:
+    inner = fs._fs if isinstance(fs, _Deadlined) else fs
+    if not isinstance(inner, AsyncFileSystem) or not paths:
         return [fs.exists(p) for p in paths]
     import asyncio
 
@@ -276,9 +377,9 @@ def _exist_many(fs, paths: list[str], concurrency: int = 64) -> list[bool]:
 
         async def one(p):
             async with gate:
-                return await fs._exists(p)
+                return await inner._exists(p)
         return await asyncio.gather(*(one(p) for p in paths))
-    return list(sync(fs.loop, check))
+    return list(sync(inner.loop, check, timeout=operation_deadline()))
 
 
 def check_writable(location) -> None:
@@ -302,10 +403,10 @@ def check_writable(location) -> None:
     except StorageError:
         raise
     except Exception as err:  # each backend raises its own types (botocore, aiohttp, OSError)
-        detail = str(err).splitlines()[0] if str(err) else type(err).__name__
-        raise StorageError(f"output {location!r} is not writable: {detail}") from err
+        raise StorageError(f"output {location!r} is not writable: {failure(err)}") from err
 
 
-__all__ = ["StorageError", "is_url", "normalise", "join", "exists", "isfile", "listdir",
-           "open_file", "read_bytes", "write_bytes", "remove", "upload_file", "download_file",
-           "copy", "sizes", "upload_dir", "download_dir", "complete_scenes", "check_writable"]
+__all__ = ["StorageError", "backend_errors", "check_writable", "complete_scenes", "copy",
+           "deadlines", "download_dir", "download_file", "exists", "failure", "is_url", "isfile",
+           "join", "listdir", "normalise", "open_file", "operation_deadline", "read_bytes",
+           "remove", "sizes", "upload_dir", "upload_file", "write_bytes"]

@@ -19,7 +19,7 @@ from __future__ import annotations
 import numpy as np
 
 import kubric as kb
-from kubric.pipeline import Option, float_range
+from kubric.pipeline import Option, OptionError, float_range
 from kubric.recipes import multiview_schema
 from kubric.recipes.common import open_existing_source as open_source
 from kubric.recipes.common import source_location
@@ -123,6 +123,12 @@ class Nvs(_HdriObjects, name="nvs"):
 
     def add_objects(self, scene, rng, sources):
         occupied = []
+        placed = 0
         for _ in range(rng.randint(self.min_num_objects, self.max_num_objects + 1)):
             obj = self.random_object(rng, sources, self.size_range)
-            self.add_upright(scene, obj, rng, occupied, self.region)
+            placed += self.add_upright(scene, obj, rng, occupied, self.region)
+        if placed < self.min_num_objects:  # an impossible request, refused before rendering
+            raise OptionError(f"{self.name}: only {placed} objects of sizes {self.size_range} m "
+                              f"fit in the square ±{self.region} m, fewer than "
+                              f"min_num_objects={self.min_num_objects}; lower min_num_objects "
+                              "or size_range, or raise region")

@@ -61,7 +61,27 @@ def open_people_sources(character_source, motion_source) -> dict:
                                       "motion_source=procedural or source folders")
                 humans = asset_tools.ensure_humans()
             out[key] = humans[0] if key == "characters" else humans[1]
+        check_source_kind(out[key], key, value)
     return out
+
+
+#: the asset type each people source must hold
+SOURCE_KINDS = {"characters": "Character", "motions": "MotionClip"}
+
+
+def check_source_kind(source, key: str, value) -> None:
+    """OptionError (one line) unless ``source`` holds assets and all are of the type ``key``
+    needs: a motion source given as ``character_source`` (or the reverse) is named as such."""
+    db = getattr(source, "db", None)
+    if db is None:  # the procedural stand-in
+        return
+    kinds = sorted({str(entry.get("asset_type")) for entry in db.values()})
+    option = f"{key[:-1]}_source"
+    if kinds != [SOURCE_KINDS[key]]:
+        other = {v: k for k, v in SOURCE_KINDS.items()}.get(kinds[0]) if len(kinds) == 1 else None
+        hint = f" (a {other[:-1]} source: give it as {other[:-1]}_source?)" if other else ""
+        raise OptionError(f"{option}={str(value)!r} holds {kinds or 'no'} assets, not only "
+                          f"{SOURCE_KINDS[key]} ones{hint}")
 
 
 def asset_ids(source) -> list[str]:

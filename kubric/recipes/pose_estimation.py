@@ -120,7 +120,12 @@ class PoseEstimation(MoviBase, name="pose_estimation"):
         spots = free_spots(rng, wanted, PEOPLE_REGION, MIN_PERSON_GAP)
         scene.metadata["dropped_objects"] += wanted - len(spots)
         for k, spot in enumerate(spots):
-            add_person(scene, sources, rng, spot, f"person_{k}")
+            person = add_person(scene, sources, rng, spot, f"person_{k}")
+            if person.keypoint_regressor is None:  # refused before rendering, not after
+                raise OptionError(f"{self.name}: character {person.metadata['character_id']!r} "
+                                  "of character_source has no keypoint regressor, and this "
+                                  "recipe annotates COCO keypoints; give a source whose "
+                                  "characters have one (the humans source, or procedural)")
 
     def populate(self, scene, simulator, rng, sources):
         """Room, then clutter and people, then the camera (which aims at the people)."""

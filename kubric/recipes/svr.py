@@ -41,6 +41,13 @@ class Svr(MultiviewBase, name="svr"):
     camera_distance = Option((2.5, 2.5), "camera distance (m) from the object, low,high",
                              type=float_range, low=0.1)
 
+    def check(self) -> None:
+        super().check()
+        if not self.object_size < self.camera_distance[0]:  # the camera inside the object
+            raise OptionError(f"{self.name}: object_size={self.object_size:g} m must be smaller "
+                              f"than the nearest camera distance {self.camera_distance[0]:g} m "
+                              "(camera_distance), or the views see no object")
+
     def open_sources(self) -> dict:
         sources = super().open_sources()
         if self.objects_source is not None:

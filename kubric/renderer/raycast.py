@@ -40,13 +40,15 @@ import os
 from dataclasses import dataclass
 
 import numpy as np
-import trimesh
 
 from kubric.core import camera_geometry as geo
 from kubric.core import lights, materials, objects, rolling_shutter
 from kubric.core.color import Color, linear_to_srgb, srgb_to_linear
+from kubric.core.imports import uninterrupted_import
 from kubric.renderer.base import ALL_LAYERS, Renderer
 from kubric.renderer.raycast_rolling import rolling_flow_ends, rolling_frame
+
+trimesh = uninterrupted_import("trimesh")  # trimesh swallows a Ctrl-C in its import
 
 _SPHERE_SEGMENTS, _SPHERE_RINGS = 128, 64  # as kubric.renderer.blender_objects
 #: glTF's y-up → Blender's z-up: (x, y, z) → (x, −z, y)

@@ -15,13 +15,13 @@ def cmd_view(args) -> int:
         return 2
     try:
         source = DirectorySource(args.path)
-    except NotADirectoryError as err:
+    except NotADirectoryError as err:  # bad input: exit status 1 (docs/exit-codes.md)
         print(f"kubric view: error: {err}", file=sys.stderr)
-        return 2
+        return 1
     if not source.names():
         print(f"kubric view: error: {args.path!r} holds no scene directories (scene_*/ with "
               "metadata.json)", file=sys.stderr)
-        return 2
+        return 1
     return serve(ViewerService(source), args.host, args.port)
 
 

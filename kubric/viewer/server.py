@@ -17,9 +17,12 @@ Endpoints (all answers are computed by :class:`~kubric.viewer.service.ViewerServ
 
 Scenes are named, never addressed by path; a request path containing ``..``, a backslash, a NUL,
 an absolute path or an encoded separator inside a component is refused with 400 before any
-lookup (also after repeated percent-decoding). Errors are JSON ``{"error": message}`` with 400
-(bad request), 404 (unknown scene / layer / frame), 405 (methods that would write), 422 (a
-scene that cannot be shown: incomplete, corrupt files) or 500 (anything else: every request is
+lookup (also after repeated percent-decoding). Answers are strict JSON (a NaN or infinity in a
+scene's files is sent as ``null``). Errors are JSON ``{"error": message}``, naming scenes,
+never the server's folders, with 400
+(bad request), 404 (unknown scene / layer / frame), 405 (any method but GET / HEAD), 422 (a
+scene that cannot be shown: corrupt files, a frame count its files do not back or over
+:data:`~kubric.viewer.source.MAX_FRAMES`) or 500 (anything else: every request is
 answered with a status, never a dropped connection). The listen backlog is
 :data:`LISTEN_BACKLOG` (the standard library's default, 5, drops connections under load).
 """
@@ -89,6 +92,17 @@ def _index(text: str) -> int:
     return int(text)
 
 
+def finite(value):
+    """``value`` with every non-finite float (NaN, ±Infinity) replaced by None."""
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {k: finite(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [finite(v) for v in value]
+    return value
+
+
 class Handler(BaseHTTPRequestHandler):
     service: ViewerService  # set by make_server
     quiet = True
@@ -137,13 +151,24 @@ class Handler(BaseHTTPRequestHandler):
 
     do_POST = do_PUT = do_DELETE = do_PATCH = _refuse  # noqa: N815
 
-    @staticmethod
-    def error(status, message):
-        return status, "application/json", json.dumps({"error": str(message)}).encode()
+    def __getattr__(self, name):
+        if name.startswith("do_"):  # any other method (OPTIONS, TRACE, ...): 405, not 501
+            return self._refuse
+        raise AttributeError(name)
+
+    def error(self, status, message):
+        """A JSON error; the server's own folder is never shown (scenes are named)."""
+        text = str(message)
+        root = getattr(self.service.source, "root", None)
+        if root is not None:
+            text = text.replace(f"{root}/", "").replace(str(root), "<scenes>")
+        return status, "application/json", json.dumps({"error": text}).encode()
 
     @staticmethod
     def json(data):
-        return HTTPStatus.OK, "application/json", json.dumps(data).encode()
+        """Strict JSON (RFC 8259): a NaN or infinity from a scene's files becomes null."""
+        return HTTPStatus.OK, "application/json", json.dumps(finite(data),
+                                                             allow_nan=False).encode()
 
     def route(self, raw: str):
         parts, query = split_path(raw)

@@ -111,7 +111,7 @@ class ViewerService:
 
     def scene(self, name: str) -> dict:
         summary = self.summary(name)
-        if summary["error"] and summary["recipe"] is None:
+        if summary["error"] and (summary["recipe"] is None or summary["num_frames"] is None):
             raise SceneError(summary["error"])
         meta = self.source.metadata(name)
         try:

@@ -91,6 +91,26 @@ class SceneSource(abc.ABC):
         return name
 
 
+#: the most frames (views) a scene may claim in the viewer
+MAX_FRAMES = 100_000
+
+
+def frame_count_error(name: str, count, directory, formats: dict, layers: list) -> str | None:
+    """Why ``metadata.num_frames`` = ``count`` cannot be shown (not a whole number in
+    1..:data:`MAX_FRAMES`, or the last frame of the first layer is missing), or None."""
+    if count is None:
+        return None
+    if isinstance(count, bool) or not isinstance(count, int) or count < 1:
+        return f"{name}/metadata.json: num_frames {str(count)[:40]!r} is not a whole number ≥ 1"
+    if count > MAX_FRAMES:
+        return f"{name}/metadata.json claims {count} frames; the viewer shows at most {MAX_FRAMES}"
+    if layers and not (directory / frame_filename(formats[layers[0]].template,
+                                                 count - 1)).is_file():
+        return (f"{name}/metadata.json claims {count} frames, but {layers[0]} frame {count - 1} "
+                "is missing")
+    return None
+
+
 class DirectorySource(SceneSource):
     """A scene directory (one scene) or a folder whose sub-directories are scenes.
 
@@ -154,7 +174,11 @@ class DirectorySource(SceneSource):
                    layers=[n for n, fmt in self.formats(name).items()
                            if (directory / frame_filename(fmt.template, 0)).is_file()],
                    has_tracks=(directory / TRACKS_FILE).is_file())
-        if not (directory / SUCCESS_FILE).is_file():
+        frames = frame_count_error(name, row["num_frames"], directory, self.formats(name),
+                                   row["layers"])
+        if frames is not None:  # a count the files do not back: never sent to the page
+            row["num_frames"], row["error"] = None, frames
+        elif not (directory / SUCCESS_FILE).is_file():
             row["error"] = f"incomplete scene: {name} has no {SUCCESS_FILE} (still being " \
                            "written, or its worker failed)"
         return row

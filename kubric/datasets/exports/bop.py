@@ -15,7 +15,10 @@ Layout (BOP's, as the BOP toolkit reads it)::
         scene_gt_info.json               {im_id: [{bbox_obj, bbox_visib, px_count_all,
                                           px_count_valid, px_count_visib, visib_fract}, ...]}
 
-``gt`` indexes ``metadata["instances"]`` (every instance of the scene, visible or not).
+``gt`` indexes the scene's rigid instances: ``metadata["instances"]`` (every instance, visible or
+not) without the people (instances with ``keypoints_2d`` or a ``character_id``): BOP models are
+rigid meshes, a character deforms, so people are left out and counted in the summary (their
+pixels belong to no object's mask).
 Conventions: camera axes are OpenCV's (x right, y down, looking down +z: ours with y and z
 negated); ``cam_K`` puts pixel centres at integer coordinates (our ``intrinsics_pixels`` with
 ``cx``, ``cy`` minus 0.5); rotations row-major; lengths in mm. ``mask``: the object's mesh
@@ -43,6 +46,7 @@ from kubric.datasets.exports import models as mdl
 from kubric.datasets.exports.coco import amodal_masks, mask_bbox
 from kubric.datasets.exports.scenes import ExportError, Scene, find_scenes, load_scene, model_sources
 from kubric.io.layers import read_frame
+from kubric.io.output_check import OutputError
 from kubric.io.png_io import encode_png
 
 #: our camera axes (x right, y up, looking down -z) → OpenCV's
@@ -58,10 +62,13 @@ class BopSummary:
     models: int
     depth_clipped: int
     skipped_incomplete: int
+    people: int = 0
 
     def format(self) -> str:
         extra = f", {self.skipped_incomplete} incomplete scene(s) skipped" \
             if self.skipped_incomplete else ""
+        if self.people:
+            extra += f", {self.people} person instance(s) left out (BOP models are rigid)"
         clipped = f"; {self.depth_clipped} depth pixels beyond 65535 · depth_scale mm written " \
             "as 0" if self.depth_clipped else ""
         return (f"wrote {self.path}: {self.scenes} scene(s), {self.images} images, "
@@ -158,6 +165,11 @@ def _png(array: np.ndarray) -> bytes:
     return encode_png(np.ascontiguousarray(array if array.ndim == 3 else array[..., None]))
 
 
+def is_person(instance: dict) -> bool:
+    """A character instance (deforming: no BOP model can describe it)."""
+    return "keypoints_2d" in instance or "character_id" in instance
+
+
 def export_scene(scene: Scene, out: pathlib.Path, store: ModelStore, depth_scale: float
                  ) -> tuple[int, int, int]:
     """Write one scene's BOP folder; returns (images, annotations, clipped depth pixels)."""
@@ -169,6 +181,7 @@ def export_scene(scene: Scene, out: pathlib.Path, store: ModelStore, depth_scale
     k = opencv_k(camera["intrinsics_pixels"])
     background = float(meta["metadata"].get("background_depth", 10000.0))
     instances = meta.get("instances", [])
+    rigid = [(k, inst) for k, inst in enumerate(instances) if not is_person(inst)]
     work = out.with_name(f".{out.name}.incomplete")
     shutil.rmtree(work, ignore_errors=True)
     for sub in ("rgb", "depth", "mask", "mask_visib"):
@@ -198,19 +211,19 @@ def export_scene(scene: Scene, out: pathlib.Path, store: ModelStore, depth_scale
         cams[str(i)] = {"cam_K": k.ravel().tolist(), "depth_scale": depth_scale,
                         "cam_R_w2c": r_w2c.ravel().tolist(), "cam_t_w2c": t_w2c.tolist()}
         gts[str(i)], infos[str(i)] = [], []
-        for g, inst in enumerate(instances):
+        for g, (label, inst) in enumerate(rigid):
             obj_id, model = store.get(inst)
             r_obj = quaternion_matrix(inst["quaternions"][i])
             r = r_w2c @ r_obj
             t = r_w2c @ (np.asarray(inst["positions"][i], dtype=np.float64) * 1000.0) + t_w2c
             t = t + r @ model.centre
-            visib = seg == g + 1
+            visib = seg == label + 1
             if amodal is not None:  # the scene's exact amodal layer (extra_layers=amodal)
-                full = amodal[i, g] | visib
+                full = amodal[i, label] | visib
             else:
                 cam_pts = model.vertices @ r.T + t
                 if np.any(cam_pts[:, 2] <= 1.0):
-                    raise ExportError(f"{scene.path.name}: frame {i}: instance {g} "
+                    raise ExportError(f"{scene.path.name}: frame {i}: instance {label} "
                                       f"({inst.get('asset_id')}) reaches behind the camera; its "
                                       "silhouette cannot be projected")
                 px = cam_pts[:, :2] / cam_pts[:, 2:3] * [k[0, 0], k[1, 1]] + [k[0, 2], k[1, 2]]
@@ -242,18 +255,21 @@ def export_bop(root, out, split: str = "train_pbr", depth_scale: float = 1.0,
 
     root, out = pathlib.Path(root), pathlib.Path(out)
     if out.exists() and not out.is_dir():
-        raise ExportError(f"--out {str(out)!r} is a file; give a folder (the BOP dataset root)")
+        raise OutputError(f"--out {str(out)!r} is a file; give a folder (the BOP dataset root)")
+    if not 0 < depth_scale < float("inf"):  # inf would write every depth as 0
+        raise OutputError(f"--depth-scale must be a finite number > 0 (millimetres per depth "
+                          f"unit), got {depth_scale}")
     if not split or "/" in split or split.startswith("."):
-        raise ExportError(f"--split {split!r}: give a folder name such as train_pbr")
+        raise OutputError(f"--split {split!r}: give a folder name such as train_pbr")
     if (out / "models" / "models_info.json").exists():
-        raise ExportError(f"--out {str(out)!r} already holds a BOP export (models/models_info.json"
+        raise OutputError(f"--out {str(out)!r} already holds a BOP export (models/models_info.json"
                           "); remove it or choose another folder (object ids are numbered per "
                           "export)")
     paths, skipped = find_scenes(root)
     first = load_scene(root, paths[0])
     store = ModelStore(out / "models", model_sources(first.metadata.get("flags", {}), sources))
     store.folder.mkdir(parents=True, exist_ok=True)
-    n_images = n_ann = clipped = 0
+    n_images = n_ann = clipped = people = 0
     with tqdm(total=len(paths), unit="scene", desc="export bop", file=sys.stderr,
               disable=not progress) as bar:
         for path in paths:
@@ -261,9 +277,11 @@ def export_bop(root, out, split: str = "train_pbr", depth_scale: float = 1.0,
             images, anns, over = export_scene(scene, out / split / f"{scene.seed:06d}", store,
                                               depth_scale)
             n_images, n_ann, clipped = n_images + images, n_ann + anns, clipped + over
+            people += sum(map(is_person, scene.metadata.get("instances", [])))
             bar.update(1)
     store.finish()
-    return BopSummary(out, len(paths), n_images, n_ann, len(store.models), clipped, skipped)
+    return BopSummary(out, len(paths), n_images, n_ann, len(store.models), clipped, skipped,
+                      people)
 
 
 __all__ = ["BopSummary", "export_bop", "instance_scale", "opencv_k", "quaternion_matrix",

@@ -31,6 +31,8 @@ annotation.
 
 from __future__ import annotations
 
+import numpy as np
+
 from kubric.annotations.keypoints import coco_keypoints
 from kubric.assets.clevr import KUBASIC_SHAPES, SHAPES
 from kubric.datasets.exports.scenes import ExportError, Scene
@@ -120,6 +122,9 @@ class PersonScheme(CategoryScheme):
     def check(self, scene: Scene) -> None:
         if self.base is not None:
             self.base.check(scene)
+        for index, instance in enumerate(scene.metadata.get("instances", [])):
+            if _is_person(instance):
+                check_keypoints(scene, index, instance, len(self.keypoint_names))
 
     def annotation_extras(self, scene: Scene, index: int, frame: int) -> dict:
         instance = scene.metadata["instances"][index]
@@ -130,6 +135,32 @@ class PersonScheme(CategoryScheme):
         return {"keypoints": flat, "num_keypoints": count}
 
 
+def check_keypoints(scene: Scene, index: int, instance: dict, count: int) -> None:
+    """ExportError (one line) unless the person ``instance`` holds ``keypoints_2d`` as
+    (T, K, 2) finite numbers and ``keypoints_visibility`` as (T, K) flags in {0, 1, 2}, T the
+    scene's frames and K = ``count`` (the person category's keypoints)."""
+    where = f"{scene.path.name}: instance {index}"
+    shapes = {"keypoints_2d": (scene.num_frames, count, 2),
+              "keypoints_visibility": (scene.num_frames, count)}
+    arrays = {}
+    for key, shape in shapes.items():
+        try:
+            arrays[key] = np.asarray(instance.get(key), dtype=np.float64)
+        except (TypeError, ValueError):
+            raise ExportError(f"{where}: {key} is not an array of numbers (a ragged or "
+                              "non-numeric list)") from None
+        if arrays[key].shape != shape:
+            raise ExportError(f"{where}: {key} has shape {arrays[key].shape}, expected {shape} "
+                              "(frames, keypoints[, x y])")
+    vis = arrays["keypoints_visibility"]
+    if not np.isin(vis, (0, 1, 2)).all():
+        raise ExportError(f"{where}: keypoints_visibility holds "
+                          f"{vis[~np.isin(vis, (0, 1, 2))][0]!r}; allowed 0, 1, 2")
+    shown = arrays["keypoints_2d"][vis > 0]
+    if not np.isfinite(shown).all():
+        raise ExportError(f"{where}: keypoints_2d holds NaN/inf at a keypoint marked visible")
+
+
 def scheme_for(scene: Scene, sources=None) -> CategoryScheme:
     """The scheme of ``scene``'s recipe (module doc), with the ``person`` category when the scene
     has people; ``sources``: asset-source paths given on the command line, searched for
@@ -138,8 +169,17 @@ def scheme_for(scene: Scene, sources=None) -> CategoryScheme:
     people = [i for i in instances if _is_person(i)]
     if not people:
         return _recipe_scheme(scene, sources)
+    names, skeleton = people[0].get("keypoint_names"), people[0].get("keypoint_skeleton", [])
+    if not isinstance(names, list) or not names or not all(isinstance(n, str) for n in names):
+        raise ExportError(f"{scene.path.name}: a person's keypoint_names {str(names)[:80]} is not "
+                          "a list of names")
+    if not isinstance(skeleton, list) or not all(
+            isinstance(e, list) and len(e) == 2 and all(isinstance(i, int) for i in e)
+            for e in skeleton):
+        raise ExportError(f"{scene.path.name}: a person's keypoint_skeleton {str(skeleton)[:80]} "
+                          "is not a list of [i, j] pairs")
     base = None if len(people) == len(instances) else _recipe_scheme(scene, sources)
-    return PersonScheme(base, people[0]["keypoint_names"], people[0]["keypoint_skeleton"])
+    return PersonScheme(base, names, skeleton)
 
 
 def _recipe_scheme(scene: Scene, sources=None) -> CategoryScheme:

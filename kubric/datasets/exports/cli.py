@@ -9,6 +9,7 @@ import sys
 
 from kubric.datasets.exports import FORMATS, exporter
 from kubric.errors import KubricError
+from kubric.io.output_check import check_output, scene_folders
 
 SCENES_HELP = "a folder of scene_* directories, or one scene directory"
 DATASET_HELP = "a packed dataset (kubric pack), or a folder of scene_* directories"
@@ -16,17 +17,23 @@ DATASET_HELP = "a packed dataset (kubric pack), or a folder of scene_* directori
 HUB = ("hf", "webdataset")
 
 
-def _error(what: str, message) -> int:
+def _error(what: str, message, code: int = 2) -> int:
     print(f"kubric export {what}: error: {' '.join(str(message).split())}", file=sys.stderr)
-    return 2
+    return code
 
 
 def _run(name: str, args, **kwargs):
-    """``FORMATS[name](SCENES, OUT, **kwargs)`` with its expected errors as one line (exit 2)."""
+    """``FORMATS[name](SCENES, OUT, **kwargs)`` with its expected errors as one line, exiting
+    with the error's status (docs/exit-codes.md: 2 for a bad option or output, 1 for bad
+    input)."""
     try:
+        check_output(args.out, scene_folders(args.scenes_dir), [args.scenes_dir],
+                     command=f"kubric export {name}")
         return exporter(name)(args.scenes_dir, args.out, **kwargs), 0
     except (KubricError, OSError) as err:  # ExportError is one
-        return None, _error(name, err)
+        refused = isinstance(err, FileExistsError)  # an output it will not replace: as --out
+        return None, _error(name, err, err.exit_code if isinstance(err, KubricError)
+                            else 2 if refused else 1)
 
 
 def cmd_coco(args) -> int:
@@ -38,9 +45,9 @@ def cmd_coco(args) -> int:
 
 
 def cmd_bop(args) -> int:
-    if not args.depth_scale > 0:
-        return _error("bop", f"--depth-scale must be > 0 (millimetres per depth unit), got "
-                      f"{args.depth_scale}")
+    if not 0 < args.depth_scale < float("inf"):
+        return _error("bop", f"--depth-scale must be a finite number > 0 (millimetres per depth "
+                      f"unit), got {args.depth_scale}")
     summary, code = _run("bop", args, split=args.split, depth_scale=args.depth_scale,
                          progress=not args.no_progress, sources=args.source)
     if summary:

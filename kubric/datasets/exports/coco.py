@@ -33,6 +33,7 @@ import sys
 
 import numpy as np
 
+from kubric import faults
 from kubric.datasets.exports import rle
 from kubric.datasets.exports.categories import scheme_for
 from kubric.datasets.exports.scenes import (
@@ -45,6 +46,7 @@ from kubric.datasets.exports.scenes import (
 )
 from kubric.io.bitmask import MAX_MASKS, unpack_masks
 from kubric.io.layers import read_layer
+from kubric.io.output_check import OutputError
 from kubric.io.paths import temp_name_for
 
 
@@ -149,9 +151,9 @@ def export_coco(root, out, progress: bool = True, compressed: bool = True,
     root = pathlib.Path(root)
     out = pathlib.Path(out)
     if out.is_dir():
-        raise ExportError(f"--out {str(out)!r} is a directory; give a file name (.json)")
+        raise OutputError(f"--out {str(out)!r} is a directory; give a file name (.json)")
     if not out.parent.is_dir():
-        raise ExportError(f"--out {str(out)!r}: folder {str(out.parent)!r} does not exist")
+        raise OutputError(f"--out {str(out)!r}: folder {str(out.parent)!r} does not exist")
     paths, skipped = find_scenes(root)
     scheme = scheme_for(load_scene(root, paths[0]), sources)
     info = {"description": f"Kubric scenes exported from {root.resolve().name}",
@@ -183,6 +185,7 @@ def export_coco(root, out, progress: bool = True, compressed: bool = True,
                         anns.write(("," if n_annotations else "") + _dump(item))
                         n_annotations += 1
                     bar.update(1)
+                    faults.point("export.scene_written")
             main.write('],"annotations":[')
             anns.seek(0)
             shutil.copyfileobj(anns, main, 1 << 16)

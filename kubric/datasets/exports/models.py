@@ -16,6 +16,7 @@ import pathlib
 
 import numpy as np
 
+from kubric.core.imports import uninterrupted_import
 from kubric.datasets.exports.scenes import ExportError
 
 #: the renderer's default importer axes for these formats (= no conversion)
@@ -52,7 +53,7 @@ def find_asset(sources, asset_id: str):
 
 def load_mesh(source, asset_id: str):
     """(vertices (V, 3) metres, faces (F, 3)) of the asset's render mesh, in its local frame."""
-    import trimesh
+    trimesh = uninterrupted_import("trimesh")  # trimesh swallows a Ctrl-C in its import
     entry = source.db[asset_id]
     if entry.get("asset_type") != "FileBasedObject":
         raise ExportError(f"asset {asset_id!r} of {source.name!r} is not a mesh object")
@@ -79,7 +80,7 @@ def load_mesh(source, asset_id: str):
 
 def make_model(vertices_m: np.ndarray, faces: np.ndarray, scale) -> Model:
     """The scaled mesh in millimetres, centred on its bounding box."""
-    import trimesh
+    trimesh = uninterrupted_import("trimesh")  # trimesh swallows a Ctrl-C in its import
     v = np.asarray(vertices_m, dtype=np.float64) * np.asarray(scale, dtype=np.float64) * 1000.0
     centre = (v.min(axis=0) + v.max(axis=0)) / 2
     v = v - centre

@@ -71,7 +71,8 @@ def annotation_id(image: int, label: int) -> int:
 
 def find_scenes(root) -> tuple[list[pathlib.Path], int]:
     """(complete scene directories under ``root``, or ``root`` itself; number of incomplete
-    ones skipped). One-line ExportError when ``root`` is not a folder or holds no scene."""
+    ones skipped). One-line ExportError when ``root`` is not a folder or holds no scene, and a
+    DuplicateSeedError when two scenes share a seed (their ids would clash)."""
     root = pathlib.Path(root)
     if not root.is_dir():
         raise ExportError(f"{str(root)!r} is not a directory (expected a folder of scene_* "
@@ -82,6 +83,7 @@ def find_scenes(root) -> tuple[list[pathlib.Path], int]:
     if not complete:
         raise ExportError(f"{str(root)!r} holds no complete scene directory (scene_* with "
                           f"{scene_dir.SUCCESS_FILE})")
+    scene_dir.check_unique_seeds((load_scene(root, p).seed, p) for p in complete)
     return complete, incomplete
 
 
@@ -100,10 +102,11 @@ def load_scene(root: pathlib.Path, path: pathlib.Path) -> Scene:
 
 
 def objects_sources(flags: dict, extra=()) -> list:
-    """The asset sources a scene's objects came from (not KuBasic): the ``extra`` ones given
-    (paths), then those the scene's options name (``objects_source``, ``objects``), else the
-    converted ``pybullet_data`` collection for the recipes that default to it (those with the
-    option ``collection_limit``)."""
+    """The asset sources a scene's objects came from: the ``extra`` ones given (paths), then
+    those the scene's options name (``objects_source``, ``objects``), else the default of the
+    recipe: the converted ``pybullet_data`` collection for those with the option
+    ``collection_limit`` (MOVi), KuBasic for the others with an ``objects_source`` option (svr,
+    complex_brdf, vbr)."""
     import kubric as kb
 
     out = [kb.AssetSource(p) for p in extra]
@@ -113,17 +116,22 @@ def objects_sources(flags: dict, extra=()) -> list:
             out.append(kb.AssetSource(value))
     if "collection_limit" in flags and flags.get("objects_source") is None:
         out.append(asset_tools.ensure_pybullet_collection(limit=flags.get("collection_limit")))
+    elif "objects_source" in flags and flags.get("objects_source") is None:
+        out.append(_kubasic(flags))  # svr, complex_brdf, vbr: KuBasic is their objects' source
     return out
+
+
+def _kubasic(flags: dict):
+    import kubric as kb
+
+    kubasic = flags.get("kubasic_source")
+    return kb.AssetSource(kubasic) if kubasic else asset_tools.ensure_kubasic()
 
 
 def model_sources(flags: dict, extra=()) -> list:
     """:func:`objects_sources` plus KuBasic (``kubasic_source``, else the locally built one):
     every source whose meshes a scene's instances may use."""
-    import kubric as kb
-
-    kubasic = flags.get("kubasic_source")
-    return objects_sources(flags, extra) + [kb.AssetSource(kubasic) if kubasic
-                                            else asset_tools.ensure_kubasic()]
+    return objects_sources(flags, extra) + [_kubasic(flags)]
 
 
 __all__ = ["ExportError", "ID_BASE", "Scene", "annotation_id", "find_scenes", "image_id",

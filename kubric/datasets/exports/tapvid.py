@@ -27,8 +27,8 @@ import pickle
 import numpy as np
 
 from kubric.annotations.track_files import TRACKS_FILE, read_tracks
+from kubric.datasets.exports.scenes import find_scenes
 from kubric.errors import InputError
-from kubric.io import scene_dir
 from kubric.io.layers import read_layer
 from kubric.io.paths import atomic_write_bytes
 
@@ -56,7 +56,7 @@ def tapvid_example(tracks: dict, video: np.ndarray) -> dict[str, np.ndarray]:
 def scene_dirs_with_tracks(root) -> list[pathlib.Path]:
     """Complete scene directories under ``root`` (or ``root`` itself), each with tracks.npz;
     ValueError (one line) when there is none or a complete scene lacks its tracks."""
-    candidates = scene_dir.scenes_under(root)
+    candidates = find_scenes(root)[0]
     lacking = [p.name for p in candidates if not (p / TRACKS_FILE).is_file()]
     if lacking:
         raise InputError(f"scene {lacking[0]!r} has no {TRACKS_FILE} ({len(lacking)} of "
