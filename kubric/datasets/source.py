@@ -30,6 +30,7 @@ from __future__ import annotations
 import bisect
 import os
 import pathlib
+import threading
 from collections.abc import Sequence
 
 import numpy as np
@@ -40,6 +41,11 @@ from kubric.datasets.tasks import check_servable, get_task
 from kubric.datasets.tfds_io import flatten, unflatten
 from kubric.io import storage
 from kubric.io.schema import Feature, Schema, SchemaError
+
+#: held while a source imports TFDS and opens its shards: two threads whose first use of a
+#: source coincides (Grain's and PyTorch's prefetch threads) could otherwise import TFDS's lazily
+#: imported modules at once, which deadlocked the JAX snippet of the README under load
+_OPEN_LOCK = threading.RLock()
 
 #: what ``load(..., units=...)`` accepts (module doc)
 UNITS = ("raw", "physical")
@@ -171,25 +177,30 @@ class DataSource:
             self._reader = self._features = self._parser = self._last = None
             self._pid = os.getpid()
         if self._reader is None:
-            import tensorflow_datasets as tfds
-            from tensorflow_datasets.core import utils
-            try:
-                features = tfds.features.FeatureConnector.from_config(str(self.dataset_dir))
-            except Exception as err:  # JSONDecodeError, KeyError, OSError ... of TFDS's parser
-                raise DatasetError(f"{str(self.dataset_dir / 'features.json')!r} cannot be read: "
-                                   f"{_one_line(err)}") from None
-            self._features = features
-            keys = self._keys or tuple(self._features.keys())
-            specs = {k: self._features.get_serialized_info()[k] for k in keys}
-            self._parser = (specs, utils.flatten_nest_dict(specs), keys)
-            lengths = self.info["shard_lengths"][self.split]
-            missing = [p for p in self.shard_paths() if not os.path.isfile(p)]
-            if missing:
-                raise DatasetError(f"{missing[0]!r}: shard missing ({len(missing)} of the "
-                                   f"{self.split} split's shards are)")
-            self._reader = _ShardReader(self.shard_paths(), lengths)
+            with _OPEN_LOCK:  # one thread imports TFDS and opens the reader (see _OPEN_LOCK)
+                if self._reader is None:
+                    self._open_reader()
         return self._reader
 
+    def _open_reader(self) -> None:
+        """Parse the dataset's features.json and open its shards (under :data:`_OPEN_LOCK`)."""
+        import tensorflow_datasets as tfds
+        from tensorflow_datasets.core import utils
+        try:
+            features = tfds.features.FeatureConnector.from_config(str(self.dataset_dir))
+        except Exception as err:  # JSONDecodeError, KeyError, OSError ... of TFDS's parser
+            raise DatasetError(f"{str(self.dataset_dir / 'features.json')!r} cannot be read: "
+                               f"{_one_line(err)}") from None
+        self._features = features
+        keys = self._keys or tuple(self._features.keys())
+        specs = {k: self._features.get_serialized_info()[k] for k in keys}
+        self._parser = (specs, utils.flatten_nest_dict(specs), keys)
+        lengths = self.info["shard_lengths"][self.split]
+        missing = [p for p in self.shard_paths() if not os.path.isfile(p)]
+        if missing:
+            raise DatasetError(f"{missing[0]!r}: shard missing ({len(missing)} of the "
+                               f"{self.split} split's shards are)")
+        self._reader = _ShardReader(self.shard_paths(), lengths)
 
     def _records(self, scenes: list[int]) -> list[bytes]:
         """The serialised examples of ``scenes``; a shard that cannot be read is named."""
@@ -217,10 +228,10 @@ class DataSource:
 
     def decode(self, data: bytes) -> dict:
         """Serialised example → regular nested numpy dict of the task's features."""
+        self._open()  # first: TFDS is imported under its lock
         from tensorflow_datasets.core import example_parser, utils
         from tensorflow_datasets.proto import tf_example_pb2
 
-        self._open()
         specs, flat_specs, keys = self._parser
         proto = tf_example_pb2.Example.FromString(data)
         if len(keys) < len(self._features.keys()):  # parse only the task's features
