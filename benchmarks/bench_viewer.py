@@ -31,6 +31,8 @@ import sys
 import tempfile
 import time
 
+import smoke_mode  # noqa: E402
+
 ROOT = pathlib.Path(__file__).resolve().parent.parent
 LIST_BUDGET_S, FRAME_BUDGET_S = 1.0, 0.100
 
@@ -162,9 +164,9 @@ def browser_numbers(port: int, frames: int) -> dict | None:
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--size", type=int, default=128)
-    parser.add_argument("--frames", type=int, default=12)
-    parser.add_argument("--scenes", type=int, default=100)
+    parser.add_argument("--size", type=int, default=smoke_mode.size(128, 16))
+    parser.add_argument("--frames", type=int, default=smoke_mode.size(12, 2))
+    parser.add_argument("--scenes", type=int, default=smoke_mode.size(100, 32))  # 32: it asks for scene 31
     args = parser.parse_args(argv)
     with tempfile.TemporaryDirectory() as tmp:
         folder = make_folder(pathlib.Path(tmp), args.size, args.frames, args.scenes)
