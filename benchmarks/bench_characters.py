@@ -67,11 +67,11 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--samples", type=int, default=smoke_mode.size(16, 1))
     parser.add_argument("--frames", type=int, default=smoke_mode.size(12, 2))
-    parser.add_argument("--size", type=int, default=smoke_mode.size(128, 16))
+    parser.add_argument("--size", type=int, default=smoke_mode.size(128, 32))
     parser.add_argument("--people", type=int, default=2)
     parser.add_argument("--segments", type=int, default=smoke_mode.size(48, 8))
     parser.add_argument("--spacing", type=float, default=0.012)
-    parser.add_argument("--tracks", type=int, default=smoke_mode.size(1024, 16))
+    parser.add_argument("--tracks", type=int, default=smoke_mode.size(1024, 4))
     parser.add_argument("--character", choices=("procedural", "humans"), default="procedural")
     args = parser.parse_args(argv)
 

@@ -12,6 +12,7 @@ import importlib.util
 import os
 import pathlib
 import re
+import signal
 import subprocess
 import sys
 
@@ -96,11 +97,17 @@ def test_benchmark_smoke_run(name):
         pytest.skip(f"{name} needs {missing} (pip install -e '.[bench,cluster,s3]')")
     before = docs_state()
     env = dict(os.environ, KUBRIC_BENCH_SMOKE="1")
-    proc = subprocess.run([sys.executable, str(BENCHMARKS / f"{name}.py")], cwd=ROOT, env=env,
-                          capture_output=True, text=True, timeout=600)
-    output = proc.stdout + proc.stderr
-    assert proc.returncode == 0, f"{name} exited {proc.returncode}:\n{output[-4000:]}"
+    proc = subprocess.Popen([sys.executable, str(BENCHMARKS / f"{name}.py")], cwd=ROOT, env=env,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            start_new_session=True)  # its own group: killed whole on a hang
+    try:
+        stdout, stderr = proc.communicate(timeout=300)
+    except subprocess.TimeoutExpired:
+        os.killpg(proc.pid, signal.SIGKILL)
+        stdout, stderr = proc.communicate()
+        pytest.fail(f"{name} ran over 300 s:\n{(stdout + stderr)[-4000:]}")
+    assert proc.returncode == 0, f"{name} exited {proc.returncode}:\n{(stdout + stderr)[-4000:]}"
     for pattern in ROWS[name]:
-        assert re.search(pattern, proc.stdout, re.MULTILINE), \
-            f"{name} printed no row matching {pattern!r}:\n{proc.stdout[-4000:]}"
+        assert re.search(pattern, stdout, re.MULTILINE), \
+            f"{name} printed no row matching {pattern!r}:\n{stdout[-4000:]}"
     assert docs_state() == before, f"{name} changed docs/ in a smoke run"
