@@ -14,6 +14,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+import smoke_mode
 
 
 def bench_kubasic(out: Path, workers: int) -> dict:
@@ -105,7 +106,7 @@ def bench_decomposition() -> list[dict]:
     except ImportError:
         methods = {"vhacd": physics.vhacd}
     rows = []
-    for name, (mesh, watertight) in sorted(meshes.items()):
+    for name, (mesh, watertight) in sorted(meshes.items())[:smoke_mode.size(None, 1)]:
         row = {"mesh": name, "faces": len(mesh.faces)}
         for method, fn in methods.items():
             t0 = time.perf_counter()
@@ -140,7 +141,8 @@ def main(argv=None) -> dict:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", default=None, help="output folder (default: a temp folder)")
     parser.add_argument("--workers", type=int, default=2)
-    parser.add_argument("--limit", type=int, default=None, help="random_urdfs (default all)")
+    parser.add_argument("--limit", type=int, default=smoke_mode.size(None, 0),
+                        help="random_urdfs (default all)")
     parser.add_argument("--skip-full", action="store_true", help="skip the full conversion")
     args = parser.parse_args(argv)
     with tempfile.TemporaryDirectory() as tmp:

@@ -23,6 +23,7 @@ import sys
 import numpy as np
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
+import smoke_mode  # noqa: E402
 from bench_render import timed  # noqa: E402
 
 import kubric as kb  # noqa: E402
@@ -64,17 +65,19 @@ def make_scene(args, with_people: bool):
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--samples", type=int, default=16)
-    parser.add_argument("--frames", type=int, default=12)
-    parser.add_argument("--size", type=int, default=128)
+    parser.add_argument("--samples", type=int, default=smoke_mode.size(16, 1))
+    parser.add_argument("--frames", type=int, default=smoke_mode.size(12, 2))
+    parser.add_argument("--size", type=int, default=smoke_mode.size(128, 32))
     parser.add_argument("--people", type=int, default=2)
-    parser.add_argument("--segments", type=int, default=48)
+    parser.add_argument("--segments", type=int, default=smoke_mode.size(48, 8))
     parser.add_argument("--spacing", type=float, default=0.012)
-    parser.add_argument("--tracks", type=int, default=1024)
+    parser.add_argument("--tracks", type=int, default=smoke_mode.size(1024, 4))
     parser.add_argument("--character", choices=("procedural", "humans"), default="procedural")
     args = parser.parse_args(argv)
 
-    def best(fn, repeats=3):
+    repeats = smoke_mode.size(3, 1)
+
+    def best(fn):
         """(last result, least CPU-s of ``repeats`` runs): the machine is shared."""
         runs = [timed(fn) for _ in range(repeats)]
         return runs[-1][0], min(r[1] for r in runs)

@@ -34,6 +34,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import handwritten_codecs as hw  # noqa: E402
+import smoke_mode  # noqa: E402
 from bench_file_io import synthetic_scene  # noqa: E402
 
 from kubric.io import png_io, tiff_io  # noqa: E402
@@ -358,8 +359,8 @@ def run(sizes, repeats: int) -> None:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--repeats", type=int, default=21)
-    parser.add_argument("--sizes", type=int, nargs="+", default=[256, 512])
+    parser.add_argument("--repeats", type=int, default=smoke_mode.size(21, 1))
+    parser.add_argument("--sizes", type=int, nargs="+", default=smoke_mode.size([256, 512], [32]))
     args = parser.parse_args()
     run(args.sizes, args.repeats)
 

@@ -28,14 +28,16 @@ import tempfile
 import time
 
 import numpy as np
+import smoke_mode  # noqa: E402
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
-OPTIONS = ["resolution=128", "samples=4", "denoise=false"]
+OPTIONS = smoke_mode.size(["resolution=128", "samples=4", "denoise=false"],
+                          ["resolution=16", "frame_end=2", "samples=1", "denoise=false"])
 
 
 def cache_dir() -> pathlib.Path:
     base = os.environ.get("KUBRIC_CACHE_DIR") or pathlib.Path.home() / ".cache" / "kubric"
-    return pathlib.Path(base) / "bench_datasets" / "movi_a_128"
+    return pathlib.Path(base) / "bench_datasets" / smoke_mode.size("movi_a_128", "movi_a_smoke")
 
 
 def ensure_scenes(count: int) -> pathlib.Path:
@@ -58,7 +60,7 @@ def timed(fn) -> float:
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--scenes", type=int, default=20)
+    parser.add_argument("--scenes", type=int, default=smoke_mode.size(20, 2))
     args = parser.parse_args(argv)
     from kubric import file_io
     from kubric.datasets import load, pack

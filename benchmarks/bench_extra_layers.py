@@ -29,6 +29,7 @@ import tempfile
 import time
 
 import numpy as np
+import smoke_mode
 
 import kubric as kb
 from kubric.datasets.exports import rle
@@ -128,10 +129,10 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--recipe", default="movi_a")
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
-    ap.add_argument("--size", type=int, default=64)
-    ap.add_argument("--frames", type=int, default=4)
+    ap.add_argument("--size", type=int, default=smoke_mode.size(64, 16))
+    ap.add_argument("--frames", type=int, default=smoke_mode.size(4, 2))
     ap.add_argument("--seed", type=int, default=3)
-    ap.add_argument("--storage-size", type=int, default=256)
+    ap.add_argument("--storage-size", type=int, default=smoke_mode.size(256, 16))
     ap.add_argument("--baseline", choices=("raycast", "blender"), default="raycast",
                     help="the default scene the layers' cost is divided by: raycast (all "
                     "layers) or blender (the recipe's default quality, rendered in this process)")

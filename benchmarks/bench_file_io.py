@@ -18,6 +18,7 @@ import tempfile
 import time
 
 import numpy as np
+import smoke_mode
 
 from kubric.io import layers, png_io, tiff_io
 
@@ -107,10 +108,12 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--sweep", action="store_true", help="compare PNG filters / zlib levels")
     args = parser.parse_args()
-    scene = synthetic_scene(np.random.default_rng(0))
+    scene = synthetic_scene(np.random.default_rng(0), frames=smoke_mode.size(24, 2),
+                            size=smoke_mode.size(256, 96))
     files = sum(v.shape[0] for v in scene.values())
     results: dict[str, dict[str, float]] = {}
-    for _ in range(4):  # alternate the two codec sets: slow drifts of a shared machine hit both
+    # alternate the two codec sets: slow drifts of a shared machine hit both
+    for _ in range(smoke_mode.size(4, 1)):
         for name in ("handwritten", "kubric"):
             with handwritten_codecs() if name == "handwritten" else contextlib.nullcontext():
                 write, size, _ = time_write(scene)

@@ -22,8 +22,10 @@ import sys
 import tempfile
 import time
 
+import smoke_mode  # noqa: E402
+
 ROOT = pathlib.Path(__file__).resolve().parents[1]
-OPTIONS = {"resolution": (64, 64), "frames": 8}
+OPTIONS = smoke_mode.size({"resolution": (64, 64), "frames": 8}, {"resolution": (16, 16), "frames": 2})
 FORMATS = ("hf", "webdataset")
 
 CHILD = r"""
@@ -74,8 +76,8 @@ def measure_export(fmt: str, dataset: pathlib.Path, warmup: pathlib.Path, out: p
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--small", type=int, default=100)
-    parser.add_argument("--large", type=int, default=1000)
+    parser.add_argument("--small", type=int, default=smoke_mode.size(100, 3))
+    parser.add_argument("--large", type=int, default=smoke_mode.size(1000, 4))
     args = parser.parse_args(argv)
     failed = False
     with tempfile.TemporaryDirectory(prefix="bench_hub_") as tmp:

@@ -12,6 +12,8 @@ import statistics
 import subprocess
 import sys
 
+import smoke_mode
+
 HEAVY = ("bpy", "pybullet", "trimesh", "torch", "tensorflow")
 
 
@@ -26,7 +28,7 @@ def time_import(module: str, repeats: int) -> float:
 
 def main(argv=None) -> dict:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--repeats", type=int, default=7)
+    parser.add_argument("--repeats", type=int, default=smoke_mode.size(7, 1))
     args = parser.parse_args(argv)
     numpy_s = time_import("numpy", args.repeats)
     kubric_s = time_import("kubric", args.repeats)

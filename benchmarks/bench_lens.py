@@ -17,6 +17,7 @@ from __future__ import annotations
 import argparse
 import tempfile
 
+import smoke_mode
 from bench_raycast import cpu_seconds, simulated_scene
 
 from kubric.core import lenses
@@ -30,11 +31,11 @@ LENSES = {"pinhole": lenses.PINHOLE,
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--size", type=int, default=256)
-    ap.add_argument("--frames", type=int, default=8)
+    ap.add_argument("--size", type=int, default=smoke_mode.size(256, 16))
+    ap.add_argument("--frames", type=int, default=smoke_mode.size(8, 2))
     ap.add_argument("--seed", type=int, default=3)
     ap.add_argument("--blender", action="store_true")
-    ap.add_argument("--samples", type=int, default=16)
+    ap.add_argument("--samples", type=int, default=smoke_mode.size(16, 1))
     args = ap.parse_args()
     scene = simulated_scene("movi_a", args.size, args.frames, args.seed, "renderer=raycast")
     rest = list(range(2, args.frames + 1))

@@ -20,7 +20,9 @@ import sys
 import tempfile
 import time
 
-DEMO = ["resolution=128", "samples=16"]
+import smoke_mode  # noqa: E402
+
+DEMO = smoke_mode.size(["resolution=128", "samples=16"], ["resolution=16", "samples=1"])
 RECIPES = {
     "klevr": DEMO,
     "toybox": DEMO + ["num_categories=3"],
@@ -29,7 +31,8 @@ RECIPES = {
     "multiview_matting": DEMO + ["difficulty=hard"],
     "nvs": DEMO,
 }
-BASELINE = ("movi_a", ["resolution=128", "frame_end=12", "samples=16"])
+BASELINE = ("movi_a", smoke_mode.size(["resolution=128", "frame_end=12", "samples=16"],
+                                      ["resolution=16", "frame_end=2", "samples=1"]))
 #: toybox: categories given to KuBasic shapes for the benchmark
 TOY_CATEGORIES = {"cube": "box", "sponge": "box", "sphere": "ball", "torus": "ring",
                   "gear": "ring", "teapot": "kitchen", "cylinder": "kitchen"}
@@ -64,6 +67,8 @@ def main(argv=None) -> int:
     unknown = sorted(set(args.recipes) - set(RECIPES))
     if unknown:
         parser.error(f"unknown recipes {unknown}; allowed: {sorted(RECIPES)}")
+    if smoke_mode.SMOKE and not args.recipes:  # toybox: the generic path and its own objects=
+        args.recipes = ["toybox"]
     from kubric.pipeline import get_recipe
     from kubric.pipeline.inspect import inspect_scene
 

@@ -32,10 +32,11 @@ import tempfile
 import time
 
 import numpy as np
+import smoke_mode  # noqa: E402
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 FIXTURES = ROOT / "tests" / "hostile_fixtures.py"  # `kubric` with the toy recipe registered
-SCENES = 24
+SCENES = smoke_mode.size(24, 4)
 
 
 def command(scenes: pathlib.Path, out: pathlib.Path, workers: int) -> list[str]:
@@ -138,7 +139,8 @@ def measure(runs: int, seed: int) -> list[dict]:
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--runs", type=int, default=20, help="signalled runs per configuration")
+    parser.add_argument("--runs", type=int, default=smoke_mode.size(20, 1),
+                        help="signalled runs per configuration")
     parser.add_argument("--seed", type=int, default=0, help="seed of the signal delays")
     args = parser.parse_args(argv)
     rows = measure(args.runs, args.seed)

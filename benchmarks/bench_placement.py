@@ -23,6 +23,7 @@ import json
 import time
 
 import numpy as np
+import smoke_mode
 
 import kubric as kb
 from kubric import randomness
@@ -111,7 +112,7 @@ def measure(scenes: int) -> list[dict]:
 
 def main(argv=None) -> list[dict]:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--scenes", type=int, default=100, help="seeds per configuration")
+    parser.add_argument("--scenes", type=int, default=smoke_mode.size(100, 1), help="seeds per configuration")
     return measure(parser.parse_args(argv).scenes)
 
 

@@ -41,6 +41,7 @@ import numpy as np
 
 HERE = pathlib.Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
+import smoke_mode  # noqa: E402
 from bench_scene_cost import edge_band  # noqa: E402
 
 ROOT = HERE.parent
@@ -304,14 +305,15 @@ def calibrated_recipes() -> list[str]:
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--recipes", nargs="*", help="default: every RenderQuality recipe")
-    parser.add_argument("--seeds", nargs="*", type=int, default=[1, 2, 3])
-    parser.add_argument("--reference-samples", type=int, default=1024)
-    parser.add_argument("--json", type=pathlib.Path, default=DATA)
-    parser.add_argument("--doc", type=pathlib.Path, default=DOC)
+    parser.add_argument("--seeds", nargs="*", type=int, default=smoke_mode.size([1, 2, 3], [1]))
+    parser.add_argument("--reference-samples", type=int, default=smoke_mode.size(1024, 4))
+    parser.add_argument("--json", type=pathlib.Path, default=smoke_mode.output(DATA))
+    parser.add_argument("--doc", type=pathlib.Path, default=smoke_mode.output(DOC))
     parser.add_argument("--no-doc", action="store_true", help="leave the docs page as it is")
     parser.add_argument("--resume", action="store_true",
                         help="keep the scenes already in --json (same settings and reference)")
-    parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+    parser.add_argument("--set", action="append", metavar="KEY=VALUE",
+                        default=smoke_mode.size([], ["resolution=16"]),
                         help="extra options for every recipe (smoke runs only: resolution=32)")
     parser.add_argument("--child", nargs=3, metavar=("RECIPE", "SEED", "OUT"),
                         help=argparse.SUPPRESS)
@@ -323,7 +325,7 @@ def main(argv=None) -> int:
         return 0
     from kubric.recipes.render_quality import CALIBRATION_SETTINGS
     available = calibrated_recipes()
-    recipes = args.recipes or available
+    recipes = args.recipes or smoke_mode.size(available, available[:1])
     unknown = sorted(set(recipes) - set(available))
     if unknown:
         raise SystemExit(f"not a calibrated recipe: {unknown}; allowed: {available}")

@@ -17,6 +17,7 @@ import tempfile
 import time
 
 import numpy as np
+import smoke_mode
 
 import kubric as kb
 from kubric.pipeline import get_recipe
@@ -51,8 +52,8 @@ def simulated_scene(recipe: str, size: int, frames: int, seed: int, *options: st
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--recipe", default="movi_a")
-    ap.add_argument("--size", type=int, default=256)
-    ap.add_argument("--frames", type=int, default=8)
+    ap.add_argument("--size", type=int, default=smoke_mode.size(256, 16))
+    ap.add_argument("--frames", type=int, default=smoke_mode.size(8, 2))
     ap.add_argument("--seed", type=int, default=3)
     args = ap.parse_args()
     scene = simulated_scene(args.recipe, args.size, args.frames, args.seed)

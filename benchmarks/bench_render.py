@@ -16,6 +16,7 @@ import resource
 import time
 
 import numpy as np
+import smoke_mode
 
 import kubric as kb
 from kubric.renderer.base import ANNOTATION_LAYERS
@@ -61,9 +62,9 @@ def timed(fn):
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--samples", type=int, default=64)
-    parser.add_argument("--frames", type=int, default=24)
-    parser.add_argument("--size", type=int, default=256)
+    parser.add_argument("--samples", type=int, default=smoke_mode.size(64, 1))
+    parser.add_argument("--frames", type=int, default=smoke_mode.size(24, 2))
+    parser.add_argument("--size", type=int, default=smoke_mode.size(256, 32))
     parser.add_argument("--denoise", action="store_true", help="OIDN on the RGB render")
     args = parser.parse_args(argv)
 

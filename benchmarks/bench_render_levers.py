@@ -25,6 +25,7 @@ import time
 import numpy as np
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
+import smoke_mode  # noqa: E402
 from bench_quality_calibration import with_renderer  # noqa: E402
 from bench_scene_cost import edge_band, rmse  # noqa: E402
 
@@ -73,13 +74,14 @@ BASE = {"samples_per_pixel": 16, "use_denoising": True, "adaptive_sampling": Fal
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seed", type=int, default=3)
-    parser.add_argument("--reference-samples", type=int, default=1024)
-    parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
+    parser.add_argument("--reference-samples", type=int, default=smoke_mode.size(1024, 4))
+    parser.add_argument("--set", action="append", metavar="KEY=VALUE",
+                        default=smoke_mode.size([], ["resolution=16"]))
     args = parser.parse_args(argv)
     os.environ.setdefault("KUBRIC_CACHE_DIR",
                           str(pathlib.Path(__file__).resolve().parents[1] / ".cache" / "kubric"))
     from kubric.renderer import blender
-    frames = [1, 2, 3, 4]
+    frames = smoke_mode.size([1, 2, 3, 4], [1])
     with tempfile.TemporaryDirectory(prefix="bench_levers_") as tmp:
         # the MOVi-A recipe's renderer for the seed, stopped just before it renders
         r = with_renderer("movi_a", args.seed, args.set, pathlib.Path(tmp), lambda r: r)

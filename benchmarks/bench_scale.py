@@ -48,6 +48,7 @@ import time
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "tests"))
+import smoke_mode  # noqa: E402
 
 #: a worker of the kubric contract in the standard library only (python -S): copy the template
 #: scene into OUT/.scene_X.incomplete-PID, write _SUCCESS, rename to OUT/scene_X.
@@ -136,11 +137,11 @@ def child_resume(spec: dict) -> dict:
 
 
 def child_pack(spec: dict) -> dict:
-    from kubric.datasets import dask_pack, packer
+    from kubric.datasets import packer, store_commit
     start = time.perf_counter()
     kwargs = dict(splits="train=0.9,validation=0.1", progress=False, workers=1)
-    if spec["out"].startswith("s3://"):
-        result = dask_pack.pack_sharded(spec["scenes"], spec["out"], **kwargs)
+    if spec["out"].startswith("s3://"):  # a URL: the store commit (the sharded packer refuses one)
+        result = store_commit.pack_into(spec["scenes"], spec["out"], **kwargs)
     else:
         result = packer.pack(spec["scenes"], spec["out"], **kwargs)
     return {"wall": time.perf_counter() - start, "packed": sum(result.counts.values()),
@@ -198,7 +199,7 @@ def half_finished(scenes: pathlib.Path, root: pathlib.Path, n: int) -> pathlib.P
     for seed in range(0, n, 2):
         shutil.copytree(scenes / f"scene_{seed:08d}", out / f"scene_{seed:08d}",
                         copy_function=os.link)
-    for seed in range(1, min(n, 41), 4):
+    for seed in range(1, min(n - 2, 41), 4):  # seed + 2 < n: a scene of the run
         (out / f".scene_{seed:08d}.incomplete-999999999").mkdir()
         shutil.copytree(scenes / f"scene_{seed + 2:08d}", out / f"scene_{seed + 2:08d}")
         (out / f"scene_{seed + 2:08d}" / "_SUCCESS").unlink()
@@ -270,16 +271,17 @@ def verdict(ok: bool) -> str:
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--sizes", default="100,1000,10000",
+    parser.add_argument("--sizes", default=smoke_mode.size("100,1000,10000", "10"),
                         help="N for the stdlib-worker runs, resume and pack")
-    parser.add_argument("--bench-sizes", default="100,1000",
+    parser.add_argument("--bench-sizes", default=smoke_mode.size("100,1000", "2"),
                         help="N for the runs with the real `kubric worker bench` process")
-    parser.add_argument("--slots", type=int, default=4, help="pool workers = Dask workers")
+    parser.add_argument("--slots", type=int, default=smoke_mode.size(4, 2),
+                        help="pool workers = Dask workers")
     parser.add_argument("--arms", default="pool,dask-resource,dask-plain")
     parser.add_argument("--big-arms", default="pool,dask-plain",
                         help="the arms also run at N ≥ 10000 (time: ~N × 30 ms of CPU each)")
     parser.add_argument("--sections", default="generate,resume,pack,load")
-    parser.add_argument("--load-size", type=int, default=1000,
+    parser.add_argument("--load-size", type=int, default=smoke_mode.size(1000, 10),
                         help="N of the dataset read from disk and from s3:// (load section)")
     parser.add_argument("--json", default=None, help="also write every result to this file")
     parser.add_argument("--child", default=None, help=argparse.SUPPRESS)

@@ -33,6 +33,8 @@ import time
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+import smoke_mode  # noqa: E402
+
 FAKE = f"{ROOT / 'tests' / 'fake_recipes.py'}:Fake"
 TINY = ["resolution=32", "frame_end=3", "samples=2", "denoise=false", "max_num_objects=5"]
 SPEEDUP_TARGET = 1.8     # the issue's: 2 workers at least 1.8x faster than 1
@@ -88,14 +90,15 @@ def scheduler_cost(tasks: int) -> float:
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--scenes", type=int, default=12,
+    parser.add_argument("--scenes", type=int, default=smoke_mode.size(12, 2),
                         help="MOVi-A scenes per configuration (default 12: with 6, three rounds "
                         "of ~1-s scenes, a run's fixed ~0.3 s of first-task set-up was a tenth "
                         "of the 2-worker time)")
-    parser.add_argument("--overhead-scenes", type=int, default=None,
+    parser.add_argument("--overhead-scenes", type=int, default=smoke_mode.size(None, 2),
                         help="test-recipe scenes for the per-scene overhead, even (default: "
                         "10 for 6 scenes, scaled with --scenes)")
-    parser.add_argument("--tasks", type=int, default=None, help="no-op tasks for the scheduler "
+    parser.add_argument("--tasks", type=int, default=smoke_mode.size(None, 10),
+                        help="no-op tasks for the scheduler "
                         "cost (default: 2000 for 6 scenes, scaled with --scenes, at least 100)")
     args = parser.parse_args(argv)
     if args.scenes < 2:

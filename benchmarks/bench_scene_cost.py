@@ -34,6 +34,7 @@ import tempfile
 import time
 
 import numpy as np
+import smoke_mode
 
 from kubric.recipes.render_quality import RULE_FACTOR
 
@@ -143,12 +144,14 @@ def save_crops(path: pathlib.Path, images: list[tuple[str, np.ndarray]], worst: 
     print(f"crops (frame 1, rows {y0}-{y0 + 2 * half}, columns {x0}-{x0 + 2 * half}) → {path}")
 
 
-def throughput(work: pathlib.Path, recipe: str = "movi_a", seeds=(4, 4)) -> dict:
+def throughput(work: pathlib.Path, recipe: str = "movi_a", seeds=(4, 4),
+               assignments: list[str] = ()) -> dict:
     """Wall seconds for len(seeds) default scenes (fresh ``kubric worker`` processes): one after
     the other with all cores each; side by side with all cores each (oversubscribed: the process
     pool); side by side with cores // scenes threads each (one Dask slot per core). The same
     seed twice by default: side by side, two different scenes would leave a core idle once the
-    shorter one ends, which a long run's pool does not."""
+    shorter one ends, which a long run's pool does not. ``assignments``: recipe options
+    (``key=value``, as ``--set``)."""
     def workers(tag, threads, parallel):
         env = dict(os.environ)
         env.pop("KUBRIC_RENDER_THREADS", None)
@@ -159,7 +162,8 @@ def throughput(work: pathlib.Path, recipe: str = "movi_a", seeds=(4, 4)) -> dict
         for k, s in enumerate(seeds):
             procs.append(subprocess.Popen(
                 [sys.executable, "-m", "kubric", "worker", recipe, "--seed", str(s), "--out",
-                 str(work / f"{tag}_{k}")], cwd=HERE.parent, env=env,
+                 str(work / f"{tag}_{k}"), *[a for o in assignments for a in ("--set", o)]],
+                cwd=HERE.parent, env=env,
                 stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
             if not parallel and procs[-1].wait():
                 raise SystemExit(f"throughput worker {tag} seed {s} failed")
@@ -205,15 +209,16 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seed", type=int, default=3)
     parser.add_argument("--recipe", default="movi_a", help="any MOVi recipe (default movi_a)")
-    parser.add_argument("--reference-samples", type=int, default=1024)
+    parser.add_argument("--reference-samples", type=int, default=smoke_mode.size(1024, 4))
     parser.add_argument("--json", type=pathlib.Path, help="also write the numbers here")
     parser.add_argument("--crops", type=pathlib.Path, help="write a crop comparison PNG here")
     parser.add_argument("--no-throughput", action="store_true")
-    parser.add_argument("--allocator-pairs", type=int, default=3, metavar="N",
+    parser.add_argument("--allocator-pairs", type=int, default=smoke_mode.size(3, 1), metavar="N",
                         help="extra alternating runs of the fast profile with and without the "
                              "allocator tuning (its A/B; default 3 pairs, 0 to skip)")
     parser.add_argument("--throughput-only", action="store_true")
-    parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+    parser.add_argument("--set", action="append", metavar="KEY=VALUE",
+                        default=smoke_mode.size([], ["resolution=16", "frame_end=4"]),
                         help="extra recipe options for every run (smoke runs: resolution=64)")
     args = parser.parse_args(argv)
     os.environ.setdefault("KUBRIC_CACHE_DIR", str(HERE.parent / ".cache" / "kubric"))
@@ -221,7 +226,7 @@ def main(argv=None) -> int:
     results: dict = {"seed": args.seed, "profiles": {}}
     if args.throughput_only:
         with tempfile.TemporaryDirectory(prefix="bench_scene_cost_") as tmp:
-            t = throughput(pathlib.Path(tmp), args.recipe)
+            t = throughput(pathlib.Path(tmp), args.recipe, assignments=args.set)
         print_throughput(t)
         return 0
     with tempfile.TemporaryDirectory(prefix="bench_scene_cost_") as tmp:
@@ -271,7 +276,7 @@ def main(argv=None) -> int:
             save_crops(args.crops, images, dict(images)["default"])
         if not args.no_throughput:
             print("throughput: 2 default scenes, sequential vs side by side ...", flush=True)
-            results["throughput"] = throughput(work, args.recipe)
+            results["throughput"] = throughput(work, args.recipe, assignments=args.set)
 
     p = results["profiles"]
     old = p["final"]

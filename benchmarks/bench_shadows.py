@@ -19,6 +19,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import smoke_mode
 from scipy import ndimage
 
 import kubric as kb
@@ -58,9 +59,9 @@ def build(catch: bool, size: int, samples: int):
 
 def main(argv=None) -> dict:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--size", type=int, default=256)
-    parser.add_argument("--samples", type=int, default=64)
-    parser.add_argument("--repeats", type=int, default=2)
+    parser.add_argument("--size", type=int, default=smoke_mode.size(256, 32))
+    parser.add_argument("--samples", type=int, default=smoke_mode.size(64, 1))
+    parser.add_argument("--repeats", type=int, default=smoke_mode.size(2, 1))
     args = parser.parse_args(argv)
     times = {"unlit": [], "catch_shadows": []}
     floor = {}

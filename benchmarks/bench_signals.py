@@ -29,6 +29,7 @@ import tempfile
 import time
 
 import numpy as np
+import smoke_mode  # noqa: E402
 
 TINY = ["--set", "resolution=16", "--set", "frame_end=3", "--set", "samples=1"]
 
@@ -115,7 +116,8 @@ def measure(runs: int, seed: int) -> list[dict]:
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--runs", type=int, default=20, help="signalled runs per configuration")
+    parser.add_argument("--runs", type=int, default=smoke_mode.size(20, 1),
+                        help="signalled runs per configuration")
     parser.add_argument("--seed", type=int, default=0, help="seed of the signal delays")
     args = parser.parse_args(argv)
     rows = measure(args.runs, args.seed)

@@ -7,6 +7,7 @@ of each phase and the physics steps per second, at step_rate 240 and 960.
 import time
 
 import numpy as np
+import smoke_mode
 
 import kubric as kb
 from kubric.simulator import PyBullet
@@ -53,8 +54,8 @@ def measure(n_objects: int, step_rate: int, seed: int = 0) -> dict:
 def main():
     print(f"{'objects':>7} {'step_rate':>9} {'setup_s':>8} {'place_s':>8} {'physics_s':>9} "
           f"{'write_s':>8} {'steps/s':>8} {'events':>6}")
-    for n in (10, 30, 100):
-        for rate in (240, 960):
+    for n in smoke_mode.size((10, 30, 100), (2,)):
+        for rate in smoke_mode.size((240, 960), (240,)):
             r = measure(n, rate)
             print(f"{n:>7} {rate:>9} {r['setup']:>8.3f} {r['placement']:>8.3f} "
                   f"{r['physics']:>9.3f} {r['write_back']:>8.3f} {r['steps_per_s']:>8.0f} "

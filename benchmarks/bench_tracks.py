@@ -17,6 +17,7 @@ import tempfile
 import numpy as np
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
+import smoke_mode  # noqa: E402
 from bench_render import movi_like_scene, timed  # noqa: E402
 
 import kubric as kb  # noqa: E402
@@ -26,10 +27,10 @@ from kubric.annotations.track_files import write_tracks  # noqa: E402
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--samples", type=int, default=64)
-    parser.add_argument("--frames", type=int, default=24)
-    parser.add_argument("--size", type=int, default=256)
-    parser.add_argument("--tracks", type=int, default=2048)
+    parser.add_argument("--samples", type=int, default=smoke_mode.size(64, 1))
+    parser.add_argument("--frames", type=int, default=smoke_mode.size(24, 2))
+    parser.add_argument("--size", type=int, default=smoke_mode.size(256, 32))
+    parser.add_argument("--tracks", type=int, default=smoke_mode.size(2048, 16))
     args = parser.parse_args(argv)
 
     scene = movi_like_scene(np.random.default_rng(0), args.frames, args.size)

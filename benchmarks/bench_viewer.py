@@ -31,6 +31,8 @@ import sys
 import tempfile
 import time
 
+import smoke_mode  # noqa: E402
+
 ROOT = pathlib.Path(__file__).resolve().parent.parent
 LIST_BUDGET_S, FRAME_BUDGET_S = 1.0, 0.100
 
@@ -40,7 +42,7 @@ def make_folder(out: pathlib.Path, size: int, frames: int, scenes: int) -> pathl
     render = out / "render"
     cmd = [sys.executable, "-m", "kubric", "worker", "movi_a", "--seed", "0", "--out", str(render)]
     for option in (f"resolution={size}", f"frame_end={frames}", "samples=4", "denoise=false",
-                   "tracks=64"):
+                   f"tracks={smoke_mode.size(64, 4)}"):
         cmd += ["--set", option]
     start = time.perf_counter()
     subprocess.run(cmd, cwd=ROOT, check=True, capture_output=True)
@@ -104,7 +106,7 @@ def http_numbers(folder: pathlib.Path, port: int, frames: int) -> dict:
     return out
 
 
-def browser_numbers(port: int, frames: int) -> dict | None:
+def browser_numbers(port: int, frames: int, rows: int) -> dict | None:
     chromium, driver = shutil.which("chromium"), shutil.which("chromedriver")
     if not chromium or not driver:
         print("browser: chromium / chromedriver not installed (make browser): browser numbers "
@@ -125,7 +127,7 @@ def browser_numbers(port: int, frames: int) -> dict | None:
             browser.get("about:blank")
             start = time.perf_counter()
             browser.get(url)
-            while len(browser.find_elements("css selector", "tr.scene-row")) < 100:
+            while len(browser.find_elements("css selector", "tr.scene-row")) < rows:
                 time.sleep(0.002)
             loads.append(time.perf_counter() - start)
         switches = []
@@ -162,9 +164,9 @@ def browser_numbers(port: int, frames: int) -> dict | None:
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--size", type=int, default=128)
-    parser.add_argument("--frames", type=int, default=12)
-    parser.add_argument("--scenes", type=int, default=100)
+    parser.add_argument("--size", type=int, default=smoke_mode.size(128, 16))
+    parser.add_argument("--frames", type=int, default=smoke_mode.size(12, 2))
+    parser.add_argument("--scenes", type=int, default=smoke_mode.size(100, 32))  # 32: it asks for scene 31
     args = parser.parse_args(argv)
     with tempfile.TemporaryDirectory() as tmp:
         folder = make_folder(pathlib.Path(tmp), args.size, args.frames, args.scenes)
@@ -175,7 +177,7 @@ def main(argv=None) -> int:
             line = server.stdout.readline()
             port = int(line.rsplit(":", 1)[1].split("/")[0])
             numbers = http_numbers(folder, port, args.frames)
-            in_browser = browser_numbers(port, args.frames)
+            in_browser = browser_numbers(port, args.frames, min(100, args.scenes))  # rows shown
         finally:
             server.terminate()
             server.wait(timeout=10)
