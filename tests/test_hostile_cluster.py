@@ -147,6 +147,6 @@ def test_item10_two_real_generates_at_once(tmp_path):
         time.sleep(0.05)
     second = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
     assert first.poll() is None, "the first run ended before the second started"
-    assert second.returncode == 1 and f"(pid {first.pid}," in second.stderr
+    assert second.returncode == 3 and f"(pid {first.pid}," in second.stderr  # busy (docs/exit-codes.md)
     stdout, _ = first.communicate(timeout=120)
     assert first.returncode == 0 and stdout.startswith("2 generated, 0 already complete")

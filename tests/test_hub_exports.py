@@ -298,7 +298,8 @@ def test_bad_outputs_are_one_line_and_leave_nothing(bench, tmp_path):
         assert "is not empty" in proc.stderr
         proc = kubric("export", fmt, tmp_path / "nothing", "--out", tmp_path / "o",
                       "--no-progress")
-        assert proc.returncode == 2 and "is not a directory" in proc.stderr, proc.stderr
+        # bad input (docs/exit-codes.md: 1), as the other exports say of a missing SCENES
+        assert proc.returncode == 1 and "is not a directory" in proc.stderr, proc.stderr
         assert not (tmp_path / "o").exists()
     proc = kubric("export", "hf", ds, "--out", tmp_path / "o", "--scenes-per-shard", 0)
     assert proc.returncode == 2 and "--scenes-per-shard must be ≥ 1, got 0" in proc.stderr

@@ -20,13 +20,18 @@ import pathlib
 import re
 from collections.abc import Callable
 
-from kubric.errors import KubricError
+from kubric.errors import KubricError, UsageError
 
 _URL_RE = re.compile(r"^([a-zA-Z][a-zA-Z0-9+.\-]*)://(.*)$")
 
 
 class StorageError(KubricError, ValueError):
     """A malformed, unreachable or unwritable location (one line, names the location)."""
+
+
+class StorageUsageError(StorageError, UsageError):
+    """A location given that cannot name an output at all (empty, a URL without a bucket):
+    a bad option, exit status 2 (docs/exit-codes.md)."""
 
 
 def is_url(location) -> bool:
@@ -38,13 +43,13 @@ def normalise(location) -> str:
     """A canonical string form: URLs without a trailing slash, local paths absolute. An empty
     location raises :class:`StorageError` (it would silently mean the current directory)."""
     if not str(location).strip():
-        raise StorageError(f"output location {str(location)!r} is empty (give a directory or a "
+        raise StorageUsageError(f"output location {str(location)!r} is empty (give a directory or a "
                            f"URL; '.' for the current directory)")
     if is_url(location):
         scheme, rest = _URL_RE.match(location).groups()
         rest = rest.rstrip("/")
         if not rest:
-            raise StorageError(f"output URL {location!r} names no bucket or path")
+            raise StorageUsageError(f"output URL {location!r} names no bucket or path")
         return f"{scheme.lower()}://{rest}"
     return str(pathlib.Path(location).expanduser().resolve())
 

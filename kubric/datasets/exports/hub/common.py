@@ -16,6 +16,7 @@ from collections.abc import Iterator
 from kubric.datasets import layout, load
 from kubric.datasets.exports.scenes import ExportError
 from kubric.io import scene_dir
+from kubric.io.output_check import OutputError
 
 #: the folder, inside the work folder, where scene folders are packed before an export
 PACKED = ".packed"
@@ -34,9 +35,9 @@ def check_out(out) -> pathlib.Path:
     """``out`` as a path: it must not exist, or be an empty directory."""
     out = pathlib.Path(out)
     if out.is_symlink() or (out.exists() and not out.is_dir()):
-        raise ExportError(f"--out {str(out)!r} exists and is not a directory")
+        raise OutputError(f"--out {str(out)!r} exists and is not a directory")
     if out.is_dir() and any(out.iterdir()):
-        raise ExportError(f"--out {str(out)!r} is not empty (an export writes a new folder)")
+        raise OutputError(f"--out {str(out)!r} is not empty (an export writes a new folder)")
     return out
 
 

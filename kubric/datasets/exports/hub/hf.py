@@ -33,9 +33,9 @@ from kubric.datasets.exports.hub.common import (
     splits_of,
     writing,
 )
-from kubric.datasets.exports.scenes import ExportError
 from kubric.datasets.layout import read_info
 from kubric.datasets.tfds_io import flatten, unflatten
+from kubric.errors import UsageError
 from kubric.io import png_io
 from kubric.io.schema import Feature, Schema
 
@@ -156,7 +156,7 @@ def export_hf(source, out, splits: str = "train=0.9,validation=0.1",
     packed dataset) feeds the card's licences and command; ``license_id`` overrides the licence
     the card derives from the assets. Returns {split: number of examples}."""
     if scenes_per_shard < 1:
-        raise ExportError(f"--scenes-per-shard must be ≥ 1, got {scenes_per_shard}")
+        raise UsageError(f"--scenes-per-shard must be ≥ 1, got {scenes_per_shard}")
     ParquetWriter = _hd() and need("datasets.arrow_writer").ParquetWriter
 
     with writing(out) as work:

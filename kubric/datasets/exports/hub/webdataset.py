@@ -32,6 +32,7 @@ from kubric.datasets.exports.hub.hf import is_image
 from kubric.datasets.exports.scenes import ExportError
 from kubric.datasets.layout import read_info
 from kubric.datasets.tfds_io import flatten
+from kubric.errors import UsageError
 from kubric.io import png_io
 from kubric.io.schema import Feature, Schema
 
@@ -119,7 +120,7 @@ def export_webdataset(source, out, splits: str = "train=0.9,validation=0.1",
     content: {"splits": {split: {"shards": [...], "pattern": ..., "samples": n, "scenes": n}},
     "files": {suffix: feature name}}."""
     if samples_per_shard < 1:
-        raise ExportError(f"--samples-per-shard must be ≥ 1, got {samples_per_shard}")
+        raise UsageError(f"--samples-per-shard must be ≥ 1, got {samples_per_shard}")
     webdataset = common.need("webdataset")
     index: dict = {}
     with common.writing(out) as work:
