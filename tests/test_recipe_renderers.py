@@ -69,8 +69,8 @@ def test_capabilities_are_answered_without_importing_a_backend():
     proc = subprocess.run([sys.executable, "-c", code], env=ENV, capture_output=True, text=True,
                           timeout=120)
     assert proc.returncode == 0, proc.stderr
-    assert proc.stdout.split("\n")[0] == ("True False ['depth_of_field', 'motion_blur'] [] "
-                                          "True False ['blender']")
+    assert proc.stdout.split("\n")[0] == ("True False ['depth_of_field', 'motion_blur'] "
+                                          "['rolling_shutter'] True False ['blender']")
 
 
 def test_capability_declarations_are_checked():
@@ -84,11 +84,12 @@ def test_capability_declarations_are_checked():
     with pytest.raises(ValueError, match=r"unknown renderer 'povray'; allowed: \['blender', "
                                          r"'raycast'\]"):
         base.capabilities("povray")
-    # a rolling shutter is in the vocabulary, and no backend renders one
-    assert base.able(["rolling_shutter"]) == []
+    # a rolling shutter is rendered by raycast only
+    assert base.able(["rolling_shutter"]) == ["raycast"]
     assert base.refusal("blender", {"rolling_shutter": "readout=0.1"}, "x") == (
         "x: renderer=blender cannot render rolling shutter (readout=0.1); backends that can: "
-        "none")
+        "raycast")
+    assert base.able(["rolling_shutter", "motion_blur"]) == []  # no backend does both
 
 
 def _scene(**camera):
@@ -202,7 +203,8 @@ def test_vbr_with_raycast_writes_its_lasr_sequence(tmp_path):
     lasr = json.loads((scene / "lasr" / "export.json").read_text())
     assert lasr["num_frames"] == 3 and lasr["sequence"] == meta["metadata"]["lasr_sequence"]
     refused = kubric("export", "nerf", scene, "--out", tmp_path / "nerf")
-    assert refused.returncode == 2 and refused.stderr.count("\n") == 1
+    # not a multi-view scene: bad input (docs/exit-codes.md)
+    assert refused.returncode == 1 and refused.stderr.count("\n") == 1
     assert "transforms_train.json does not exist (not a multi-view scene" in refused.stderr
     assert not (tmp_path / "nerf").exists()
 
