@@ -123,7 +123,8 @@ SWALLOWER = """
 import os, signal, time
 try:
     os.kill(os.getpid(), signal.SIGINT)   # Ctrl-C lands while this module imports ...
-    time.sleep(0.5)
+    for _ in range(40):                   # (short sleeps: the handler runs between them even
+        time.sleep(0.05)                  # when another thread took the signal, under load)
 except BaseException:                     # ... and is swallowed, as trimesh's imports do
     pass
 """

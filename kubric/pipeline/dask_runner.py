@@ -116,7 +116,7 @@ def _quiet(silent: bool = False):
     line)."""
     import logging
     names = {"distributed", "distributed.scheduler", "distributed.worker", "bokeh", "tornado",
-             "distributed.nanny", "distributed.core"}
+             "distributed.nanny", "distributed.core", "distributed.client"}
     if silent:
         names |= {n for n in logging.root.manager.loggerDict if n.startswith("distributed")}
     for name in names:
