@@ -35,6 +35,7 @@ Outside the domain :meth:`Lens.distort` returns NaN (the point has no image posi
 
 from __future__ import annotations
 
+import abc
 import math
 from dataclasses import dataclass
 
@@ -80,7 +81,7 @@ def _solve(jac: np.ndarray, rhs: np.ndarray) -> np.ndarray:
                      jac[:, 0, 0] * rhs[:, 1] - jac[:, 1, 0] * rhs[:, 0]], -1) / det[:, None]
 
 
-class Lens:
+class Lens(abc.ABC):
     """A lens model (see module doc). ``name`` is the metadata's model name, ``coefficients`` the
     values in OpenCV's order."""
 
@@ -101,18 +102,18 @@ class Lens:
     def is_pinhole(self) -> bool:
         return False
 
+    @abc.abstractmethod
     def domain_radius(self) -> float:
         """The largest pinhole radius r = |(a, b)| inside the domain (exclusive; may be ∞)."""
-        raise NotImplementedError
 
+    @abc.abstractmethod
     def radial(self, r: np.ndarray) -> np.ndarray:
         """The distorted radius of pinhole radius ``r`` (radial part only), increasing on the
         domain."""
-        raise NotImplementedError
 
+    @abc.abstractmethod
     def _map(self, ab: np.ndarray) -> np.ndarray:
         """The model on (..., 2) pinhole positions (no domain check)."""
-        raise NotImplementedError
 
     def distort(self, ab) -> np.ndarray:
         """Pinhole normalised positions (..., 2) → distorted ones (..., 2); NaN outside the
@@ -180,9 +181,9 @@ class Lens:
         r[~np.isfinite(rd)] = np.nan
         return r
 
+    @abc.abstractmethod
     def _jacobian(self, ab: np.ndarray) -> np.ndarray:
         """(N, 2, 2) d distort / d (a, b), analytic."""
-        raise NotImplementedError
 
     def record(self) -> dict:
         """The metadata's description: ``{"model": name, "coefficients": [...]}`` (OpenCV's

@@ -40,6 +40,7 @@ Adding one is one class with :func:`register`: ``@register class Mine(LayerKind)
 
 from __future__ import annotations
 
+import abc
 from collections.abc import Callable, Mapping
 
 import numpy as np
@@ -54,7 +55,7 @@ UINT16_MAX = png_io.UINT16_MAX
 RANGE_TOLERANCE = 1e-4
 
 
-class LayerKind:
+class LayerKind(abc.ABC):
     """How one kind of layer is stored, packed, decoded and drawn (module doc)."""
 
     #: the stored name (``LayerFormat.kind``)
@@ -69,10 +70,10 @@ class LayerKind:
     adjustable_range: bool = False
 
     # ------------------------------------------------------------------ file form
+    @abc.abstractmethod
     def encoder(self, arr: np.ndarray, what: str) -> tuple[Callable, dict | None]:
         """(frame encoder → file bytes, the layer's range for data_ranges.json or None) of a
         checked (T, H, W, C) layer."""
-        raise NotImplementedError
 
     def read(self, data: bytes, what: str) -> np.ndarray:
         """The stored (H, W, C) samples of one file."""
@@ -113,10 +114,10 @@ class LayerKind:
         return samples.astype(dtype)
 
     # ------------------------------------------------------------------ drawing
+    @abc.abstractmethod
     def draw(self, frame: np.ndarray, lo: float | None = None, hi: float | None = None,
              background: float = BACKGROUND_DEPTH) -> np.ndarray:
         """(H, W, C) decoded frame → (H, W, 3|4) uint8 picture."""
-        raise NotImplementedError
 
     def scale(self, layer: np.ndarray, background: float = BACKGROUND_DEPTH) -> tuple:
         """(lo, hi) that draws every frame of a (T, H, W, C) layer on one scale."""
@@ -299,12 +300,13 @@ class Labels(LayerKind):
 class Quantised16(LayerKind):
     """A float layer stored as 16-bit samples of an interval: :meth:`interval` is [lo, hi]."""
 
+    @abc.abstractmethod
     def interval(self, value_range, what: str) -> tuple[float, float]:
-        raise NotImplementedError
+        """[lo, hi] of the 16-bit samples (from the scene's range where it has one)."""
 
+    @abc.abstractmethod
     def quantise(self, arr: np.ndarray, what: str) -> tuple[Callable, dict | None]:
         """(per-frame quantiser, range for data_ranges.json) of a checked float layer."""
-        raise NotImplementedError
 
     def encoder(self, arr, what):
         quantise, value_range = self.quantise(arr, what)
