@@ -30,6 +30,7 @@ import time
 
 import numpy as np
 import smoke_mode
+from bench_raycast import simulated_scene
 
 import kubric as kb
 from kubric.datasets.exports import rle
@@ -55,20 +56,14 @@ def timed(fn):
 
 
 def cost(recipe: str, size: int, frames: int, seed: int, options=(), baseline="raycast") -> None:
-    rec = get_recipe(recipe).from_assignments([f"resolution={size}", f"frame_end={frames}",
-                                               f"renderer={baseline}", *options])
-    with tempfile.TemporaryDirectory() as scratch:
-        scene = rec.make_scene()
-        sim = kb.simulator.PyBullet(scene, scratch)
-        rec.populate(scene, sim, np.random.RandomState(seed), rec.open_sources())
-        sim.run(frame_start=0, frame_end=scene.frame_end + 1)
-        sim.close()
-        if baseline == "raycast":
-            layers, base = timed(lambda: create("raycast", scene).render(
-                return_layers=ALL_LAYERS))
-        else:  # the recipe's default quality setting, as its worker renders
-            layers, base = timed(lambda: create(baseline, scene, scratch,
-                                                **rec.renderer_settings()).render())
+    options = [f"renderer={baseline}", *options]
+    scene = simulated_scene(recipe, size, frames, seed, *options)
+    if baseline == "raycast":
+        layers, base = timed(lambda: create("raycast", scene).render(return_layers=ALL_LAYERS))
+    else:  # the recipe's default quality setting, as its worker renders
+        settings = get_recipe(recipe).from_assignments(options).renderer_settings()
+        with tempfile.TemporaryDirectory() as scratch:
+            layers, base = timed(lambda: create(baseline, scene, scratch, **settings).render())
     instances = [a for a in scene.foreground_assets if isinstance(a, kb.PhysicalObject)]
     print(f"{recipe} seed {seed}, {size}², {frames} frames, {len(instances)} objects: default "
           f"{baseline} scene (every layer it writes) {base:.2f} CPU-s")
