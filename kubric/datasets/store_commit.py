@@ -65,7 +65,8 @@ def _read_json(location: str) -> dict | None:
 def check_output(out: str, overwrite: bool) -> None:
     """Raise DatasetError (one line) unless ``out`` may receive a dataset (step 2): empty,
     holding only this protocol's leftovers, or a dataset to be overwritten."""
-    names = [n for n in storage.listdir(out) if n not in (WORK, LEASES)]
+    names = [n for n in storage.listdir(out) if n not in (WORK, LEASES)
+             and not n.startswith(storage.WRITE_PROBE_PREFIX)]  # a concurrent run's probe
     if not names:
         return
     if layout.INFO_FILE in names:

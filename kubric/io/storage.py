@@ -387,10 +387,15 @@ def _exist_many(fs, paths: list[str], concurrency: int = 64) -> list[bool]:
     return list(sync(inner.loop, check, timeout=operation_deadline()))
 
 
+WRITE_PROBE_PREFIX = ".kubric-write-test-"
+"""Names :func:`check_writable` gives its short-lived probe files (another process checking the
+same output at the same moment may see one: it is not foreign content)."""
+
+
 def check_writable(location) -> None:
     """Raise :class:`StorageError` (one line) unless files can be written under ``location``;
     leaves nothing behind (a URL gets a probe file, deleted again)."""
-    probe_name = f".kubric-write-test-{os.getpid()}"
+    probe_name = f"{WRITE_PROBE_PREFIX}{os.getpid()}"
     if not is_url(location):  # checked without creating anything
         path = pathlib.Path(location).expanduser().absolute()
         existing = next(p for p in (path, *path.parents) if p.exists())
@@ -411,7 +416,8 @@ def check_writable(location) -> None:
         raise StorageError(f"output {location!r} is not writable: {failure(err)}") from err
 
 
-__all__ = ["StorageError", "backend_errors", "check_writable", "complete_scenes", "copy",
+__all__ = ["WRITE_PROBE_PREFIX", "StorageError",
+           "backend_errors", "check_writable", "complete_scenes", "copy",
            "deadlines", "download_dir", "download_file", "exists", "failure", "is_url", "isfile",
            "join", "listdir", "normalise", "open_file", "operation_deadline", "read_bytes",
            "remove", "sizes", "upload_dir", "upload_file", "write_bytes"]

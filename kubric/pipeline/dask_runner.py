@@ -113,10 +113,13 @@ class ClusterOptions:
 
 def _quiet(silent: bool = False):
     """Dask's loggers at ERROR (or, ``silent``, at nothing: the run already failed in one
-    line)."""
+    line). Call it after importing distributed, whose import sets these levels from its config."""
     import logging
+
+    import distributed  # noqa: F401  (its logging config first, ours over it)
     names = {"distributed", "distributed.scheduler", "distributed.worker", "bokeh", "tornado",
-             "distributed.nanny", "distributed.core", "distributed.client"}
+             "distributed.nanny", "distributed.core", "distributed.client",
+             "distributed.batched", "distributed.comm", "distributed.comm.tcp"}
     if silent:
         names |= {n for n in logging.root.manager.loggerDict if n.startswith("distributed")}
     for name in names:
@@ -143,8 +146,8 @@ def open_cluster(options: ClusterOptions, processes: bool = False):
     if kind == "slurm" and shutil.which("sbatch") is None:
         raise ClusterError("--cluster slurm: sbatch is not on the PATH (run on a Slurm login node, "
                            "or use --print-job-script to see the job script)")
-    _quiet()
     from distributed import Client, LocalCluster
+    _quiet()  # after the import: importing distributed sets its loggers' levels from its config
     cluster = None
     try:
         if kind == "local":
