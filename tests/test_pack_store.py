@@ -5,6 +5,7 @@ cluster of plain `dask worker`s that share nothing but the store; a dataset load
 equals the local one; bad outputs and damaged datasets are one line, nothing that looks complete
 is left behind."""
 
+import json
 import os
 import pathlib
 import signal
@@ -107,6 +108,9 @@ def test_pack_to_s3_is_bit_identical_and_loads_like_local(store):
     assert info.stdout.splitlines()[3:] == local_info[3:]  # splits, tasks, features
     size = lambda text: text.splitlines()[2].split("size on disk ")[1]  # noqa: E731
     assert size(info.stdout) == size("\n".join(local_info))
+    marker = json.loads((ref / "kubric_dataset.json").read_text())  # the same bytes as on S3
+    assert marker["shard_bytes"] and marker["shard_bytes"] == \
+        {name: (ref / name).stat().st_size for name in marker["shard_sha256"]}
     # packing the same output again is refused, --overwrite replaces it
     one_line(kubric("pack", store["scenes"], "--out", "s3://data/ds", *PACK), "already a dataset")
     proc = kubric("pack", store["scenes"], "--out", "s3://data/ds", "--overwrite",
@@ -192,6 +196,12 @@ def test_bad_store_outputs_and_damaged_datasets_are_one_line(store, tmp_path):
     assert kubric("pack", scenes, "--out", "s3://data/damaged", *PACK).returncode == 0
     victim = sorted(k for k in fs.find("data/damaged") if ".array_record-" in k
                     and "-train." in k)[1]
+    # a truncated shard: `datasets info` sees it from the listing and the marker's sizes
+    fs.pipe_file(victim, fs.cat_file(victim)[:-30])
+    info = kubric("datasets", "info", "s3://data/damaged")
+    assert info.returncode == 1 and len(info.stderr.strip().splitlines()) == 1, info.stderr
+    assert f"{victim.rsplit('/', 1)[1]}': " in info.stderr and "bytes, the marker says" in \
+        info.stderr and "(truncated or replaced)" in info.stderr, info.stderr
     fs.rm(victim)
     from kubric.datasets import DatasetError, load
     with pytest.raises(DatasetError, match=rf"is damaged: shard '{victim.rsplit('/', 1)[1]}' "

@@ -117,7 +117,7 @@ def encode_chunk(work: str, file: str, scenes: list[str], schema, dims: dict) ->
             record["scenes"].append(name)
             record["num_bytes"] += len(data)
         writer.close()
-        record["sha256"] = layout.file_sha256(tmp)
+        record["sha256"], record["file_bytes"] = layout.file_sha256(tmp), tmp.stat().st_size
     storage.write_bytes(storage.join(work, f".{file}.json"),
                         json.dumps(record, indent=2).encode())
     return record
@@ -125,7 +125,7 @@ def encode_chunk(work: str, file: str, scenes: list[str], schema, dims: dict) ->
 
 def recut_shard(work: str, file: str, pieces: list[tuple[str, list[int]]]) -> dict:
     """Write ``work/file`` from records of chunk files: ``pieces`` = [(chunk file, [record
-    indices])] in order; returns ``{"file", "num_bytes", "sha256"}``."""
+    indices])] in order; returns ``{"file", "num_bytes", "sha256", "file_bytes"}``."""
     from array_record.python import array_record_module
     _require_work(work)
     num_bytes = 0
@@ -144,8 +144,8 @@ def recut_shard(work: str, file: str, pieces: list[tuple[str, list[int]]]) -> di
             finally:
                 reader.close()
         writer.close()
-        digest = layout.file_sha256(tmp)
-    return {"file": file, "num_bytes": num_bytes, "sha256": digest}
+        digest, file_bytes = layout.file_sha256(tmp), tmp.stat().st_size
+    return {"file": file, "num_bytes": num_bytes, "sha256": digest, "file_bytes": file_bytes}
 
 
 # ------------------------------------------------------------------------ executors
@@ -416,7 +416,8 @@ def _recut(work: str, executor, name: str, assignment: dict, chunk_of: dict,
         chunks = [records[key] for key in sorted(k for k in records if k[0] == split)]
         if not any(r["corrupt"] for r in chunks):
             state["shards"][split] = [{"file": r["file"], "scenes": r["scenes"],
-                                       "num_bytes": r["num_bytes"], "sha256": r.get("sha256")}
+                                       "num_bytes": r["num_bytes"], "sha256": r.get("sha256"),
+                                       "file_bytes": r.get("file_bytes")}
                                       for r in chunks]
             continue
         good = [(r["file"], i, scene) for r in chunks for i, scene in enumerate(r["scenes"])]
@@ -435,7 +436,8 @@ def _recut(work: str, executor, name: str, assignment: dict, chunk_of: dict,
         state["shards"][split] = shards
 
     def done(k, result):
-        targets[k]["num_bytes"], targets[k]["sha256"] = result["num_bytes"], result["sha256"]
+        for key in ("num_bytes", "sha256", "file_bytes"):
+            targets[k][key] = result[key]
     _run(executor, calls, done)
     if not storage.is_url(work):  # a URL's work area goes as a whole after the commit
         keep = {sh["file"] for shards in state["shards"].values() for sh in shards}

@@ -34,8 +34,7 @@ def dataset_info(dataset_dir) -> str:
         info = remote_info(path)
         listed = storage.sizes(path)
         size = sum(listed.values())
-        problems = [f"{storage.join(path, name)!r}: shard missing"
-                    for name in dataset_files(info) if name not in listed]
+        problems = remote_shard_problems(path, info, listed)
     else:
         path = pathlib.Path(dataset_dir)
         info = read_info(path)
@@ -71,6 +70,23 @@ def dataset_info(dataset_dir) -> str:
         raise DatasetError(f"{problems[0]}" + (f" (and {len(problems) - 1} more shard problems)"
                                                if len(problems) > 1 else ""))
     return "\n".join(lines)
+
+
+def remote_shard_problems(url: str, info: dict, listed: dict[str, int]) -> list[str]:
+    """One line per shard of the dataset at ``url`` that is missing from its listing
+    (``{name: bytes}``) or whose size differs from the marker's ``shard_bytes`` (truncated,
+    grown or replaced). Same-size damage shows when a split is loaded: the cache checks every
+    shard's SHA-256 before it reads it."""
+    recorded = info.get("shard_bytes") if isinstance(info.get("shard_bytes"), dict) else {}
+    problems = []
+    for name in dataset_files(info):
+        where = storage.join(url, name)
+        if name not in listed:
+            problems.append(f"{where!r}: shard missing")
+        elif name in recorded and listed[name] != recorded[name]:
+            problems.append(f"{where!r}: {listed[name]} bytes, the marker says "
+                            f"{recorded[name]} (truncated or replaced)")
+    return problems
 
 
 def check_metadata(path) -> list[str]:

@@ -3,8 +3,9 @@
 A dataset directory is TFDS's layout (``dataset_info.json``, ``features.json``, label files and
 ``NAME-SPLIT.array_record-0000k-of-0000n`` shards) plus ``kubric_dataset.json``: the format
 version, the recipe schema, the frame count / resolution, the split fractions, the scenes of
-every split (in example order) and the SHA-256 of every shard (``shard_sha256``; absent in
-datasets packed before it existed). Readers refuse a format version newer than :data:`FORMAT_VERSION`.
+every split (in example order), the SHA-256 of every shard (``shard_sha256``) and its size in
+bytes (``shard_bytes``; each absent in datasets packed before it existed). Readers refuse a
+format version newer than :data:`FORMAT_VERSION`.
 """
 
 from __future__ import annotations

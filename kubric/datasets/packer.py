@@ -538,11 +538,12 @@ def _finish_shard(work: pathlib.Path, state: dict, writer: _ShardWriter) -> None
 def finalise(work, state, schema, name, dims, split_fractions, incomplete, features,
              hash_files: bool = True) -> dict:
     """Final shard names, TFDS metadata and the kubric marker; returns counts per split. A
-    shard's checksum is its state entry's ``sha256``, else (``hash_files``) its file's."""
+    shard's checksum and size are its state entry's ``sha256`` and ``file_bytes``, else
+    (``hash_files``) its file's."""
     import tensorflow_datasets as tfds
 
     from kubric import __version__
-    split_infos, counts, scenes, shard_lengths, digests = [], {}, {}, {}, {}
+    split_infos, counts, scenes, shard_lengths, digests, sizes = [], {}, {}, {}, {}, {}
     # the record goes before the renames: a kill among them leaves no record naming moved files
     # (the next run starts afresh), never one that a rerun would trust
     (work / PROGRESS_FILE).unlink()
@@ -556,6 +557,10 @@ def finalise(work, state, schema, name, dims, split_fractions, incomplete, featu
                                              else None)
             if digest:
                 digests[final] = digest
+            file_bytes = shard.get("file_bytes") or \
+                ((work / final).stat().st_size if hash_files else None)
+            if file_bytes:
+                sizes[final] = file_bytes
         counts[split] = sum(len(sh["scenes"]) for sh in shards)
         scenes[split] = [s for sh in shards for s in sh["scenes"]]
         shard_lengths[split] = [len(sh["scenes"]) for sh in shards]
@@ -574,7 +579,8 @@ def finalise(work, state, schema, name, dims, split_fractions, incomplete, featu
                 "shard_lengths": shard_lengths, "scenes": scenes,
                 "incomplete_skipped": incomplete, "kubric_version": __version__,
                 "shard_writer_options": layout.SHARD_WRITER_OPTIONS,
-                "shard_sha256": digests, "schema_json": schema.to_json()},
+                "shard_sha256": digests, "shard_bytes": sizes,
+                "schema_json": schema.to_json()},
                work / layout.INFO_FILE)
     return counts
 
