@@ -92,6 +92,25 @@ extra_layers.allowed = "comma-separated names of " + ", ".join(EXTRA_LAYERS) + "
 extra_layers.__name__ = "names"
 
 
+#: the names that make sense for a static scene seen from many views (scene flow needs motion)
+STATIC_EXTRA_LAYERS = tuple(n for n in EXTRA_LAYERS if not n.startswith("scene_flow"))
+
+
+def static_extra_layers(value) -> tuple[str, ...]:
+    """Option converter of the multi-view recipes: :func:`extra_layers` without scene flow (their
+    views are one instant of a static scene)."""
+    names = extra_layers(value)
+    flow = [n for n in names if n not in STATIC_EXTRA_LAYERS]
+    if flow:
+        raise ValueError(f"{flow} need motion: a multi-view scene's views show one instant")
+    return names
+
+
+static_extra_layers.allowed = ("comma-separated names of " + ", ".join(STATIC_EXTRA_LAYERS)
+                               + " (or none)")
+static_extra_layers.__name__ = "names"
+
+
 def schema_with(schema: Schema, names) -> Schema:
     """``schema`` plus the features of ``names`` (same name: the scene's schema.json carries
     them, so the packer, loaders and viewer read them without the recipe)."""

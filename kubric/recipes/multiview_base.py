@@ -43,6 +43,7 @@ from kubric.datasets.exports import nerf
 from kubric.io.layers import LAYERS
 from kubric.io.scene_writer import write_scene
 from kubric.pipeline import Option, OptionError, Recipe, float_range, resolution
+from kubric.recipes import extra_layers as extra
 from kubric.recipes.common import (
     annotate_instances,
     check_min_max,
@@ -185,6 +186,9 @@ class MultiviewBase(RenderQuality, Recipe, LensOptions):
                              "low,high", type=float_range, low=-89.0, high=89.9)
     kubasic_source = Option(None, "KuBasic asset source folder or URL (default: built locally)",
                             type=source_location)
+    extra_layers = Option((), "opt-in ground truth per view: comma-separated "
+                          f"{', '.join(extra.STATIC_EXTRA_LAYERS)} (docs/conventions.md)",
+                          type=extra.static_extra_layers)
 
     # ------------------------------------------------------------------ checks
     def check(self) -> None:
@@ -312,25 +316,28 @@ class MultiviewBase(RenderQuality, Recipe, LensOptions):
     def write_outputs(self, scene, layers, seed, out_dir, background, render_settings,
                       splits) -> list:
         candidates = [a for a in scene.foreground_assets if isinstance(a, kb.PhysicalObject)]
+        rendered = set(layers)
+        extra.add_before_relabel(scene, layers, self.extra_layers)
         visible = annotate_instances(scene, layers, candidates)
+        extra.add_after_relabel(scene, layers, self.extra_layers, visible)
+        schema = extra.schema_with(self.schema, self.extra_layers)
         by_split = {s: [v for v, name in enumerate(splits) if name == s]
                     for s in nerf.SPLITS}
         metadata, events = scene_documents(
             self, scene, seed, visible, background=background, renderer=render_settings,
             num_views=self.num_views, views=[{"split": s} for s in splits],
             split_ratio=list(self.split_ratio), splits=by_split, look_at=list(self.look_at()))
-        extra = self.extra_outputs(scene, layers, metadata["instances"], metadata["metadata"])
+        own = self.extra_outputs(scene, layers, metadata["instances"], metadata["metadata"])
         view_files = dict(VIEW_FILES)
-        view_files.update({f"{name}_file": self.schema.layers[name].template
-                           for name in extra.layers})
+        view_files.update({f"{name}_file": schema.layer_formats[name].template
+                           for name in (*own.layers, *(n for n in layers if n not in rendered))})
         depth = layers["depth"][layers["depth"] < geo.BACKGROUND_DEPTH]
         near, far = (float(depth.min()), float(depth.max())) if depth.size else (0.0, 0.0)
         transforms = nerf.nerf_transforms(
             scene.camera, list(scene.frames), scene.resolution, splits, view_files,
             extra={"recipe": self.name, "seed": int(seed), "near": near, "far": far,
                    "split_ratio": list(self.split_ratio)})
-        files = {**extra.files, **{f"transforms_{split}.json": data
-                                   for split, data in transforms.items()}}
-        write_scene(self.schema, out_dir, {**layers, **extra.layers}, metadata, events,
-                    files=files)
+        files = {**own.files, **{f"transforms_{split}.json": data
+                                 for split, data in transforms.items()}}
+        write_scene(schema, out_dir, {**layers, **own.layers}, metadata, events, files=files)
         return visible
