@@ -166,6 +166,52 @@ def test_a_walking_character_s_amodal_mask_and_scene_flow_equal_a_numpy_cast():
                                            atol=1e-5)
 
 
+def test_a_character_s_part_ids_name_the_bone_of_the_face_each_ray_hits():
+    """Body parts: each person pixel's part id names the bone that carries most of the skin
+    weight of the face a brute-force Möller–Trumbore cast hits on the mesh skinned at that
+    frame (the weights summed from the rig's (index, weight) lists, not the model's matrix)."""
+    from kubric.annotations.materials_parts import character_part_ids, id_layer, part_table
+    from kubric.annotations.surfaces import ray_triangles
+    from kubric.assets.procedural_character import tube_person, walk_clip
+    from kubric.renderer.scene_model_layers import skinned_anchor
+
+    scene = kb.Scene(resolution=(32, 40), frame_start=0, frame_end=1)
+    person = tube_person()
+    scene += person
+    person.play(walk_clip())
+    box = kb.Cube(name="box", scale=0.2, position=(0.0, -1.5, 1.2))
+    scene += box
+    scene.camera = kb.PerspectiveCamera(position=(0.4, -3.2, 1.0), look_at=(0, 0, 0.9))
+    table, ids = part_table(scene.assets)
+    assert {e["object"] for e in table} == {person.name, "box"}
+    h, w = 40, 32
+    centres = geo.pixel_centres(h, w).reshape(-1, 2)
+    seen_parts = set()
+    for frame in scene.frames:
+        o, d = geo.pixel_rays(scene.camera, centres, frame=frame, resolution=(w, h))
+        tri, _, dist = ray_triangles(o, d, person.deformed_vertices(frame)[person.faces])
+        hit = tri >= 0
+        depth = np.where(hit, dist, geo.BACKGROUND_DEPTH).reshape(1, h, w, 1)
+        labels = np.where(hit, 1, 0).reshape(1, h, w, 1)  # the person is scene.assets[0]
+        parts = id_layer(labels, scene.assets, ids)
+        character_part_ids(scene, depth, labels, parts, ids, anchor=skinned_anchor,
+                           frames=[frame])
+        got = parts.reshape(-1)
+        for pixel in np.flatnonzero(hit):
+            total: dict[int, float] = {}
+            for vertex in person.faces[tri[pixel]]:
+                for bone, weight in zip(person.skin_indices[vertex], person.skin_weights[vertex],
+                                        strict=True):
+                    total[int(bone)] = total.get(int(bone), 0.0) + float(weight)
+            best = max(total.values())
+            bone = min(b for b, v in total.items() if v == best)
+            entry = table[got[pixel] - 1]
+            assert entry == {"object": person.name, "part": person.bone_names[bone]}, pixel
+            seen_parts.add(entry["part"])
+        assert (got[~hit] == 0).all()
+    assert len(seen_parts) >= 4, seen_parts  # torso, head, arms, legs: not one part
+
+
 def test_bit_planes_round_trip_and_count():
     rng = np.random.RandomState(0)
     masks = rng.rand(2, 64, 5, 6) > 0.7

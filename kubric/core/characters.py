@@ -221,6 +221,11 @@ class Character(PhysicalObject):
         v = self.vertices[self.rendered_vertices]
         return np.stack([v.min(axis=0), v.max(axis=0)])
 
+    def triangle_bones(self) -> np.ndarray:
+        """(F,) int: the body part of each face, the bone with the largest skin weight summed
+        over its three vertices (ties: the lower bone index)."""
+        return np.argmax(self._weights[self.faces].sum(axis=1), axis=1)
+
     def bone_index(self, name: str) -> int:
         try:
             return self.bone_names.index(name)

@@ -27,7 +27,12 @@ from __future__ import annotations
 
 from kubric.annotations.amodal import annotate_amodal
 from kubric.annotations.boundaries import occlusion_boundaries
-from kubric.annotations.materials_parts import id_layer, material_table, part_table
+from kubric.annotations.materials_parts import (
+    character_part_ids,
+    id_layer,
+    material_table,
+    part_table,
+)
 from kubric.annotations.scene_flow import CAMERA_LAYERS, WORLD_LAYERS, scene_flow
 from kubric.io.bitmask import pack_masks
 from kubric.io.schema import Feature, Schema
@@ -70,7 +75,8 @@ FEATURES = {
     ),
     "part_ids": (
         F("part_ids", "uint16", ("T", "H", "W", 1), "layer:part_ids", "png",
-          doc="0 = nothing hit, k = metadata parts[k − 1]: {object, part (URDF link)}"),
+          doc="0 = nothing hit, k = metadata parts[k − 1]: {object, part (URDF link or a "
+          "character's bone)}"),
     ),
 }
 
@@ -136,6 +142,9 @@ def add_before_relabel(scene, layers: dict, names) -> None:
             table, ids = table_of(scene.assets)
             scene.metadata[key] = table
             layers[name] = id_layer(layers["segmentation"], scene.assets, ids)
+            if name == "part_ids":  # a character's body parts, by the face each ray hits
+                character_part_ids(scene, layers["depth"], layers["segmentation"],
+                                   layers[name], ids, anchor=skinned_anchor)
     if "occlusion_boundaries" in names:
         layers["occlusion_boundaries"] = occlusion_boundaries(layers["depth"],
                                                               layers["segmentation"])
