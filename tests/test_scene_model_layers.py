@@ -122,6 +122,20 @@ def test_each_amodal_mask_equals_a_render_of_that_object_alone(made):
         assert sum("articulated_link" in i for i in meta["instances"]) >= 1
 
 
+def _person_behind_a_box(frame_end: int):
+    """(scene, walking tube person, box partly hiding it) at 32×40 px, frames 0..frame_end."""
+    from kubric.assets.procedural_character import tube_person, walk_clip
+
+    scene = kb.Scene(resolution=(32, 40), frame_start=0, frame_end=frame_end)
+    person = tube_person()
+    scene += person
+    person.play(walk_clip())
+    box = kb.Cube(name="box", scale=0.2, position=(0.0, -1.5, 1.2))
+    scene += box
+    scene.camera = kb.PerspectiveCamera(position=(0.4, -3.2, 1.0), look_at=(0, 0, 0.9))
+    return scene, person, box
+
+
 def test_a_walking_character_s_amodal_mask_and_scene_flow_equal_a_numpy_cast():
     """Skinned characters: the amodal mask (Embree on the mesh skinned at each frame) equals a
     brute-force Möller–Trumbore cast (kubric.annotations.surfaces) of every pixel-centre ray (a
@@ -131,16 +145,9 @@ def test_a_walking_character_s_amodal_mask_and_scene_flow_equal_a_numpy_cast():
     from kubric.annotations.character_tracks import anchor_queries
     from kubric.annotations.scene_flow import scene_flow
     from kubric.annotations.surfaces import ray_triangles
-    from kubric.assets.procedural_character import tube_person, walk_clip
     from kubric.renderer.scene_model_layers import amodal_masks, skinned_anchor
 
-    scene = kb.Scene(resolution=(32, 40), frame_start=0, frame_end=2)
-    person = tube_person()
-    scene += person
-    person.play(walk_clip())
-    box = kb.Cube(name="box", scale=0.2, position=(0.0, -1.5, 1.2))
-    scene += box
-    scene.camera = kb.PerspectiveCamera(position=(0.4, -3.2, 1.0), look_at=(0, 0, 0.9))
+    scene, person, box = _person_behind_a_box(frame_end=2)
     masks = amodal_masks(scene, [person, box])
     assert (masks[:, 0] & masks[:, 1]).any()  # the box hides part of the person
     h, w = 40, 32
@@ -172,16 +179,9 @@ def test_a_character_s_part_ids_name_the_bone_of_the_face_each_ray_hits():
     frame (the weights summed from the rig's (index, weight) lists, not the model's matrix)."""
     from kubric.annotations.materials_parts import character_part_ids, id_layer, part_table
     from kubric.annotations.surfaces import ray_triangles
-    from kubric.assets.procedural_character import tube_person, walk_clip
     from kubric.renderer.scene_model_layers import skinned_anchor
 
-    scene = kb.Scene(resolution=(32, 40), frame_start=0, frame_end=1)
-    person = tube_person()
-    scene += person
-    person.play(walk_clip())
-    box = kb.Cube(name="box", scale=0.2, position=(0.0, -1.5, 1.2))
-    scene += box
-    scene.camera = kb.PerspectiveCamera(position=(0.4, -3.2, 1.0), look_at=(0, 0, 0.9))
+    scene, person, _ = _person_behind_a_box(frame_end=1)
     table, ids = part_table(scene.assets)
     assert {e["object"] for e in table} == {person.name, "box"}
     h, w = 40, 32
