@@ -29,7 +29,7 @@ $(STAMP): pyproject.toml | $(BIN)/python
 install: $(STAMP)
 
 test: $(STAMP) browser testmodels
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest -q --durations=40
 
 browser:  # Debian's chromium + chromedriver for the `kubric view` browser tests (skipped when present)
 	@if ! command -v chromium >/dev/null || ! command -v chromedriver >/dev/null; then \

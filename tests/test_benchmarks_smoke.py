@@ -30,6 +30,8 @@ ROWS = {
     "bench_codecs": [r"^32² .+\n  codec +enc ms", r"^  handwritten +[\d.]+ +[\d.]+ +\d+ +yes"],
     "bench_datasets": [r"^pack, 2 worker\(s\): [\d.]+ s", r"^read, random order, video only: "
                        r"dataset [\d.]+ examples/s"],
+    "bench_events": [r"^\| frames \(default\) \| \d+ \| [\d.]+ \| [\d.]+ \|",
+                     r"^\| flow K=2 \| \d+ \| [\d.]+ \| [\d.]+ \|"],
     "bench_extra_layers": [r"^\| extra_layers \| CPU-s \| × default scene \|",
                            r"^\| raw bits \(T·N·H·W / 8\) \| \d+ \| — \|"],
     "bench_file_io": [r"^handwritten : \d+ files, [\d.]+ MB", r"^kubric      : \d+ files, [\d.]+ MB"],

@@ -19,9 +19,12 @@ motion blur (``coverage_samples``); the ground truth is :mod:`kubric.annotations
   the sensor model of :mod:`kubric.annotations.event_camera` (``event_threshold`` ±
   ``event_threshold_spread`` per pixel, drawn from an rng derived from the seed;
   ``event_refractory_us``, ``event_noise_rate``), t = 0 µs at frame_start; intensity from the
-  rendered RGB frames (``event_subframes=0``: log intensity linear between frame times) or from K
-  raycast sub-frames per frame (``event_subframes=K``: the raycast backend's Lambert shading,
-  cheap and not photoreal); recorded in ``metadata.event_camera``.
+  rendered RGB frames (``event_subframes=0``: log intensity linear between frame times) or K
+  samples per frame (``event_subframes=K``): raycast sub-frame renders (``event_interpolation=
+  raycast``: exact motion, the raycast backend's Lambert shading, not photoreal) or the rendered
+  frames warped along the exact flow with its occlusions (``event_interpolation=flow``,
+  :mod:`kubric.annotations.flow_interpolation`: the renderer's own shading, no extra render);
+  recorded in ``metadata.event_camera``.
 """
 
 from __future__ import annotations
@@ -62,6 +65,12 @@ class ExposureOptions:
     event_subframes = Option(0, "event intensity samples per frame: 0 = the rendered frames, "
                              "log intensity linear between them; K = K raycast sub-frames",
                              low=0, high=64)
+    event_interpolation = Option("raycast", "how event_subframes=K makes the samples between "
+                                 "two frames: raycast = sub-frame renders by the raycast backend "
+                                 "(exact motion, its Lambert shading); flow = the rendered "
+                                 "frames warped along the exact flow with its occlusions (the "
+                                 "renderer's own shading, no extra render)",
+                                 choices=("raycast", "flow"))
     event_threshold = Option(0.2, "event contrast threshold C± (log intensity)", low=0.01,
                              high=5.0)
     event_threshold_spread = Option(0.03, "per-pixel standard deviation of the thresholds",
@@ -135,7 +144,14 @@ class ExposureOptions:
                                refractory_us=self.event_refractory_us,
                                noise_rate_hz=self.event_noise_rate)
         frames = list(scene.frames)
-        if self.event_subframes and len(frames) > 1:  # (one frame: no events either way)
+        flow = self.event_subframes and self.event_interpolation == "flow"
+        if flow and len(frames) > 1:
+            from kubric.annotations.flow_interpolation import interpolate_sequence
+            k = self.event_subframes
+            rgb = interpolate_sequence(layers["rgba"][..., :3], layers["forward_flow"],
+                                       layers["backward_flow"], layers["depth"], k)
+            times = frames[0] + np.arange(len(rgb)) / k
+        elif self.event_subframes and len(frames) > 1:  # (one frame: no events either way)
             from kubric.renderer.raycast_subframes import subframe_layers
             k = self.event_subframes
             rgb = subframe_layers(scene, frames[:-1], np.arange(k) / k, ("rgba",))["rgba"]
@@ -148,11 +164,12 @@ class ExposureOptions:
         rng = np.random.RandomState([int(seed), EVENTS_RNG_TAG])
         thresholds = model.thresholds(h, w, rng)
         times_us = ev.frame_times_us(times, scene.frame_start, scene.frame_rate)
-        events = ev.simulate(ev.srgb_to_log_intensity(rgb[..., :3], model.eps), times_us,
+        events = ev.simulate(ev.srgb_to_log_intensity(np.clip(rgb[..., :3], 0, 255), model.eps),
+                             times_us,
                              thresholds, model)
         events = ev.add_noise(events, h, w, times_us[0], times_us[-1], model, rng)
         sensor = {**dataclasses.asdict(model), "file": EVENTS_H5_FILE,
-                  "source": f"raycast sub-frames K={self.event_subframes}"
+                  "source": f"{self.event_interpolation} sub-frames K={self.event_subframes}"
                   if self.event_subframes else "rendered frames", "num_events": len(events["t"])}
         scene.metadata["event_camera"] = sensor
         attrs = {k: v for k, v in sensor.items() if k != "num_events"}
