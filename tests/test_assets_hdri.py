@@ -20,9 +20,11 @@ def _isolated_cache(tmp_path, monkeypatch):
 
 def test_bpy_world_hdris_become_a_texture_source(tmp_path):
     source = ensure_hdri_source()
-    assert source.manifest_path.parent == tmp_path / "cache" / "HDRIs"
-    expected = sorted(p.stem for p in bpy_world_hdri_dir().glob("*.exr"))
-    assert len(expected) >= 8 and source.all_asset_ids == expected
+    assert source.manifest_path.parent == tmp_path / "cache" / f"HDRIs-{hdri.VERSION}"
+    expected = sorted(p.stem for p in bpy_world_hdri_dir().glob("*.exr")
+                      if p.stem not in hdri.NOT_BACKGROUNDS)
+    assert "studio" in hdri.NOT_BACKGROUNDS and (bpy_world_hdri_dir() / "studio.exr").is_file()
+    assert len(expected) >= 7 and source.all_asset_ids == expected
     _, held_out = source.get_test_split(fraction=0.25, seed=0)
     assert len(held_out) == 2
     tex = source.create("sunset")

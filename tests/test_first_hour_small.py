@@ -9,6 +9,7 @@ import sys
 
 import pytest
 
+from kubric.asset_tools import hdri
 from kubric.pipeline.worker import run_scene
 from kubric.recipes.bench import Bench
 
@@ -76,7 +77,8 @@ def test_building_an_asset_source_on_first_use_says_so(tmp_path):
     first, again = (subprocess.run([sys.executable, "-c", code, str(tmp_path)],
                                    capture_output=True, text=True, timeout=300) for _ in "12")
     assert first.returncode == 0, first.stderr
-    assert f"building the asset source HDRIs into {tmp_path} (first use only)" in first.stderr
-    assert re.search(r"^built HDRIs in \d+ s$", first.stderr, re.M)
+    assert f"building the asset source HDRIs-{hdri.VERSION} into {tmp_path} (first use only)" \
+        in first.stderr
+    assert re.search(rf"^built HDRIs-{hdri.VERSION} in \d+ s$", first.stderr, re.M)
     assert again.returncode == 0 and "building" not in again.stderr  # built: silent
     assert int(first.stdout) == int(again.stdout) > 0

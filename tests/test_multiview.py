@@ -34,7 +34,7 @@ RUNS = {
     "robust_nerf:jitter": TINY + ["num_views=5", "split_ratio=3,1,1", "impostor_motion=jitter",
                                   "jitter=0.4"],
 }
-HDRIS = {"city", "courtyard", "forest", "interior", "night", "studio", "sunrise", "sunset"}
+HDRIS = {"city", "courtyard", "forest", "interior", "night", "sunrise", "sunset"}  # no studio
 TOY_CATEGORIES = {"cube": "boxy", "sponge": "boxy", "sphere": "round", "cylinder": "round",
                   "torus": "round", "teapot": "kitchen"}
 

@@ -18,7 +18,11 @@ from kubric.assets.asset_source import AssetSource, build_once, cache_dir
 from kubric.errors import InputError
 
 NAME_DEFAULT = "HDRIs"
-VERSION = "1.1"  # 1.1: each archive's sha256 in the manifest
+VERSION = "1.2"  # 1.1: each archive's sha256 in the manifest; 1.2: without studio.exr
+#: bpy's world HDRIs left out of the default source: ``studio`` is a lighting rig (a dark room
+#: with soft boxes), not a background — ground-projected it gives MOVi-C–F black surroundings
+#: and radial streaks on the floor; the seven left are outdoor and interior scenes
+NOT_BACKGROUNDS = ("studio",)
 EXTENSIONS = (".hdr", ".exr")
 BPY_WORLD_LICENSE = ("CC0-1.0 (Greg Zaal, Poly Haven; shipped with Blender in "
                      "datafiles/studiolights/world)")
@@ -60,8 +64,10 @@ def image_size(path: Path) -> list[int]:
 
 
 def build_hdri_source(src_dir: str | os.PathLike, out_dir: str | os.PathLike,
-                      name: str = NAME_DEFAULT, license: str | None = None) -> Path:
-    """Turn every ``.hdr`` / ``.exr`` in ``src_dir`` (not recursive) into a Texture asset.
+                      name: str = NAME_DEFAULT, license: str | None = None,
+                      exclude: tuple[str, ...] = ()) -> Path:
+    """Turn every ``.hdr`` / ``.exr`` in ``src_dir`` (not recursive; file stems in ``exclude``
+    left out) into a Texture asset.
 
     Ids are the lower-cased file stems. ``license`` defaults to the first line of a
     ``license.txt`` next to the images, else raises (an asset must state its licence).
@@ -70,7 +76,8 @@ def build_hdri_source(src_dir: str | os.PathLike, out_dir: str | os.PathLike,
     src = Path(src_dir)
     if not src.is_dir():
         raise FileNotFoundError(f"HDRI source folder {str(src)!r} does not exist")
-    images = sorted(p for p in src.iterdir() if p.suffix.lower() in EXTENSIONS and p.is_file())
+    images = sorted(p for p in src.iterdir() if p.suffix.lower() in EXTENSIONS and p.is_file()
+                    and p.stem.lower() not in exclude)
     if not images:
         raise InputError(f"HDRI source folder {str(src)!r} holds no {list(EXTENSIONS)} files")
     if license is None:
@@ -111,8 +118,9 @@ def bpy_world_hdri_dir() -> Path:
 
 
 def ensure_hdri_source(cache: str | os.PathLike | None = None):
-    """The bpy wheel's HDRIs as an :class:`AssetSource` in ``<cache>/HDRIs`` (built on first use)."""
+    """The bpy wheel's HDRIs but :data:`NOT_BACKGROUNDS` as an :class:`AssetSource` in
+    ``<cache>/HDRIs-<VERSION>`` (built on first use; a new version builds a new folder)."""
     root = Path(cache) if cache is not None else cache_dir()
-    target = build_once(root / NAME_DEFAULT, lambda tmp: build_hdri_source(
-        bpy_world_hdri_dir(), tmp, license=BPY_WORLD_LICENSE))
+    target = build_once(root / f"{NAME_DEFAULT}-{VERSION}", lambda tmp: build_hdri_source(
+        bpy_world_hdri_dir(), tmp, license=BPY_WORLD_LICENSE, exclude=NOT_BACKGROUNDS))
     return AssetSource(target)
