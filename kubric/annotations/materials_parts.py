@@ -6,7 +6,8 @@ Two tables, stored in ``metadata.json["metadata"]`` (1-based ids; 0 = nothing hi
   order, each described by ``type`` (``PrincipledBSDFMaterial``, ``FlatMaterial``, or
   ``file`` for a mesh file's own material) and its parameters (``color`` linear RGB or
   ``texture`` file name without its folder, ``metallic``, ``roughness``, ``ior``,
-  ``transmission`` …; ``asset``: the asset of a file material). Assets whose materials
+  ``transmission`` …; ``asset``: the asset of a file material; a procedural or image PBR
+  material: its ``describe()``, :mod:`kubric.core.pbr_materials`). Assets whose materials
   describe the same are one entry (two red rubber spheres share an id). An asset has one
   material: a mesh file with several materials counts as one ``file`` entry.
 * ``parts``: every physical asset as ``{"object", "part"}``: an articulated object's link
@@ -43,6 +44,8 @@ def describe_material(asset) -> dict:
     material = asset.material
     if isinstance(material, materials.UndefinedMaterial) or material is None:
         return {"type": "file", "asset": getattr(asset, "asset_id", "") or asset.name}
+    if hasattr(material, "describe"):  # kubric.core.pbr_materials: plain data of its own
+        return material.describe()
     out = {"type": type(material).__name__}
     color = getattr(material, "color", None)
     if isinstance(color, Color):

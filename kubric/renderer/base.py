@@ -38,6 +38,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from kubric.core.pbr_materials import PATTERNS
 from kubric.errors import UsageError
 from kubric.io.layers import EXACT_LAYERS, RENDERED_LAYERS
 
@@ -49,6 +50,8 @@ ALL_LAYERS = RENDERED_LAYERS
 #: exposure effects a backend may render into RGB (the annotation layers stay exact): motion
 #: blur over a shutter, thin-lens depth of field (the camera's ``use_dof``), rolling shutter
 EFFECTS = ("motion_blur", "depth_of_field", "rolling_shutter")
+#: a need ``"procedural_<pattern>"``: show that ProceduralMaterial pattern in RGB
+PATTERN_NEED = "procedural_"
 
 
 class CapabilityError(UsageError, ValueError):
@@ -72,6 +75,9 @@ class Capabilities:
         ``use_denoising``, ``adaptive_sampling``, ...; docs/render-cost.md).
       lenses: it renders a camera with a lens model (``PerspectiveCamera.lens``,
         :mod:`kubric.core.lenses`) exactly: RGB and every layer through each pixel's lens ray.
+      procedural_patterns: the :class:`~kubric.core.pbr_materials.ProceduralMaterial` patterns
+        whose texture its RGB shows (a subset of :data:`PATTERNS`); a scene with another
+        pattern is refused in one line.
     """
 
     photoreal: bool = False
@@ -81,12 +87,16 @@ class Capabilities:
     characters: bool = False
     quality_profiles: bool = False
     lenses: bool = False
+    procedural_patterns: tuple[str, ...] = ()
 
     def __post_init__(self):
         object.__setattr__(self, "layers", tuple(self.layers))
+        object.__setattr__(self, "procedural_patterns", tuple(self.procedural_patterns))
         object.__setattr__(self, "effects", frozenset(self.effects))
         for what, given, allowed in (("layers", self.layers, ALL_LAYERS),
-                                     ("effects", self.effects, EFFECTS)):
+                                     ("effects", self.effects, EFFECTS),
+                                     ("procedural_patterns", self.procedural_patterns,
+                                      PATTERNS)):
             unknown = sorted(set(given) - set(allowed))
             if unknown:
                 raise ValueError(f"Capabilities: unknown {what} {unknown}; allowed: "
@@ -104,6 +114,8 @@ class Capabilities:
             return need in self.effects
         if need in ALL_LAYERS:
             return need in self.layers
+        if need.startswith(PATTERN_NEED):
+            return need[len(PATTERN_NEED):] in self.procedural_patterns
         return bool(self.can_save_state if need == "save_state" else getattr(self, need))
 
 
@@ -116,6 +128,7 @@ NEEDS = {
     "lenses": "render through a lens model (distortion)",
     **{effect: f"render {effect.replace('_', ' ')}" for effect in EFFECTS},
     **{layer: f"make the {layer} layer" for layer in ALL_LAYERS},
+    **{PATTERN_NEED + p: f"render {p} procedural materials" for p in PATTERNS},
 }
 
 
@@ -132,9 +145,10 @@ class Backend:
 BACKENDS = {
     "blender": Backend("kubric.renderer.blender:Blender", Capabilities(
         photoreal=True, effects={"motion_blur", "depth_of_field"}, state_file_suffix=".blend",
-        characters=True, quality_profiles=True, lenses=True)),
+        characters=True, quality_profiles=True, lenses=True, procedural_patterns=PATTERNS)),
     "raycast": Backend("kubric.renderer.raycast:Raycast", Capabilities(
-        photoreal=False, lenses=True, effects={"rolling_shutter"})),
+        photoreal=False, lenses=True, effects={"rolling_shutter"},
+        procedural_patterns=("checker", "brick", "wave"))),
 }
 
 

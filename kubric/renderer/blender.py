@@ -58,6 +58,7 @@ import numpy as np
 
 from kubric.core import camera_geometry as geo
 from kubric.core import cameras, characters, lights, materials, objects, rolling_shutter
+from kubric.core import pbr_materials as pbr
 from kubric.core.scene import Scene
 from kubric.core.views import TableView
 from kubric.renderer import allocator
@@ -66,6 +67,7 @@ from kubric.renderer import blender_lens as bl
 from kubric.renderer import blender_materials as bm
 from kubric.renderer import blender_objects as bo
 from kubric.renderer import blender_passes as bp
+from kubric.renderer import blender_procedural as bpr
 from kubric.renderer import blender_shadows as bs
 from kubric.renderer import blender_world as bw
 from kubric.renderer.base import CapabilityError, Renderer
@@ -200,6 +202,8 @@ class Blender(TableView, Renderer):
         lights.RectAreaLight: bo.build_area,
         materials.PrincipledBSDFMaterial: bm.build_principled,
         materials.FlatMaterial: bm.build_flat,
+        pbr.ProceduralMaterial: bpr.build,
+        pbr.ImageMaterial: bpr.build,
         materials.Texture: None,  # read by the materials / world that use it
     }
     setters = {
@@ -222,6 +226,8 @@ class Blender(TableView, Renderer):
                                "height": bo.data_setter("size_y")},
         materials.PrincipledBSDFMaterial: bm.PRINCIPLED_SETTERS,
         materials.FlatMaterial: bm.FLAT_SETTERS,
+        pbr.ProceduralMaterial: bpr.PROCEDURAL_SETTERS,
+        pbr.ImageMaterial: bpr.IMAGE_SETTERS,
         characters.Character: bc.SETTERS,
     }
     keyframers = {

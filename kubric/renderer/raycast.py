@@ -43,9 +43,11 @@ import numpy as np
 
 from kubric.core import camera_geometry as geo
 from kubric.core import lights, materials, objects, rolling_shutter
+from kubric.core import pbr_materials as pbr
 from kubric.core.color import Color, linear_to_srgb, srgb_to_linear
 from kubric.core.imports import uninterrupted_import
-from kubric.renderer.base import ALL_LAYERS, Renderer
+from kubric.renderer import procedural_patterns
+from kubric.renderer.base import ALL_LAYERS, PATTERN_NEED, Renderer
 from kubric.renderer.raycast_rolling import rolling_flow_ends, rolling_frame
 
 trimesh = uninterrupted_import("trimesh")  # trimesh swallows a Ctrl-C in its import
@@ -366,6 +368,8 @@ class Raycast(Renderer):
         self.require_effects({"depth_of_field": getattr(camera, "use_dof", False) and
                               f"camera {camera.name!r} use_dof=True"})
         geometry = self.geometry()
+        if "rgba" in wanted:
+            self.require_patterns(geometry)
         out: dict[str, np.ndarray] = {}
         rolling = rolling_shutter.duration_of(camera) > 0
         for i, frame in enumerate(frames):
@@ -419,7 +423,8 @@ class Raycast(Renderer):
         res["normal"] = image(normals, 3)
         lo, hi = geometry.bounds[owner, 0], geometry.bounds[owner, 1]
         extent = np.where(hi - lo > 0, hi - lo, 1.0)
-        res["object_coordinates"] = image(np.clip((local - lo) / extent, 0, 1), 3)
+        generated = np.clip((local - lo) / extent, 0, 1)
+        res["object_coordinates"] = image(generated, 3)
         res["uv"] = image(np.concatenate([np.mod(uv, 1.0), np.zeros((len(idx), 1))], 1), 3)
         for name, step in (("forward_flow", 1), ("backward_flow", -1)):
             if name in wanted:
@@ -434,10 +439,20 @@ class Raycast(Renderer):
                 res[name] = image(np.nan_to_num(flow, nan=0.0), 2)  # NaN: left the lens's domain
         if "rgba" in wanted:
             points = origins[idx] + dirs[idx] * t[:, None]
-            res["rgba"] = self._shade(geometry, posed, owner, uv, points, normals, frame, hit,
-                                      (h, w))
+            res["rgba"] = self._shade(geometry, posed, owner, (uv, generated), points, normals,
+                                      frame, hit, (h, w))
             res["rgba"][~has_ray.reshape(h, w)] = 0  # outside the lens's image: no light
         return {k: res[k] for k in wanted}
+
+    def require_patterns(self, geometry) -> None:
+        """One line (CapabilityError) for a ProceduralMaterial whose pattern this backend's RGB
+        does not show (:mod:`kubric.renderer.procedural_patterns`)."""
+        for _, asset, _ in geometry.entries:
+            material = asset.material
+            if isinstance(material, pbr.ProceduralMaterial):
+                self._require({PATTERN_NEED + material.pattern:
+                               f"{asset.uid}'s material pattern={material.pattern}"},
+                              "Raycast.render")
 
     @staticmethod
     def _normals(geometry, posed, tid, owner, bary, dirs):
@@ -454,9 +469,15 @@ class Raycast(Renderer):
         return np.where(back[:, None], -normals, normals)
 
     # ------------------------------------------------------------------ rgba
-    def _albedo(self, asset, mesh, uv):
-        """Linear base colour (N, 3) of ``asset``'s hits with texture coordinates ``uv``."""
+    def _albedo(self, asset, mesh, uv, generated):
+        """Linear base colour (N, 3) of ``asset``'s hits with texture coordinates ``uv`` and
+        generated coordinates ``generated`` (procedural materials)."""
         material = asset.material
+        if isinstance(material, pbr.ProceduralMaterial):
+            return procedural_patterns.base_color(material, generated)
+        if isinstance(material, pbr.ImageMaterial):
+            image = _load_texture(material.base_color, self._textures)
+            return _sample(image, uv * float(material.uv_scale))
         color = getattr(material, "color", None)
         if isinstance(material, materials.UndefinedMaterial):
             if mesh.texture is not None:
@@ -470,8 +491,9 @@ class Raycast(Renderer):
             return np.broadcast_to(_ambient_radiance(color, self._textures), (len(uv), 3))
         return np.broadcast_to(np.asarray(_GREY), (len(uv), 3))
 
-    def _shade(self, geometry, posed, owner, uv, points, normals, frame, hit, hw):
+    def _shade(self, geometry, posed, owner, coords, points, normals, frame, hit, hw):
         h, w = hw
+        uv, generated = coords
         ambient = _ambient_radiance(self.scene.ambient_illumination, self._textures)
         irradiance = np.broadcast_to(np.pi * ambient, (len(points), 3)).copy()
         eps = 1e-4 * max(1.0, float(np.abs(posed.triangles).max())) if len(points) else 0.0
@@ -483,7 +505,7 @@ class Raycast(Renderer):
         for k, (_, asset, mesh) in enumerate(geometry.entries):
             sel = np.flatnonzero(owner == k)
             if len(sel):
-                albedo = self._albedo(asset, mesh, uv[sel])
+                albedo = self._albedo(asset, mesh, uv[sel], generated[sel])
                 unlit = isinstance(asset.material, materials.FlatMaterial)
                 radiance[sel] = albedo if unlit else albedo * irradiance[sel] / np.pi
         rgba = np.zeros((h * w, 4), np.uint8)
