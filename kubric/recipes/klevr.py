@@ -31,6 +31,7 @@ from kubric.pipeline import Option, OptionError, float_range
 from kubric.recipes import multiview_schema
 from kubric.recipes.common import open_existing_source as open_source
 from kubric.recipes.common import source_location
+from kubric.recipes.material_options import MaterialOptions
 from kubric.recipes.multiview_base import (
     ExtraOutputs,
     MultiviewBase,
@@ -186,7 +187,7 @@ class Klevr(_SemanticScenes, name="klevr"):
         return kubasic_object(sources, category, float(rng.uniform(*self.size_range)), rng)
 
 
-class ToyBox(_SemanticScenes, name="toybox"):
+class ToyBox(MaterialOptions, _SemanticScenes, name="toybox"):
     """ToyBox: 4–12 upright objects of an asset source with categories, HDRI background."""
 
     schema = multiview_schema.TOYBOX
@@ -202,8 +203,20 @@ class ToyBox(_SemanticScenes, name="toybox"):
     hdri_source = Option(None, "HDRI asset source folder (default: the HDRIs shipped with bpy)",
                          type=source_location)
 
+    def flags(self, seed: int) -> dict:
+        return self.material_flags(super().flags(seed))
+
+    def renderer_requests(self) -> dict[str, str]:
+        return {**super().renderer_requests(), **self.material_requests()}
+
+    def finish_scene(self, scene, seed: int) -> None:
+        """Random PBR materials (``material_source``) for the objects and the dome."""
+        dome = next((a for a in scene.assets if a.name == "dome"), None)
+        self.apply_materials(scene, seed, dome)
+
     def check(self):
         super().check()
+        self.open_materials()
         if self.objects is None:
             raise OptionError(f"{self.name}: option objects is required: an asset source folder "
                               "whose assets have metadata.category")

@@ -50,6 +50,7 @@ from kubric.recipes import movi_schema
 from kubric.recipes.articulated_models import MODELS, add_model, model_list
 from kubric.recipes.common import open_existing_source, source_location
 from kubric.recipes.exposure_schema import EXPOSURE_VARIANTS
+from kubric.recipes.material_options import MaterialOptions
 from kubric.recipes.movi_base import (
     CAMERA_MIN_HEIGHT,
     DYNAMIC_SPAWN_REGION,
@@ -179,7 +180,7 @@ class MoviB(_ClevrLike, name="movi_b"):
         return floor.hexstr
 
 
-class MoviC(MoviBase, name="movi_c"):
+class MoviC(MaterialOptions, MoviBase, name="movi_c"):
     """MOVi-C: 3–10 scanned-like objects with their own textures on an HDRI dome, HDRI light."""
 
     schema = movi_schema.MOVI_C
@@ -218,8 +219,12 @@ class MoviC(MoviBase, name="movi_c"):
     #: likewise while ``characters`` is 0
     CHARACTER_OPTIONS = ("characters", "character_source", "motion_source")
 
+    def check(self) -> None:
+        super().check()
+        self.open_materials()
+
     def flags(self, seed: int) -> dict:
-        out = super().flags(seed)
+        out = self.material_flags(super().flags(seed))
         if not self.articulated_objects:
             for name in self.ARTICULATED_OPTIONS:
                 out.pop(name)
@@ -232,7 +237,12 @@ class MoviC(MoviBase, name="movi_c"):
         out = super().renderer_requests()
         if self.characters:
             out["characters"] = f"characters={self.characters}"
-        return out
+        return {**out, **self.material_requests()}
+
+    def finish_scene(self, scene, seed: int) -> None:
+        """Random PBR materials (``material_source``) for the objects and the dome."""
+        dome = next((a for a in scene.assets if a.name == "dome"), None)
+        self.apply_materials(scene, seed, dome)
 
     def open_sources(self):
         sources = super().open_sources()

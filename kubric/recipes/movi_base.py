@@ -187,6 +187,9 @@ class MoviBase(ExposureOptions, RenderQuality, Recipe, LensOptions):
         camera.look_at((0.0, 0.0, 0.0))
         scene.camera = camera
 
+    def finish_scene(self, scene, seed: int) -> None:
+        """After the scene is populated, before the simulation (default: nothing)."""
+
     def motion_blur(self, rng) -> float:
         """Shutter length in frames (0 = none)."""
         return 0.0
@@ -230,6 +233,7 @@ class MoviBase(ExposureOptions, RenderQuality, Recipe, LensOptions):
         with tempfile.TemporaryDirectory(prefix="kubric_movi_") as scratch:
             simulator = kb.simulator.PyBullet(scene, scratch)
             background, blur = self.populate(scene, simulator, rng, sources)
+            self.finish_scene(scene, seed)  # material_source= (MOVi-C–F)
             self.sample_lens(scene, seed)  # dof=True (an rng derived from the seed)
             self.set_rolling_shutter(scene)  # rolling_shutter=d
             scene.camera.lens = self.make_lens(rng)  # drawn after the rest (lens_options)

@@ -243,6 +243,9 @@ class MultiviewBase(RenderQuality, Recipe, LensOptions):
         """Per-view changes after the camera is keyed (default: none)."""
         return None
 
+    def finish_scene(self, scene, seed: int) -> None:
+        """After the objects are placed, before the camera is keyed (default: nothing)."""
+
     def add_floor(self, scene, sources, material):
         """The KuBasic dome (floor disc at z = 0 bending up into a wall) as the background."""
         dome = sources["kubasic"].create("dome", name="dome", static=True, background=True)
@@ -304,6 +307,7 @@ class MultiviewBase(RenderQuality, Recipe, LensOptions):
             self.scratch = pathlib.Path(scratch)  # for generated files (meshes, textures)
             background = self.build_background(scene, rng, sources)
             self.add_objects(scene, rng, sources)
+            self.finish_scene(scene, seed)  # material_source= (toybox)
             self.key_camera(scene, self.camera_positions(rng))
             self.animate(scene, rng, splits, sources)
             scene.camera.lens = self.make_lens(rng)  # drawn after the rest (lens_options)
