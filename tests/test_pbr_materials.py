@@ -138,3 +138,65 @@ def test_blender_checker_cells_are_where_the_geometry_puts_them(blender_renders)
     inner = _interior(inside, black.astype(int) + 2 * inside)
     assert inner.sum() > 150
     np.testing.assert_array_equal(lum[inner] < 128, black[inner])
+
+
+# ---------------------------------------------------------------------------------- recipes
+def _movi_c_scene(out_dir, *extra):
+    from collection_fixtures import run_worker
+    run_worker("movi_c", 5, out_dir, ("renderer=raycast", "resolution=32", "frame_end=2",
+                                      "min_num_objects=3", "max_num_objects=3",
+                                      "collection_limit=8", *extra))
+    scene = next(out_dir.glob("scene_*"))
+    import json
+    return scene, json.loads((scene / "metadata.json").read_text())
+
+
+def test_movi_c_procedural_materials_are_recorded_deterministic_and_opt_in(tmp_path):
+    opts = ("material_source=procedural", "material_patterns=checker,brick,wave")
+    scene_a, a = _movi_c_scene(tmp_path / "a", *opts)
+    _, b = _movi_c_scene(tmp_path / "b", *opts)
+    _, plain = _movi_c_scene(tmp_path / "plain")
+    materials = [inst["material"] for inst in a["instances"]]
+    assert materials == [inst["material"] for inst in b["instances"]]
+    assert all(m["type"] == "ProceduralMaterial" and m["pattern"] in ("checker", "brick", "wave")
+               for m in materials)
+    assert a["metadata"]["floor_material"]["type"] == "ProceduralMaterial"
+    assert not any("material" in inst for inst in plain["instances"])
+    assert "material_source" not in plain["flags"] and "floor_material" not in plain["metadata"]
+    # the materials come from their own rng: every trajectory is the plain scene's
+    key = {inst["asset_id"]: inst["positions"] for inst in plain["instances"]}
+    assert {inst["asset_id"]: inst["positions"] for inst in a["instances"]} == key
+
+
+def test_recipes_refuse_patterns_their_renderer_does_not_show():
+    from kubric.pipeline import OptionError, get_recipe
+
+    for recipe in ("movi_c", "movi_e"):
+        with pytest.raises(OptionError, match=f"{recipe}: renderer=raycast cannot render noise "
+                           "procedural materials .material_patterns=noise,checker.; backends "
+                           "that can: blender"):
+            get_recipe(recipe).from_assignments([
+                "renderer=raycast", "material_source=procedural",
+                "material_patterns=noise,checker"]).check()
+    with pytest.raises(OptionError, match="material_source.*procedural or an existing material "
+                       "source folder"):
+        get_recipe("movi_c").from_assignments(["material_source=/no/such/folder"])
+
+
+def test_toybox_gives_objects_and_floor_procedural_materials(tmp_path):
+    import json
+
+    from collection_fixtures import run_worker
+
+    from kubric import asset_tools
+    from kubric.recipes.klevr import with_categories
+    toys = with_categories(asset_tools.ensure_kubasic(), {"cube": "box", "sphere": "ball"},
+                           tmp_path / "toys")
+    run_worker("toybox", 2, tmp_path / "out", (
+        "renderer=raycast", "resolution=32", "num_views=3", "split_ratio=1,1,1",
+        "num_categories=2", f"objects={toys}", "material_source=procedural",
+        "material_patterns=checker"))
+    meta = json.loads(next((tmp_path / "out").glob("scene_*/metadata.json")).read_text())
+    assert meta["instances"]
+    assert {inst["material"]["pattern"] for inst in meta["instances"]} == {"checker"}
+    assert meta["metadata"]["floor_material"]["pattern"] == "checker"

@@ -35,6 +35,11 @@ def material_location(value):
     return path
 
 
+material_location.allowed = (f"{PROCEDURAL} or an existing material source folder (with "
+                             "materials.json)")
+material_location.__name__ = "procedural|path"
+
+
 def pattern_list(value) -> tuple[str, ...]:
     names = tuple(v.strip() for v in (value.split(",") if isinstance(value, str) else value)
                   if str(v).strip())
@@ -42,6 +47,10 @@ def pattern_list(value) -> tuple[str, ...]:
     if not names or unknown:
         raise ValueError(f"expected comma-separated patterns of {list(PATTERNS)}, got {value!r}")
     return names
+
+
+pattern_list.allowed = f"comma-separated names of {', '.join(PATTERNS)}"
+pattern_list.__name__ = "names"
 
 
 class MaterialOptions:
