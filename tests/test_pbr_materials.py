@@ -104,9 +104,22 @@ def test_raycast_checker_matches_the_geometry_and_refuses_noise():
 
 
 @pytest.fixture(scope="module")
-def blender_renders():
-    """Blender renders (32 px, 4 samples) of the slab: plain, checker, brick, noise, voronoi."""
-    looks = {"plain": kb.PrincipledBSDFMaterial(color="white", roughness=1.0),
+def blender_renders(tmp_path_factory):
+    """Blender renders (32 px, 4 samples) of the slab: plain, checker, brick, noise, voronoi and
+    an image set (a 2×2 black / white base colour, a flat normal map, a displacement map)."""
+    from PIL import Image
+
+    from kubric.core.pbr_materials import ImageMaterial
+    folder = tmp_path_factory.mktemp("image_set")
+    cells = np.kron(np.array([[255, 0], [0, 255]], np.uint8), np.ones((8, 8), np.uint8))
+    Image.fromarray(np.stack([cells] * 3, -1)).save(folder / "base.png")
+    Image.fromarray(np.full((16, 16, 3), (128, 128, 255), np.uint8)).save(folder / "normal.png")
+    Image.fromarray(cells).save(folder / "height.png")
+    image = ImageMaterial(base_color=str(folder / "base.png"),
+                          normal_map=str(folder / "normal.png"),
+                          displacement_map=str(folder / "height.png"), roughness=1.0,
+                          uv_scale=2.0, material_id="cells", license="CC0-1.0")
+    looks = {"image": image, "plain": kb.PrincipledBSDFMaterial(color="white", roughness=1.0),
              "checker": _black_white("checker", 4), "brick": _black_white("brick", 2),
              "noise": _black_white("noise", 3), "voronoi": _black_white("voronoi", 3)}
     out = {}
@@ -126,7 +139,7 @@ def test_blender_procedural_textures_vary_where_the_plain_slab_does_not(blender_
 
     plain = spread("plain")  # path-tracing noise of 4 samples only
     assert plain < 8.0
-    for name in ("checker", "brick", "noise", "voronoi"):
+    for name in ("checker", "brick", "noise", "voronoi", "image"):
         assert spread(name) > 3 * plain, (name, spread(name), plain)
 
 
@@ -157,10 +170,15 @@ def test_movi_c_procedural_materials_are_recorded_deterministic_and_opt_in(tmp_p
     _, b = _movi_c_scene(tmp_path / "b", *opts)
     _, plain = _movi_c_scene(tmp_path / "plain")
     materials = [inst["material"] for inst in a["instances"]]
+    from kubric.docgen import undocumented_scene_fields
+    assert undocumented_scene_fields(scene_a) == []
     assert materials == [inst["material"] for inst in b["instances"]]
     assert all(m["type"] == "ProceduralMaterial" and m["pattern"] in ("checker", "brick", "wave")
                for m in materials)
     assert a["metadata"]["floor_material"]["type"] == "ProceduralMaterial"
+    # the HDRI dome stays out of the lighting, as the recipe's own dome is; objects are not
+    assert a["metadata"]["floor_material"]["indirect_visibility"] is False
+    assert all(m["indirect_visibility"] is True for m in materials)
     assert not any("material" in inst for inst in plain["instances"])
     assert "material_source" not in plain["flags"] and "floor_material" not in plain["metadata"]
     # the materials come from their own rng: every trajectory is the plain scene's

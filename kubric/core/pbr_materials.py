@@ -57,6 +57,9 @@ class ProceduralMaterial(Material):
       offset: added to the generated coordinates before scaling (moves the pattern).
       detail: noise octaves, in [0, 15] (noise only).
       bump: bump-map strength of the factor, in [0, 1] (0 = flat).
+      indirect_visibility: False: rays other than camera rays pass through the surface (as
+        ``FlatMaterial.indirect_visibility``: a dome floor that neither blocks the environment
+        light nor shows in reflections, while camera rays see it lit and shadowed).
     """
 
     pattern = kt.Property("checker", kt.as_choice(PATTERNS), "texture pattern")
@@ -69,12 +72,13 @@ class ProceduralMaterial(Material):
     offset = kt.Vector3D((0.0, 0.0, 0.0), "shift of the generated coordinates")
     detail = kt.Float(2.0, 0.0, 15.0, "noise octaves")
     bump = kt.Float(0.0, 0.0, 1.0, "bump strength")
+    indirect_visibility = kt.Property(True, kt.as_bool(), "visible to non-camera rays")
 
     def describe(self) -> dict:
         """The material as plain JSON-able data."""
         out = {"type": "ProceduralMaterial", "source": "procedural"}
         for name in ("pattern", "color_a", "color_b", "roughness_a", "roughness_b", "metallic",
-                     "scale", "offset", "detail", "bump"):
+                     "scale", "offset", "detail", "bump", "indirect_visibility"):
             out[name] = _rounded(getattr(self, name))
         return out
 
@@ -89,6 +93,7 @@ class ImageMaterial(Material):
       roughness: constant roughness used when there is no roughness map.
       uv_scale: repeats of the images per UV unit (> 0).
       displacement_scale: bump height (m) of a displacement value of 1.
+      indirect_visibility: as :class:`ProceduralMaterial`'s.
       material_id, license, attribution, source_url: where the set comes from.
     """
 
@@ -100,6 +105,7 @@ class ImageMaterial(Material):
     roughness = kt.Float(0.5, 0.0, 1.0, "roughness without a roughness map")
     uv_scale = kt.Float(1.0, 1e-6, 1e6, "image repeats per UV unit")
     displacement_scale = kt.Float(0.01, 0.0, 10.0, "bump height (m) of displacement 1")
+    indirect_visibility = kt.Property(True, kt.as_bool(), "visible to non-camera rays")
     material_id = kt.Property("", kt.as_str(), "id in its material source")
     license = kt.Property("", kt.as_str(), "licence of the images")
     attribution = kt.Property("", kt.as_str(), "authors / publisher")
@@ -110,7 +116,8 @@ class ImageMaterial(Material):
         out = {"type": "ImageMaterial", "source": "images", "material_id": self.material_id,
                "license": self.license, "attribution": self.attribution,
                "source_url": self.source_url,
-               "uv_scale": _rounded(self.uv_scale)}
+               "uv_scale": _rounded(self.uv_scale),
+               "indirect_visibility": self.indirect_visibility}
         for name, prop in (("base_color", "base_color"), ("roughness", "roughness_map"),
                            ("metallic", "metallic_map"), ("normal", "normal_map"),
                            ("displacement", "displacement_map")):

@@ -7,7 +7,10 @@ material drawn from the source with an rng derived from the seed
 (:func:`kubric.assets.material_source.derived_rng`), so the rest of the scene is the scene made
 without the option. Recorded as data: each instance's ``material`` in ``metadata.json``
 (:meth:`describe` of the drawn material, or ``{"source": "recipe"}`` for an object that kept the
-recipe's own) and ``metadata.floor_material``; an image set's licence and attribution are in
+recipe's own) and ``metadata.floor_material``. A floor whose recipe material was invisible to
+non-camera rays (the HDRI domes of MOVi-C–F and toybox) keeps that (``indirect_visibility``
+False): it is lit and shadowed for the camera but neither blocks the HDRI light nor shows in
+reflections, as before; an image set's licence and attribution are in
 ``metadata.material_licenses``. Without ``material_source`` none of these fields exist and the
 options are left out of ``flags``.
 """
@@ -105,6 +108,9 @@ class MaterialOptions:
             if rng.uniform() >= self.material_probability:
                 return {"source": "recipe"}
             material = source.sample(rng, kind)
+            # a dome the recipe kept out of the lighting (HDRI scenes) stays out of it
+            material.indirect_visibility = bool(getattr(obj.material, "indirect_visibility",
+                                                        True))
             obj.material = material
             described = material.describe()
             if described.get("license"):

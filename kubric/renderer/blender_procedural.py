@@ -12,7 +12,9 @@
   through a Normal Map node (tangent space), displacement through a Bump node (``Distance`` =
   ``displacement_scale``) after it.
 
-Every property rebuilds the tree (the materials are static: no keyframes).
+``indirect_visibility`` False: a Mix Shader on Light Path ``Is Camera Ray`` shows the BSDF to
+camera rays and a Transparent BSDF to every other ray. Every property rebuilds the tree (the
+materials are static: no keyframes).
 """
 
 from __future__ import annotations
@@ -40,14 +42,23 @@ def build(view, asset):
     return mat
 
 
-def _fresh_tree(mat):
+def _fresh_tree(mat, indirect_visibility=True):
     nodes, links = mat.node_tree.nodes, mat.node_tree.links
     nodes.clear()
     out = nodes.new("ShaderNodeOutputMaterial")
     out.name = OUTPUT_NODE
     bsdf = nodes.new("ShaderNodeBsdfPrincipled")
     bsdf.name = PRINCIPLED_NODE
-    links.new(bsdf.outputs["BSDF"], out.inputs["Surface"])
+    if indirect_visibility:
+        links.new(bsdf.outputs["BSDF"], out.inputs["Surface"])
+    else:  # camera rays see the BSDF, every other ray passes through
+        path = nodes.new("ShaderNodeLightPath")
+        clear = nodes.new("ShaderNodeBsdfTransparent")
+        mix = nodes.new("ShaderNodeMixShader")
+        links.new(path.outputs["Is Camera Ray"], mix.inputs["Fac"])
+        links.new(clear.outputs[0], mix.inputs[1])
+        links.new(bsdf.outputs["BSDF"], mix.inputs[2])
+        links.new(mix.outputs["Shader"], out.inputs["Surface"])
     return nodes, links, bsdf
 
 
@@ -75,7 +86,7 @@ def _pattern_node(nodes, material):
 
 
 def rebuild_procedural(view, asset, mat, value=None):
-    nodes, links, bsdf = _fresh_tree(mat)
+    nodes, links, bsdf = _fresh_tree(mat, asset.indirect_visibility)
     coords = nodes.new("ShaderNodeTexCoord")
     shift = nodes.new("ShaderNodeVectorMath")
     shift.operation = "ADD"
@@ -117,7 +128,7 @@ def _image(nodes, links, uv, path, non_color):
 
 
 def rebuild_image(view, asset, mat, value=None):
-    nodes, links, bsdf = _fresh_tree(mat)
+    nodes, links, bsdf = _fresh_tree(mat, asset.indirect_visibility)
     coords = nodes.new("ShaderNodeTexCoord")
     uv = nodes.new("ShaderNodeVectorMath")
     uv.operation = "SCALE"
