@@ -21,6 +21,7 @@ from kubric.core.materials import (
     UndefinedMaterial,
 )
 from kubric.core.objects import Cube, FileBasedObject, Object3D, PhysicalObject, Sphere
+from kubric.core.pbr_materials import ImageMaterial, ProceduralMaterial
 from kubric.core.quaternion import Quaternion
 from kubric.core.scene import Scene
 from kubric.core.views import TableView, View
@@ -31,5 +32,5 @@ __all__ = [
     "PointLight", "RectAreaLight", "SpotLight", "UndefinedLight", "FlatMaterial", "Material",
     "PrincipledBSDFMaterial", "Texture", "UndefinedMaterial", "Cube", "FileBasedObject",
     "Object3D", "PhysicalObject", "Sphere", "Quaternion", "Scene", "TableView", "View",
-    "camera_geometry", "Character", "MotionClip",
+    "camera_geometry", "Character", "MotionClip", "ProceduralMaterial", "ImageMaterial",
 ]

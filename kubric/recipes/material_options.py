@@ -31,8 +31,12 @@ def material_location(value):
     text = str(value).strip()
     if text == PROCEDURAL:
         return PROCEDURAL
-    path = pathlib.Path(text).expanduser()
-    if not path.is_dir():
+    try:
+        path = pathlib.Path(text).expanduser()
+        found = path.is_dir()
+    except (OSError, ValueError, RuntimeError):  # a name too long, a NUL byte, no home
+        found = False
+    if not found:
         raise ValueError(f"expected {PROCEDURAL!r} or an existing material source folder, got "
                          f"{text!r}")
     return path
