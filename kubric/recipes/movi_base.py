@@ -46,7 +46,9 @@ from kubric.recipes.common import (
 )
 from kubric.recipes.exposure_options import ExposureOptions
 from kubric.recipes.lens_options import LensOptions
+from kubric.recipes.movi_schema import TRACK_FEATURES
 from kubric.recipes.render_quality import RenderQuality
+from kubric.recipes.rig_options import RigOptions, rig_schema
 
 DYNAMIC_SPAWN_REGION = ((-5.0, -5.0, 1.0), (5.0, 5.0, 5.0))
 STATIC_SPAWN_REGION = ((-7.0, -7.0, 0.0), (7.0, 7.0, 10.0))
@@ -86,7 +88,7 @@ def place_without_overlap(obj, simulator, region, rng, max_trials: int = 1000) -
     return False
 
 
-class MoviBase(ExposureOptions, RenderQuality, Recipe, LensOptions):
+class MoviBase(ExposureOptions, RenderQuality, Recipe, LensOptions, RigOptions):
     """Common options and steps of the MOVi recipes (not registered itself).
 
     ``schema``: the variant's output contract (:mod:`kubric.recipes.movi_schema`).
@@ -132,6 +134,7 @@ class MoviBase(ExposureOptions, RenderQuality, Recipe, LensOptions):
         self.check_tracks()
         check_min_max(self)
         self.check_exposure()
+        self.check_rig()
 
     def renderer_requests(self) -> dict[str, str]:
         out = super().renderer_requests()
@@ -238,9 +241,11 @@ class MoviBase(ExposureOptions, RenderQuality, Recipe, LensOptions):
             if self.save_state:  # the initial state, before the simulation (as upstream)
                 files[BULLET_FILE] = simulator.save_state(state / BULLET_FILE)
             _, collisions = simulator.run(frame_start=0, frame_end=scene.frame_end + 1)
+            self.build_rig(scene)  # cameras=stereo|ring (rig_options): mounted on the camera
             renderer = kb.renderer.create(self.renderer, scene, scratch,
                                           **self.renderer_settings(motion_blur=blur))
             layers = renderer.render()
+            self._views = self.render_views(scene, renderer)  # the rig's other cameras
             self.add_exposure_layers(scene, layers, blur)  # dof, coverage_samples
             self._subframes = (self.subframe_labels(scene, blur), blur)
             files.update(self.event_files(scene, layers, seed))  # events=True
@@ -270,18 +275,26 @@ class MoviBase(ExposureOptions, RenderQuality, Recipe, LensOptions):
         if "uv" in layers:
             render_settings = {**render_settings, "uv": "wrapped modulo 1 (textures repeat)"}
         files = dict(files or {})
-        if self.tracks or self.track_queries is not None:
-            def add_tracks(visible):
+        views = getattr(self, "_views", {})  # cameras=stereo|ring: {camera: its layers}
+        with_tracks = bool(self.tracks or self.track_queries is not None)
+
+        def before_relabel(visible):
+            if with_tracks:
                 files[TRACKS_FILE] = self.track_archive(scene, layers, visible, seed)
-        else:
-            add_tracks = None
+            self.views_before_relabel(scene, layers, views, files)
         extra.add_before_relabel(scene, layers, self.extra_layers)
-        visible = annotate_instances(scene, layers, candidates, before_relabel=add_tracks)
+        visible = annotate_instances(scene, layers, candidates, order=self.rig_order(scene, views),
+                                     before_relabel=before_relabel)
         subframes, shutter = getattr(self, "_subframes", (None, 0.0))  # coverage_samples=K
         files.update(self.coverage_files(scene, subframes, visible, shutter))
         extra.add_after_relabel(scene, layers, self.extra_layers, visible)
+        self.views_after_relabel(scene, layers, views, visible)
         metadata, events = scene_documents(self, scene, seed, visible, collisions,
                                            background=background, renderer=render_settings)
-        write_scene(extra.schema_with(self.schema, self.extra_layers), out_dir, layers,
-                    metadata, events, files=files)
+        self.rig_metadata(scene, metadata)
+        schema = extra.schema_with(self.schema, self.extra_layers)
+        if views:
+            schema = rig_schema(schema, self._rig, TRACK_FEATURES if with_tracks else (),
+                                list(next(iter(views.values()))))
+        write_scene(schema, out_dir, layers, metadata, events, files=files)
         return visible

@@ -1,0 +1,230 @@
+"""The recipes' camera-rig options (``cameras``, ``baseline``, ``num_cameras``): several
+synchronized cameras of one simulated scene (:mod:`kubric.core.rig`; docs/conventions.md).
+
+* ``cameras=mono`` (default): one camera, the scene unchanged.
+* ``cameras=stereo``: the recipe's camera is the **left** camera; a **right** one is mounted
+  ``baseline`` metres along its +x (a rectified pinhole pair). Adds the ``disparity`` layer of
+  the left image (pixels, :func:`kubric.annotations.rig_views.disparity`).
+* ``cameras=ring``: ``num_cameras`` cameras ``cam0`` (the recipe's) … on a horizontal circle
+  about the point of the recipe's camera's view axis nearest the world origin (MOVi's cameras
+  look at the origin), each looking at it.
+
+No random number is drawn, so a rig scene's objects, lights and reference camera are those of
+the mono scene of the same seed. Every further camera renders every layer the reference does
+(the same backend, swapping ``scene.camera``); its files are the standard ones prefixed with its
+name (``right_rgba_00000.png``, ``right_depth_00000.tiff``, ``tracks_right.npz`` …), its packed
+features the scene schema's prefixed with ``cameras/NAME/`` (``instances/cameras/NAME/`` for
+per-instance ones: visibility, boxes, image positions, keypoints), its camera record under
+``metadata.json["camera"]["rig"]["views"][NAME]``. Instances are sorted by their visible pixels
+summed over the cameras; point tracks are the reference camera's surface points seen by each
+camera (:func:`kubric.annotations.rig_views.view_tracks`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+import kubric as kb
+from kubric.annotations.keypoints import annotate_keypoints
+from kubric.annotations.rig_views import check_rectified, disparity, view_instances, view_tracks
+from kubric.annotations.segmentation import instance_labels, pixel_counts
+from kubric.annotations.track_files import tracks_archive
+from kubric.core import rig as rigs
+from kubric.io.layers import LayerFormat
+from kubric.io.scene_dir import TRACKS_FILE
+from kubric.io.schema import Feature, Schema
+from kubric.pipeline import Option, OptionError
+from kubric.recipes import extra_layers as extra
+
+RIGS = ("mono", "stereo", "ring")
+#: metres between the stereo cameras when ``baseline`` is not given
+DEFAULT_BASELINE = 0.5
+#: per-instance fields each camera of a rig has its own of (``metadata["cameras"][NAME]``)
+VIEW_INSTANCE_FIELDS = ("visibility", "bboxes", "bbox_frames", "image_positions",
+                        "keypoints_2d", "keypoints_camera", "keypoints_depth",
+                        "keypoints_visibility", "keypoint_occlusion_reason")
+DISPARITY = Feature("disparity", "float32", ("T", "H", "W", 1), "layer:disparity", "zlib",
+                    unit="px", doc="stereo: x_left − x_right of the surface point seen at the "
+                    "left pixel centre (= f·B/Z for the rectified pair); 0 where nothing is hit")
+BASELINE = Feature("camera/rig/baseline", "float32", (), "camera:rig.baseline", unit="m",
+                   doc="stereo: distance between the left and right camera centres")
+
+
+def camera_layer(camera: str, layer: str) -> str:
+    """The scene-directory layer name of ``layer`` seen by rig camera ``camera``."""
+    return f"{camera}_{layer}"
+
+
+def tracks_file(camera: str) -> str:
+    """The point-track archive of rig camera ``camera`` (the fields of ``tracks.npz``)."""
+    return f"tracks_{camera}.npz"
+
+
+def view_feature(f: Feature, camera: str) -> Feature | None:
+    """``f``'s copy for rig camera ``camera`` (module doc), None for a feature that is the same
+    for every camera (scene metadata, instance physics, collisions)."""
+    kind, arg = f.source_kind, f.source_arg
+    if kind in ("layer", "range"):
+        source = f"{kind}:{camera}_{arg}"
+    elif kind == "camera" and not arg.startswith("rig."):
+        source = f"camera:rig.views.{camera}.{arg}"
+    elif kind == "instance" and arg.split(".")[0] in VIEW_INSTANCE_FIELDS:
+        source = f"instance:cameras.{camera}.{arg}"
+    elif kind == "npz" and arg.startswith(TRACKS_FILE + ":"):
+        source = f"npz:{tracks_file(camera)}:{arg.split(':', 1)[1]}"
+    else:
+        return None
+    name = (f"instances/cameras/{camera}/{f.name[len('instances/'):]}"
+            if f.sequence == "instances/" else f"cameras/{camera}/{f.name}")
+    return dataclasses.replace(f, name=name, source=source)
+
+
+def rig_schema(schema: Schema, rig, extra_features=(), layer_names=None) -> Schema:
+    """``schema`` (plus ``extra_features``, e.g. the tracks) with every per-camera feature for
+    each further camera of ``rig``, their layers (``layer_names``: every layer a camera
+    writes; default those the features read) and, for stereo, ``disparity``."""
+    base = schema.extend(schema.name, tuple(f for f in extra_features if f.name not in schema))
+    table = base.layer_formats
+    layers, features = {}, []
+    for camera in rig.names[1:]:
+        for f in base.features:
+            copy = view_feature(f, camera)
+            if copy is not None:
+                features.append(copy)
+        for name in layer_names or base.image_layers():
+            fmt = table[name]
+            layers[camera_layer(camera, name)] = LayerFormat(
+                camera_layer(camera, fmt.template), fmt.channels, fmt.kind)
+    if rig.kind == "stereo":
+        features += [DISPARITY, BASELINE]
+    names = ", ".join(rig.names)
+    return base.extend(base.name, features, layers,
+                       description=f"{base.description} Camera rig {rig.kind} ({names}).")
+
+
+def ring_distance(camera, frame) -> float:
+    """Metres along ``camera``'s view axis (at ``frame``) to its point nearest the origin."""
+    with camera.at_frame(frame):
+        m = camera.matrix_world
+    return float(max(-m[:3, 3] @ -m[:3, 2], 1e-3))
+
+
+class RigOptions:
+    """Mixin of a MOVi-like recipe: the camera-rig options (module doc)."""
+
+    cameras = Option("mono", "camera rig: mono; stereo (left + right, a rectified pair baseline "
+                     "metres apart, with a disparity layer); ring (num_cameras around the "
+                     "look-at point)", choices=RIGS)
+    baseline = Option(DEFAULT_BASELINE, "cameras=stereo: metres between the two camera centres",
+                      low=1e-3, high=100.0)
+    num_cameras = Option(4, "cameras=ring: how many cameras", low=2, high=16)
+
+    def check_rig(self) -> None:
+        """Options a rig does not combine with fail here, in one line."""
+        if self.cameras == "mono":
+            return
+        clash = next(((k, v) for k, v in (
+            ("dof", self.dof), ("rolling_shutter", self.rolling_shutter),
+            ("coverage_samples", self.coverage_samples), ("events", self.events),
+            ("max_motion_blur", getattr(self, "max_motion_blur", 0.0)),
+            ("lens", self.lens if self.cameras == "stereo" and self.lens != "none" else None),
+        ) if v), None)
+        if clash:
+            raise OptionError(f"{self.name}: cameras={self.cameras} does not combine with "
+                              f"{clash[0]}={clash[1]} (a rig renders pinhole-time layers per "
+                              "camera; stereo is a rectified pinhole pair); drop one")
+
+    def build_rig(self, scene) -> None:
+        """Mount the rig's cameras on the scene's (final) camera; nothing for mono."""
+        self._rig = None
+        if self.cameras == "mono":
+            return
+        ref = scene.camera
+        if self.cameras == "stereo":
+            rig = rigs.stereo(ref, self.baseline)
+        else:
+            rig = rigs.ring(ref, self.num_cameras, ring_distance(ref, scene.frame_start),
+                            scene.frame_start)
+        rig.build(scene)
+        self._rig = rig
+
+    def render_views(self, scene, renderer) -> dict:
+        """{camera name: its layers} of every further camera (the renderer's own labels)."""
+        rig, views = getattr(self, "_rig", None), {}
+        if rig is None:
+            return views
+        for name, camera in list(rig.cameras.items())[1:]:
+            scene.camera = camera
+            views[name] = renderer.render()
+        scene.camera = rig.reference
+        return views
+
+    def rig_order(self, scene, views):
+        """annotate_instances' ``order`` (None for mono): visible pixels over every camera."""
+        if not views:
+            return None
+        labels = instance_labels(scene.assets)
+        other = sum(pixel_counts(v["segmentation"], labels).sum(axis=1) for v in views.values())
+        totals = {a.uid: int(n) for a, n in zip(scene.assets, other, strict=True)}
+
+        def order(candidates):
+            total = [int(np.sum(a.metadata["visibility"])) + totals[a.uid] for a in candidates]
+            ranked = sorted(range(len(candidates)), key=lambda i: -total[i])
+            return [candidates[i] for i in ranked if total[i] > 0]
+        return order
+
+    def _each_view(self, scene, views):
+        for name, view in views.items():
+            scene.camera = self._rig.cameras[name]
+            try:
+                yield name, scene.camera, view
+            finally:
+                scene.camera = self._rig.reference
+
+    def views_before_relabel(self, scene, layers, views, files) -> None:
+        """Per camera, what needs the renderer's labels: extra layers, keypoints, tracks (the
+        reference's surface points, ``files[tracks.npz]`` when written)."""
+        frames = list(scene.frames)
+        for name, camera, view in self._each_view(scene, views):
+            extra.add_before_relabel(scene, view, self.extra_layers)
+            before = {id(a): dict(a.metadata) for a in scene.assets
+                      if isinstance(a, kb.Character)}
+            for person in annotate_keypoints(scene, view):  # this camera's, under "cameras"
+                mine = {k: v for k, v in person.metadata.items() if k in VIEW_INSTANCE_FIELDS}
+                views_of = dict(before[id(person)].get("cameras", {}))
+                views_of[name] = {**views_of.get(name, {}), **mine}
+                person.metadata = {**before[id(person)], "cameras": views_of}
+            if TRACKS_FILE in files:
+                files[tracks_file(name)] = tracks_archive(view_tracks(
+                    files[TRACKS_FILE], camera, frames, view["depth"], view["segmentation"],
+                    layers["segmentation"]))
+
+    def views_after_relabel(self, scene, layers, views, instances) -> None:
+        """Per camera: segmentation relabelled to ``instances``, per-instance boxes and
+        positions, amodal layers; every layer into ``layers`` under its prefixed name; for
+        stereo the disparity layer."""
+        frames = list(scene.frames)
+        for name, camera, view in self._each_view(scene, views):
+            view["segmentation"] = kb.adjust_segmentation_idxs(view["segmentation"],
+                                                               scene.assets, instances)
+            view_instances(name, camera, view["segmentation"], instances, frames,
+                           scene.resolution)
+            extra.add_after_relabel(scene, view, self.extra_layers, instances)
+            layers.update({camera_layer(name, k): v for k, v in view.items()})
+        rig = self._rig
+        if rig is not None and rig.kind == "stereo":
+            check_rectified(rig)
+            layers["disparity"] = disparity(rig.reference, rig.cameras["right"],
+                                            layers["depth"], frames)
+
+    def rig_metadata(self, scene, document: dict) -> None:
+        """``document["camera"]["rig"]``: the rig and each further camera's record."""
+        rig = getattr(self, "_rig", None)
+        if rig is None:
+            return
+        record = rig.metadata()
+        record["views"] = {name: kb.get_camera_info(cam)
+                           for name, cam in list(rig.cameras.items())[1:]}
+        document["camera"]["rig"] = record
