@@ -246,3 +246,30 @@ def test_ring_scene_every_camera_every_layer(tmp_path):
                                   formats=formats).shape == (2, H, W, 3)
     distances = [np.linalg.norm(np.asarray(v["positions"])[0]) for v in rig["views"].values()]
     assert np.allclose(distances, np.linalg.norm(meta["camera"]["positions"][0]), rtol=1e-5)
+
+
+@pytest.mark.blender
+def test_pose_estimation_keypoints_per_camera(tmp_path):
+    """pose_estimation cameras=stereo: each person's right-camera keypoints are OpenCV's
+    projection of the same 3D keypoints with the right camera's recorded extrinsics."""
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    cmd = [sys.executable, "-m", "kubric", "worker", "pose_estimation", "--seed", "3", "--out",
+           str(tmp_path)]
+    for o in ("resolution=32", "frame_end=2", "quality=draft", "character_source=procedural",
+              "motion_source=procedural", "cameras=stereo", "max_num_people=2"):
+        cmd += ["--set", o]
+    proc = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-2000:]
+    meta = json.loads((tmp_path / "scene_00000003" / "metadata.json").read_text())
+    k = np.asarray(meta["camera"]["intrinsics_pixels"])
+    right = meta["camera"]["rig"]["views"]["right"]
+    people = [i for i in meta["instances"] if "keypoints_3d" in i]
+    assert people
+    for person in people:
+        for t, points in enumerate(np.asarray(person["keypoints_3d"], np.float64)):
+            ext = np.asarray(right["extrinsics_opencv"][t])
+            xy = cv2.projectPoints(points, cv2.Rodrigues(ext[:3, :3])[0], ext[:3, 3], k,
+                                   np.zeros(5))[0][:, 0]
+            mine = np.asarray(person["cameras"]["right"]["keypoints_2d"][t])
+            assert np.abs(xy - mine).max() < 1e-3
+            assert np.abs(mine - np.asarray(person["keypoints_2d"][t])).max() > 0.1
