@@ -11,7 +11,8 @@ order. Steps (each a method the variants override):
    settle for ``settle_frames`` frames with friction 1 and restitution 0, then are stopped);
 5. simulate frames ``0 .. frame_end + 1`` (so flow is defined at both ends of the rendered range);
 6. render ``frame_start .. frame_end`` with Blender (linked after the simulation, so it sees the
-   final trajectories only);
+   final trajectories only); with ``cameras=stereo|ring`` the rig's further cameras are mounted
+   on the camera after the simulation and render every layer too (:mod:`kubric.recipes.rig_options`);
 7. annotations: visibility → instance list sorted by visible pixels → segmentation relabelled →
    2D boxes; write the layers, ``metadata.json`` and ``events.json``; with ``tracks=N`` or
    ``track_queries`` also ``tracks.npz`` (:mod:`kubric.annotations.tracks`, docs/tracks.md).
