@@ -128,7 +128,6 @@ class RigOptions:
         clash = next(((k, v) for k, v in (
             ("dof", self.dof), ("rolling_shutter", self.rolling_shutter),
             ("coverage_samples", self.coverage_samples), ("events", self.events),
-            ("max_motion_blur", getattr(self, "max_motion_blur", 0.0)),
             ("lens", self.lens if self.cameras == "stereo" and self.lens != "none" else None),
         ) if v), None)
         if clash:
