@@ -138,8 +138,13 @@ def test_pack_round_trip_per_camera(stereo, tmp_path):
     assert np.array_equal(item["disparity"], layers["disparity"][1, ..., 0])
     assert np.isclose(item["baseline"], BASELINE)
     video = load(tmp_path / "ds", "train", task="multicamera_video")[0]
-    assert video["video"].shape == (2, 3, H, W, 3) and video["camera_names"] == ["reference",
-                                                                                "right"]
+    assert video["video"].shape == (2, 3, H, W, 3) and video["camera_names"] == ["left", "right"]
+    assert np.array_equal(video["video"][1], example["cameras"]["right"]["video"])
+    rig = example["camera"]["rig"]
+    assert np.allclose(rig["extrinsics_opencv"][1],
+                       example["cameras"]["right"]["camera"]["extrinsics_opencv"])
+    assert np.allclose(rig["matrices_world"][0] @ rig["mounts"][1], rig["matrices_world"][1],
+                       atol=1e-5)
 
 
 def test_ring_rig_geometry():

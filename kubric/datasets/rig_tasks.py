@@ -1,7 +1,8 @@
 """Loader tasks of camera-rig datasets (scenes made with ``--set cameras=stereo|ring``;
 :mod:`kubric.recipes.rig_options`). Importing :mod:`kubric.datasets.tasks` registers them.
 A rig dataset's further cameras are the features ``cameras/NAME/...`` (nested:
-``example["cameras"][NAME]["video"]``); the reference camera's are the usual top-level ones.
+``example["cameras"][NAME]["video"]``); the reference camera's are the usual top-level ones; the
+cameras' geometry also has a camera axis R (``camera/rig/matrices_world`` (R, T, 4, 4), ...).
 
 ``stereo`` — one item per (scene, frame) of a stereo dataset:
 
@@ -14,10 +15,11 @@ A rig dataset's further cameras are the features ``cameras/NAME/...`` (nested:
 
 ``multicamera_video`` — one item per scene of any rig dataset, with a **camera axis** first:
 
-* ``video`` (C, T, H, W, 3) uint8, the reference camera first, then ``cameras/...`` in the
-  dataset's order (``camera_names`` (C,): ``reference`` then the names);
-* ``camera_to_world`` (C, T, 4, 4), ``extrinsics_opencv`` (C, T, 4, 4 world → OpenCV camera),
-  ``intrinsics_pixels`` (C, 3, 3); ``video_name``.
+* ``video`` (R, T, H, W, 3) uint8, the cameras in the rig's order (``camera_names`` (R,), the
+  reference first);
+* ``camera_to_world`` (R, T, 4, 4), ``extrinsics_opencv`` (R, T, 4, 4 world → OpenCV camera),
+  ``intrinsics_pixels`` (R, 3, 3): the packed camera-axis features ``camera/rig/...``;
+  ``video_name``.
 """
 
 from __future__ import annotations
@@ -26,8 +28,8 @@ import numpy as np
 
 from kubric.datasets.task_registry import register_task
 
-_PER_CAMERA = ("video", "camera/matrices_world", "camera/intrinsics_pixels",
-               "camera/extrinsics_opencv")
+_RIG_AXIS = ("camera/rig/camera_names", "camera/rig/matrices_world",
+             "camera/rig/extrinsics_opencv", "camera/rig/intrinsics_pixels")
 
 
 @register_task("stereo", features=("video", "disparity", "camera", "cameras", "metadata"),
@@ -48,23 +50,15 @@ def stereo_task(example, frame):
             "frame": np.int32(frame), "video_name": example["metadata"]["video_name"]}
 
 
-def _camera_names(schema) -> list[str]:
-    names = []
-    for f in schema.names:
-        parts = f.split("/")
-        if parts[0] == "cameras" and len(parts) > 2 and parts[1] not in names:
-            names.append(parts[1])
-    return names
-
-
 @register_task("multicamera_video", features=("video", "camera", "cameras", "metadata"),
-               requires=_PER_CAMERA + ("cameras", "metadata/video_name"), wants_schema=True)
-def multicamera_video_task(example, frame, schema=None):
+               requires=("video", "cameras", "metadata/video_name") + _RIG_AXIS)
+def multicamera_video_task(example, frame):
     """Every camera's video with a camera axis first, and each camera's poses."""
-    views = [example] + [example["cameras"][n] for n in _camera_names(schema)]
-    return {"video": np.stack([v["video"] for v in views]),
-            "camera_to_world": np.stack([v["camera"]["matrices_world"] for v in views]),
-            "extrinsics_opencv": np.stack([v["camera"]["extrinsics_opencv"] for v in views]),
-            "intrinsics_pixels": np.stack([v["camera"]["intrinsics_pixels"] for v in views]),
-            "camera_names": ["reference", *_camera_names(schema)],
+    rig = example["camera"]["rig"]
+    names = list(rig["camera_names"])
+    return {"video": np.stack([example["video"]] + [example["cameras"][n]["video"]
+                                                    for n in names[1:]]),
+            "camera_to_world": rig["matrices_world"],
+            "extrinsics_opencv": rig["extrinsics_opencv"],
+            "intrinsics_pixels": rig["intrinsics_pixels"], "camera_names": names,
             "video_name": example["metadata"]["video_name"]}

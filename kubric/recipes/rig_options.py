@@ -50,6 +50,23 @@ DISPARITY = Feature("disparity", "float32", ("T", "H", "W", 1), "layer:disparity
                     "left pixel centre (= f·B/Z for the rectified pair); 0 where nothing is hit")
 BASELINE = Feature("camera/rig/baseline", "float32", (), "camera:rig.baseline", unit="m",
                    doc="stereo: distance between the left and right camera centres")
+#: the rig's cameras along a camera axis R (the reference first): every rig scene has them
+CAMERA_AXIS = (
+    Feature("camera/rig/camera_names", "str", ("R",), "camera:rig.cameras", "text",
+            doc="the rig's camera names, the reference first"),
+    Feature("camera/rig/matrices_world", "float32", ("R", "T", 4, 4),
+            "camera:rig.matrices_world", doc="camera → world per camera and frame (Blender "
+            "camera axes)"),
+    Feature("camera/rig/extrinsics_opencv", "float32", ("R", "T", 4, 4),
+            "camera:rig.extrinsics_opencv", doc="world → OpenCV camera per camera and frame"),
+    Feature("camera/rig/intrinsics_pixels", "float32", ("R", 3, 3),
+            "camera:rig.intrinsics_pixels", doc="OpenCV pixel intrinsics per camera"),
+    Feature("camera/rig/distortion_coefficients", "float32", ("R", 8),
+            "camera:rig.distortion_coefficients", doc="OpenCV's order per camera (zeros: "
+            "pinhole)"),
+    Feature("camera/rig/mounts", "float32", ("R", 4, 4), "camera:rig.mount_matrices",
+            doc="camera → rig (the reference camera's frame), Blender camera axes, metres"),
+)
 
 
 def camera_layer(camera: str, layer: str) -> str:
@@ -97,6 +114,7 @@ def rig_schema(schema: Schema, rig, extra_features=(), layer_names=None) -> Sche
             fmt = table[name]
             layers[camera_layer(camera, name)] = LayerFormat(
                 camera_layer(camera, fmt.template), fmt.channels, fmt.kind)
+    features += [f for f in CAMERA_AXIS if f.name not in base]
     if rig.kind == "stereo":
         features += [DISPARITY, BASELINE]
     names = ", ".join(rig.names)
@@ -224,6 +242,11 @@ class RigOptions:
         if rig is None:
             return
         record = rig.metadata()
-        record["views"] = {name: kb.get_camera_info(cam)
-                           for name, cam in list(rig.cameras.items())[1:]}
+        infos = [document["camera"]] + [kb.get_camera_info(cam)
+                                        for cam in list(rig.cameras.values())[1:]]
+        record["views"] = dict(zip(rig.names[1:], infos[1:], strict=True))
+        for key in ("matrices_world", "extrinsics_opencv", "intrinsics_pixels",
+                    "distortion_coefficients"):  # along the camera axis
+            record[key] = np.stack([np.asarray(info[key]) for info in infos])
+        record["mount_matrices"] = np.stack(list(rig.mounts.values()))
         document["camera"]["rig"] = record
