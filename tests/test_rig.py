@@ -251,6 +251,9 @@ def test_ring_scene_every_camera_every_layer(tmp_path):
                                                  formats=formats, raw=True), n)
         for label in range(1, n + 1):
             assert not np.any((seg == label) & ~amodal[:, label - 1])
+            inst = meta["instances"][label - 1]
+            own = inst if name == "cam0" else inst["cameras"][name]
+            assert own["amodal_area"] == amodal[:, label - 1].sum(axis=(1, 2)).tolist()
         assert file_io.read_layer(scene, f"{prefix}forward_scene_flow_camera",
                                   formats=formats).shape == (2, H, W, 3)
         # each camera's tracks: the reference's points through OpenCV's own fisheye model

@@ -22,6 +22,7 @@ camera (:func:`kubric.annotations.rig_views.view_tracks`).
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 
 import numpy as np
@@ -44,7 +45,8 @@ DEFAULT_BASELINE = 0.5
 #: per-instance fields each camera of a rig has its own of (``metadata["cameras"][NAME]``)
 VIEW_INSTANCE_FIELDS = ("visibility", "bboxes", "bbox_frames", "image_positions",
                         "keypoints_2d", "keypoints_camera", "keypoints_depth",
-                        "keypoints_visibility", "keypoint_occlusion_reason")
+                        "keypoints_visibility", "keypoint_occlusion_reason", "amodal_area",
+                        "amodal_bboxes", "visible_fraction")
 DISPARITY = Feature("disparity", "float32", ("T", "H", "W", 1), "layer:disparity", "zlib",
                     unit="px", doc="stereo: x_left − x_right of the surface point seen at the "
                     "left pixel centre (= f·B/Z for the rectified pair); 0 where nothing is hit")
@@ -129,6 +131,22 @@ def ring_distance(camera, frame) -> float:
     return float(max(-m[:3, 3] @ -m[:3, 2], 1e-3))
 
 
+@contextlib.contextmanager
+def _own_fields(camera: str, assets):
+    """Around an annotation that writes the reference camera's per-instance fields
+    (:data:`VIEW_INSTANCE_FIELDS`) into ``asset.metadata``: what it writes goes to
+    ``metadata["cameras"][camera]`` instead, the reference camera's values stay."""
+    before = [dict(a.metadata) for a in assets]
+    yield
+    for asset, old in zip(assets, before, strict=True):
+        mine = {k: v for k, v in asset.metadata.items() if k in VIEW_INSTANCE_FIELDS
+                and (k not in old or v is not old[k])}
+        if mine:
+            views = dict(old.get("cameras", {}))
+            views[camera] = {**views.get(camera, {}), **mine}
+            asset.metadata = {**old, "cameras": views}
+
+
 class RigOptions:
     """Mixin of a MOVi-like recipe: the camera-rig options (module doc)."""
 
@@ -206,13 +224,8 @@ class RigOptions:
         frames = list(scene.frames)
         for name, camera, view in self._each_view(scene, views):
             extra.add_before_relabel(scene, view, self.extra_layers)
-            before = {id(a): dict(a.metadata) for a in scene.assets
-                      if isinstance(a, kb.Character)}
-            for person in annotate_keypoints(scene, view):  # this camera's, under "cameras"
-                mine = {k: v for k, v in person.metadata.items() if k in VIEW_INSTANCE_FIELDS}
-                views_of = dict(before[id(person)].get("cameras", {}))
-                views_of[name] = {**views_of.get(name, {}), **mine}
-                person.metadata = {**before[id(person)], "cameras": views_of}
+            with _own_fields(name, scene.assets):  # this camera's keypoints
+                annotate_keypoints(scene, view)
             if TRACKS_FILE in files:
                 files[tracks_file(name)] = tracks_archive(view_tracks(
                     files[TRACKS_FILE], camera, frames, view["depth"], view["segmentation"],
@@ -228,7 +241,8 @@ class RigOptions:
                                                                scene.assets, instances)
             view_instances(name, camera, view["segmentation"], instances, frames,
                            scene.resolution)
-            extra.add_after_relabel(scene, view, self.extra_layers, instances)
+            with _own_fields(name, instances):  # this camera's amodal boxes
+                extra.add_after_relabel(scene, view, self.extra_layers, instances)
             layers.update({camera_layer(name, k): v for k, v in view.items()})
         rig = self._rig
         if rig is not None and rig.kind == "stereo":
