@@ -244,7 +244,7 @@ class RigOptions:
             with _own_fields(name, instances):  # this camera's amodal boxes
                 extra.add_after_relabel(scene, view, self.extra_layers, instances)
             layers.update({camera_layer(name, k): v for k, v in view.items()})
-        rig = self._rig
+        rig = getattr(self, "_rig", None)
         if rig is not None and rig.kind == "stereo":
             check_rectified(rig)
             layers["disparity"] = disparity(rig.reference, rig.cameras["right"],
