@@ -322,3 +322,18 @@ def test_movi_f_stereo_with_motion_blur(tmp_path):
     right = _right_layers(scene)["rgba"]
     assert right[..., 3].min() == 255
     assert np.abs(right.astype(int) - file_io.read_layer(scene, "rgba")).mean() > 1
+
+
+def test_tapvid_export_has_every_camera(stereo, tmp_path):
+    import pickle
+
+    from kubric.datasets.exports import exporter
+    root, scene, _, layers = stereo
+    exporter("tapvid")(root, tmp_path / "tracks.pkl")
+    data = pickle.loads((tmp_path / "tracks.pkl").read_bytes())
+    assert sorted(data) == [scene.name, f"{scene.name}:right"]
+    right = dict(np.load(scene / "tracks_right.npz"))
+    entry = data[f"{scene.name}:right"]
+    assert np.array_equal(entry["target_points"], right["target_points"])
+    assert np.array_equal(entry["occluded"], right["occluded"])
+    assert np.array_equal(entry["video"], _right_layers(scene)["rgba"][..., :3])
