@@ -71,9 +71,10 @@ def rig_examples(scene: pathlib.Path) -> dict[str, dict]:
     """``{"SCENE:NAME": video dict}`` of each further camera NAME of a camera-rig scene
     (``cameras=stereo|ring``: ``tracks_NAME.npz`` and the layer ``NAME_rgba``, the same surface
     points as the reference camera's tracks); empty for a one-camera scene."""
-    schema = stored_schema(scene)
+    paths = sorted(scene.glob("tracks_*.npz"))
+    schema = stored_schema(scene) if paths else None
     out = {}
-    for path in sorted(scene.glob("tracks_*.npz")):
+    for path in paths:
         name = path.stem[len("tracks_"):]
         if schema is not None and f"{name}_rgba" in schema.layers:
             out[f"{scene.name}:{name}"] = tapvid_example(
