@@ -56,6 +56,7 @@ ROWS = {
     "bench_shadows": [r'^\{"size": 32, "samples": 1, "cpu_s_per_frame": '],
     "bench_signals": [r'^\{"target": "runner", "signal": "SIGKILL", "runs": 1, .*"guarantees_held": '
                       r"true\}"],
+    "bench_stereo": [r"^  mono +[\d.]+ CPU-s/scene", r"^  stereo +[\d.]+ CPU-s/scene \([\d.]+× mono"],
     "bench_simulator": [r"^ +2 +240 +[\d.]+ +[\d.]+ +[\d.]+ +[\d.]+ +\d+ +\d+$"],
     "bench_tracks": [r"^16 tracks +: +[\d.]+ CPU-s", r"^ratio tracks / render"],
     "bench_viewer": [r"^scene list  HTTP cold", r"^pixel probe \(cold frames\) median"],
@@ -66,8 +67,8 @@ NEEDS = {"bench_codecs": ("tifffile", "cv2"), "bench_scale": ("distributed", "s3
 #: benchmarks that render or import with bpy
 BLENDER = {"bench_assets", "bench_characters", "bench_datasets", "bench_lens", "bench_multiview",
            "bench_quality_calibration", "bench_raycast", "bench_render", "bench_render_levers",
-           "bench_scaling", "bench_scene_cost", "bench_shadows", "bench_signals", "bench_tracks",
-           "bench_viewer"}
+           "bench_scaling", "bench_scene_cost", "bench_shadows", "bench_signals", "bench_stereo",
+           "bench_tracks", "bench_viewer"}
 
 
 def docs_state() -> dict[str, str]:

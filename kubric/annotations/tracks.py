@@ -308,6 +308,28 @@ def occlusion_reasons(xy, cam_z, point_depth, labels, depth, slope, want_label,
     return reason
 
 
+def visible_fraction(xy, reason, point_depth, labels, depth, slope, want_label,
+                     depth_tolerance: float) -> np.ndarray:
+    """(N, T) sub-pixel visible fraction (module doc) of points at ``xy`` (N, T, 2) with
+    occlusion bits ``reason`` and distances ``point_depth``, which should lie on label
+    ``want_label`` (N,), against the layers ``labels`` / ``depth`` (T, H, W) and their slope."""
+    h, w = depth.shape[1:]
+    x, y = xy[..., 0], xy[..., 1]
+    visible = np.zeros(reason.shape)
+    fy = np.clip(np.nan_to_num(y, nan=-2.0), -2.0, h + 2.0) - PIXEL_OFFSET
+    fx = np.clip(np.nan_to_num(x, nan=-2.0), -2.0, w + 2.0) - PIXEL_OFFSET
+    r0, c0 = np.floor(fy), np.floor(fx)
+    for dr in (0, 1):
+        for dc in (0, 1):
+            wgt = (1 - np.abs(fy - (r0 + dr))) * (1 - np.abs(fx - (c0 + dc)))
+            ins, sm, nc = _visible_at((r0 + dr).astype(np.int64), (c0 + dc).astype(np.int64),
+                                      labels, depth, slope, want_label, point_depth, 1.5,
+                                      depth_tolerance, h, w)
+            visible += np.where(ins & sm & nc, wgt, 0.0)
+    visible[(reason & BEHIND_CAMERA) != 0] = 0.0
+    return visible
+
+
 def compute_tracks(camera, frames: Sequence[int], depth, segmentation, assets: Sequence,
                    queries, *, instances: Sequence | None = None,
                    depth_tolerance: float = DEPTH_TOLERANCE) -> dict[str, np.ndarray]:
@@ -395,20 +417,7 @@ def compute_tracks(camera, frames: Sequence[int], depth, segmentation, assets: S
     reason = occlusion_reasons(xy, cam[..., 2], dist, labels, depth, slope, qlabel,
                                depth_tolerance)
     occluded = reason != 0
-    x, y = xy[..., 0], xy[..., 1]
-
-    visible = np.zeros((n, num_frames))
-    fy = np.clip(np.nan_to_num(y, nan=-2.0), -2.0, h + 2.0) - PIXEL_OFFSET
-    fx = np.clip(np.nan_to_num(x, nan=-2.0), -2.0, w + 2.0) - PIXEL_OFFSET
-    r0, c0 = np.floor(fy), np.floor(fx)
-    for dr in (0, 1):
-        for dc in (0, 1):
-            wgt = (1 - np.abs(fy - (r0 + dr))) * (1 - np.abs(fx - (c0 + dc)))
-            ins, sm, nc = _visible_at((r0 + dr).astype(np.int64), (c0 + dc).astype(np.int64),
-                                      labels, depth, slope, qlabel, dist, 1.5, depth_tolerance,
-                                      h, w)
-            visible += np.where(ins & sm & nc, wgt, 0.0)
-    visible[(reason & BEHIND_CAMERA) != 0] = 0.0
+    visible = visible_fraction(xy, reason, dist, labels, depth, slope, qlabel, depth_tolerance)
 
     return {
         "query_points": q.astype(np.float32),

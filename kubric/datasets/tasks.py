@@ -165,5 +165,5 @@ def person_keypoints_task(example, frame):
             "video_name": example["metadata"]["video_name"]}
 
 
-# registers multiview, svr; amodal_segmentation, scene_flow
-from kubric.datasets import extra_tasks, multiview_tasks  # noqa: E402,F401
+# registers multiview, svr; amodal_segmentation, scene_flow; stereo, multicamera_video
+from kubric.datasets import extra_tasks, multiview_tasks, rig_tasks  # noqa: E402,F401

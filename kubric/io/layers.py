@@ -103,6 +103,8 @@ _STANDARD = (
     ("uv", "uv_{:05d}.png", 3, "unit", "UV", "exact"),
     ("defocus", "defocus_{:05d}.tiff", 1, "tiff", "defocus (px)", None),
     ("exposure_flow", "exposure_flow_{:05d}.png", 2, "scaled", "exposure flow (px)", None),
+    # a stereo rig's left image (kubric.recipes.rig_options, kubric.annotations.rig_views)
+    ("disparity", "disparity_{:05d}.tiff", 1, "tiff", "disparity (px)", None),
     # opt-in ground truth from the scene model (kubric.renderer.scene_model_layers), written only
     # when a recipe's extra_layers asks (docs/conventions.md)
     ("amodal_segmentation", "amodal_segmentation_{:05d}.png", 4, "bitmask",

@@ -15,7 +15,7 @@ a schema as the Markdown table of the generated docs.
 
 Dimensions: ``T`` frames (the views of a multi-view scene), ``H`` × ``W`` pixels, ``N``
 instances, ``K`` collision events, ``V`` the frames in which one instance is visible (varies per
-instance), ``P`` points (point tracks), ``C`` classes, ``B`` bands. Features named
+instance), ``P`` points (point tracks), ``C`` classes, ``B`` bands, ``R`` the cameras of a rig. Features named
 ``instances/...`` hold one value per instance (their shape omits ``N``), ``events/collisions/...``
 one per event (shape omits ``K``).
 
@@ -67,7 +67,8 @@ from kubric.io.layers import LAYERS, LayerFormat, layer_table
 DIMS = {"T": "frames", "H": "image height (pixels)", "W": "image width (pixels)",
         "N": "instances", "K": "collision events", "V": "frames in which the instance is visible",
         "P": "points (e.g. point tracks)", "C": "classes (e.g. semantic classes)",
-        "B": "bands (e.g. texture frequency bands)"}
+        "B": "bands (e.g. texture frequency bands)",
+        "R": "cameras of a rig (the reference camera first)"}
 #: feature name prefixes that hold one value per element of a sequence, and its dimension
 SEQUENCES = {"instances/": "N", "events/collisions/": "K"}
 #: feature encodings by name (the classes of :mod:`kubric.io.encodings`)

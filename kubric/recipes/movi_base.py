@@ -11,7 +11,8 @@ order. Steps (each a method the variants override):
    settle for ``settle_frames`` frames with friction 1 and restitution 0, then are stopped);
 5. simulate frames ``0 .. frame_end + 1`` (so flow is defined at both ends of the rendered range);
 6. render ``frame_start .. frame_end`` with Blender (linked after the simulation, so it sees the
-   final trajectories only);
+   final trajectories only); with ``cameras=stereo|ring`` the rig's further cameras are mounted
+   on the camera after the simulation and render every layer too (:mod:`kubric.recipes.rig_options`);
 7. annotations: visibility → instance list sorted by visible pixels → segmentation relabelled →
    2D boxes; write the layers, ``metadata.json`` and ``events.json``; with ``tracks=N`` or
    ``track_queries`` also ``tracks.npz`` (:mod:`kubric.annotations.tracks`, docs/tracks.md).
@@ -46,7 +47,9 @@ from kubric.recipes.common import (
 )
 from kubric.recipes.exposure_options import ExposureOptions
 from kubric.recipes.lens_options import LensOptions
+from kubric.recipes.movi_schema import TRACK_FEATURES
 from kubric.recipes.render_quality import RenderQuality
+from kubric.recipes.rig_options import RigOptions, rig_schema
 
 DYNAMIC_SPAWN_REGION = ((-5.0, -5.0, 1.0), (5.0, 5.0, 5.0))
 STATIC_SPAWN_REGION = ((-7.0, -7.0, 0.0), (7.0, 7.0, 10.0))
@@ -86,7 +89,7 @@ def place_without_overlap(obj, simulator, region, rng, max_trials: int = 1000) -
     return False
 
 
-class MoviBase(ExposureOptions, RenderQuality, Recipe, LensOptions):
+class MoviBase(ExposureOptions, RenderQuality, Recipe, LensOptions, RigOptions):
     """Common options and steps of the MOVi recipes (not registered itself).
 
     ``schema``: the variant's output contract (:mod:`kubric.recipes.movi_schema`).
@@ -132,6 +135,7 @@ class MoviBase(ExposureOptions, RenderQuality, Recipe, LensOptions):
         self.check_tracks()
         check_min_max(self)
         self.check_exposure()
+        self.check_rig()
 
     def renderer_requests(self) -> dict[str, str]:
         out = super().renderer_requests()
@@ -242,9 +246,11 @@ class MoviBase(ExposureOptions, RenderQuality, Recipe, LensOptions):
             if self.save_state:  # the initial state, before the simulation (as upstream)
                 files[BULLET_FILE] = simulator.save_state(state / BULLET_FILE)
             _, collisions = simulator.run(frame_start=0, frame_end=scene.frame_end + 1)
+            self.build_rig(scene)  # cameras=stereo|ring (rig_options): mounted on the camera
             renderer = kb.renderer.create(self.renderer, scene, scratch,
                                           **self.renderer_settings(motion_blur=blur))
             layers = renderer.render()
+            self._views = self.render_views(scene, renderer)  # the rig's other cameras
             self.add_exposure_layers(scene, layers, blur)  # dof, coverage_samples
             self._subframes = (self.subframe_labels(scene, blur), blur)
             files.update(self.event_files(scene, layers, seed))  # events=True
@@ -274,18 +280,26 @@ class MoviBase(ExposureOptions, RenderQuality, Recipe, LensOptions):
         if "uv" in layers:
             render_settings = {**render_settings, "uv": "wrapped modulo 1 (textures repeat)"}
         files = dict(files or {})
-        if self.tracks or self.track_queries is not None:
-            def add_tracks(visible):
+        views = getattr(self, "_views", {})  # cameras=stereo|ring: {camera: its layers}
+        with_tracks = bool(self.tracks or self.track_queries is not None)
+
+        def before_relabel(visible):
+            if with_tracks:
                 files[TRACKS_FILE] = self.track_archive(scene, layers, visible, seed)
-        else:
-            add_tracks = None
+            self.views_before_relabel(scene, layers, views, files)
         extra.add_before_relabel(scene, layers, self.extra_layers)
-        visible = annotate_instances(scene, layers, candidates, before_relabel=add_tracks)
+        visible = annotate_instances(scene, layers, candidates, order=self.rig_order(scene, views),
+                                     before_relabel=before_relabel)
         subframes, shutter = getattr(self, "_subframes", (None, 0.0))  # coverage_samples=K
         files.update(self.coverage_files(scene, subframes, visible, shutter))
         extra.add_after_relabel(scene, layers, self.extra_layers, visible)
+        self.views_after_relabel(scene, layers, views, visible)
         metadata, events = scene_documents(self, scene, seed, visible, collisions,
                                            background=background, renderer=render_settings)
-        write_scene(extra.schema_with(self.schema, self.extra_layers), out_dir, layers,
-                    metadata, events, files=files)
+        self.rig_metadata(scene, metadata)
+        schema = extra.schema_with(self.schema, self.extra_layers)
+        if views:
+            schema = rig_schema(schema, self._rig, TRACK_FEATURES if with_tracks else (),
+                                list(next(iter(views.values()))))
+        write_scene(schema, out_dir, layers, metadata, events, files=files)
         return visible

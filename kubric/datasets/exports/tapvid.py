@@ -2,7 +2,8 @@
 (``tracks.npz``, :mod:`kubric.annotations.track_files`) of every complete scene as one pickle.
 
 It holds a dict ``{scene name: video dict}`` (:func:`export_tapvid`) in the layout of TAP-Vid's
-``tapvid_davis.pkl`` (TAP-Vid's loaders accept it) with two extra keys:
+``tapvid_davis.pkl`` (TAP-Vid's loaders accept it) with two extra keys; a camera-rig scene adds
+one entry ``"SCENE:NAME"`` per further camera NAME (:func:`rig_examples`):
 
 ==============  ==============  =======  ========================================================
 key             shape           dtype    meaning
@@ -31,6 +32,7 @@ from kubric.datasets.exports.scenes import find_scenes
 from kubric.errors import InputError
 from kubric.io.layers import read_layer
 from kubric.io.paths import atomic_write_bytes
+from kubric.io.stored_schema import stored_schema
 
 
 def tapvid_example(tracks: dict, video: np.ndarray) -> dict[str, np.ndarray]:
@@ -65,6 +67,21 @@ def scene_dirs_with_tracks(root) -> list[pathlib.Path]:
     return candidates
 
 
+def rig_examples(scene: pathlib.Path) -> dict[str, dict]:
+    """``{"SCENE:NAME": video dict}`` of each further camera NAME of a camera-rig scene
+    (``cameras=stereo|ring``: ``tracks_NAME.npz`` and the layer ``NAME_rgba``, the same surface
+    points as the reference camera's tracks); empty for a one-camera scene."""
+    paths = sorted(scene.glob("tracks_*.npz"))
+    schema = stored_schema(scene) if paths else None
+    out = {}
+    for path in paths:
+        name = path.stem[len("tracks_"):]
+        if schema is not None and f"{name}_rgba" in schema.layers:
+            out[f"{scene.name}:{name}"] = tapvid_example(
+                read_tracks(path), read_layer(scene, f"{name}_rgba", formats=schema.layers))
+    return out
+
+
 def export_tapvid(root, out) -> tuple[pathlib.Path, int]:
     """Write every complete scene under ``root`` as one TAP-Vid pickle ``out``; returns
     (path, number of scenes)."""
@@ -73,5 +90,6 @@ def export_tapvid(root, out) -> tuple[pathlib.Path, int]:
     for scene in scenes:
         tracks = read_tracks(scene / TRACKS_FILE)
         data[scene.name] = tapvid_example(tracks, read_layer(scene, "rgba"))
+        data.update(rig_examples(scene))
     payload = pickle.dumps(data, protocol=pickle.HIGHEST_PROTOCOL)
     return atomic_write_bytes(payload, out), len(data)
