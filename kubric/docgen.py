@@ -23,6 +23,7 @@ from collections.abc import Callable
 from kubric.io.paths import atomic_write_bytes
 from kubric.io.scene_dir import DATA_RANGES_FILE, EVENTS_FILE, METADATA_FILE
 from kubric.io.schema import dims_markdown, schema_markdown
+from kubric.pipeline.options import Option
 from kubric.pipeline.recipe import Recipe, builtin_schemas, get_recipe, load_builtin
 from kubric.recipes import render_quality
 
@@ -51,10 +52,13 @@ def _default_text(opt) -> str:
     return str(value).lower() if isinstance(value, bool) else str(value)
 
 
-def option_rows(cls) -> list[tuple[str, str, str, str, str]]:
-    """(name, type, default, allowed, meaning) for every option of a recipe class."""
+def option_rows(cls, names=None) -> list[tuple[str, str, str, str, str]]:
+    """(name, type, default, allowed, meaning) for every option of a recipe class (or those in
+    ``names``, as ``cls`` declares or inherits them)."""
+    options = {n: vars(option_owner(cls, n))[n] for n in names} if names is not None \
+        else cls.options
     return [(name, opt.type_name, _default_text(opt), opt.allowed(), opt.help)
-            for name, opt in cls.options.items()]
+            for name, opt in options.items()]
 
 
 def undocumented_options(classes) -> list[str]:
@@ -63,31 +67,95 @@ def undocumented_options(classes) -> list[str]:
             if not opt.help.strip()]
 
 
-def _family_doc(cls) -> str:
-    """The docstrings of the modules that define a recipe and its bases (base modules first,
-    the generic recipe machinery and option mixins left out): the family's shared facts."""
-    docs, seen = [], set()
+def _family_modules(cls) -> list[str]:
+    """The modules that define a recipe and its bases (base modules first; the generic recipe
+    machinery and option mixins left out) whose docstrings hold the family's shared facts."""
+    names = []
     for klass in reversed(cls.__mro__):
         name = klass.__module__
-        if name in seen or name.startswith(("kubric.pipeline", "builtins", "abc")) or \
+        if name in names or name.startswith(("kubric.pipeline", "builtins", "abc")) or \
                 not issubclass(klass, Recipe):
             continue
-        seen.add(name)
         module = sys.modules.get(name)
         if module is not None and module.__doc__:
-            docs.append(rst_to_markdown(inspect.cleandoc(module.__doc__)))
-    return "\n\n".join(docs)
+            names.append(name)
+    return names
+
+
+def _module_doc(name: str) -> str:
+    return rst_to_markdown(inspect.cleandoc(sys.modules[name].__doc__))
+
+
+def option_owner(cls, name: str) -> type:
+    """The class whose declaration of option ``name`` recipe ``cls`` uses (the most derived one
+    of its MRO that declares it)."""
+    for klass in cls.__mro__:
+        if isinstance(vars(klass).get(name), Option):
+            return klass
+    raise KeyError(f"{cls.name} has no option {name!r}; allowed: {', '.join(cls.options)}")
+
+
+def shared_option_groups(classes) -> dict[type, list[str]]:
+    """Classes whose option declarations two or more of ``classes`` use → those recipes' names
+    (most used first): their options are documented once, not in every recipe's table."""
+    users: dict[type, list[str]] = {}
+    for cls in classes:
+        for owner in dict.fromkeys(option_owner(cls, n) for n in cls.options):
+            users.setdefault(owner, []).append(cls.name)
+    shared = {o: names for o, names in users.items() if len(names) >= 2}
+    return dict(sorted(shared.items(), key=lambda item: (-len(item[1]), item[0].__name__)))
+
+
+def _anchor(kind: str, name: str) -> str:
+    return f"{kind}-" + re.sub(r"[^a-z0-9]+", "-", name.lower()).strip("-")
+
+
+def _option_table(rows) -> list[str]:
+    return ["| option | type | default | allowed | meaning |", "|---|---|---|---|---|",
+            *("| " + " | ".join(_cell(c) for c in row) + " |" for row in rows)]
+
+
+def _option_group(owner: type, names: list[str]) -> list[str]:
+    """The Markdown of one shared option group (anchor, heading, users, table)."""
+    users = ", ".join(f"`{n}`" for n in names)
+    if getattr(owner, "name", None) in names:  # a recipe whose options its variants inherit
+        text = f"Declared by `{owner.name}`, used by {users}."
+    else:
+        summary = " ".join((inspect.getdoc(owner) or "").split("\n\n")[0].split())
+        text = f"{rst_to_markdown(summary)} Used by {users}.".lstrip()
+    rows = option_rows(owner, [n for n, o in vars(owner).items() if isinstance(o, Option)])
+    return [f'<a id="{_anchor("options", owner.__name__)}"></a>', "",
+            f"### `{owner.__name__}` options", "", text, "", *_option_table(rows), ""]
+
+
+def _group_link(cls, owner: type) -> str:
+    """A link to a shared option group, naming the group's options that ``cls`` takes from
+    another declaration (a subclass's or its own table's)."""
+    replaced = [n for n, o in vars(owner).items()
+                if isinstance(o, Option) and option_owner(cls, n) is not owner]
+    link = f"[`{owner.__name__}`](#{_anchor('options', owner.__name__)})"
+    return link + (f" (its {', '.join(f'`{n}`' for n in replaced)} replaced)" if replaced else "")
+
+
+#: a recipe's picture in docs/recipes.md (``python -m kubric.docgen_pictures`` renders them)
+RECIPE_PICTURE = "img/recipes/{name}.png"
 
 
 def recipes_markdown() -> str:
-    """``docs/recipes.md``: the built-in recipes and their options."""
+    """``docs/recipes.md``: the built-in recipes and their options. Text and options shared by
+    several recipes are written once (shared pipelines, shared option groups) and linked from
+    each recipe; a recipe's picture is shown when ``docs/img/recipes/NAME.png`` exists."""
     classes = [cls for _, cls in sorted(load_builtin().items())]
     out = [GENERATED_NOTE, "", "# Recipes", "",
            "A recipe turns a seed and its options into one scene directory (see "
            "[the scene format](scene-format.md)). Run one with `kubric worker RECIPE --seed S --out "
            "DIR [--set option=value ...]`, many with `kubric generate RECIPE --out DIR --scenes N`; "
            "`kubric recipes` prints the same tables. Every option is checked before anything "
-           "renders; a bad value fails in one line naming the value and what is allowed.", ""]
+           "renders; a bad value fails in one line naming the value and what is allowed.", "",
+           "What several recipes share is written once: the [shared pipelines](#shared-pipelines) "
+           "and the [shared options](#shared-options); each family and recipe below links to "
+           "them and lists only what is its own. The pictures are the first frame of a tiny "
+           "scene (seed 0) rendered by `python -m kubric.docgen_pictures`.", ""]
     out += ["## Render quality (`quality`, `samples`, `denoise`)", "",
             rst_to_markdown(inspect.cleandoc(render_quality.__doc__)), "",
             "Each recipe's `default` (the calibration's tables: [render cost](render-cost.md)):",
@@ -98,14 +166,54 @@ def recipes_markdown() -> str:
     families: dict[str, list] = {}
     for cls in classes:
         families.setdefault(cls.__module__, []).append(cls)
+    uses: dict[str, list[str]] = {}
     for module_name, members in families.items():
-        doc = _family_doc(members[0])
-        if doc:
-            out += [f"## Family `{module_name}`", "", doc, ""]
+        for name in _family_modules(members[0]):
+            uses.setdefault(name, []).append(module_name)
+    shared_modules = [m for m, fams in uses.items() if len(fams) >= 2]
+    out += ["## Shared pipelines", ""]
+    for name in shared_modules:
+        fams = ", ".join(f"`{f}`" for f in uses[name])
+        out += [f'<a id="{_anchor("pipeline", name)}"></a>', "", f"### `{name}`", "",
+                f"Used by the families {fams}.", "", _module_doc(name), ""]
+    groups = shared_option_groups(classes)
+    family_of = {cls.name: cls.__module__ for cls in classes}
+    local = {o: family_of[names[0]] for o, names in groups.items()
+             if len({family_of[n] for n in names}) == 1}  # groups inside one family
+    out += ["## Shared options", "",
+            "Option groups declared once and used by recipes of several families (a group used "
+            "within one family is listed with that family; a recipe that changes a default "
+            "lists that option in its own table instead).", ""]
+    for owner, names in groups.items():
+        if owner not in local:
+            out += _option_group(owner, names)
+    pictures = docs_dir()
+    for module_name, members in families.items():
+        own = [m for m in _family_modules(members[0]) if m not in shared_modules]
+        base = [m for m in _family_modules(members[0]) if m in shared_modules]
+        out += [f"## Family `{module_name}`", ""]
+        if base:
+            out += ["Builds on " + ", ".join(f"[`{m}`](#{_anchor('pipeline', m)})"
+                                             for m in base) + ".", ""]
+        out += [x for m in own for x in (_module_doc(m), "")]
+        for owner, names in groups.items():
+            if local.get(owner) == module_name:
+                out += _option_group(owner, names)
         for cls in members:
-            out += [f"### `{cls.name}`", "", cls.description(), "",
-                    "| option | type | default | allowed | meaning |", "|---|---|---|---|---|"]
-            out += ["| " + " | ".join(_cell(c) for c in row) + " |" for row in option_rows(cls)]
+            out += [f"### `{cls.name}`", "", cls.description(), ""]
+            picture = RECIPE_PICTURE.format(name=cls.name)
+            if (pictures / picture).is_file():
+                out += [f"![{cls.name}, seed 0, first frame]({picture})", ""]
+            mine = [n for n in cls.options if option_owner(cls, n) not in groups]
+            if mine:
+                out += _option_table(option_rows(cls, mine))
+            else:
+                out.append("No options of its own.")
+            linked = dict.fromkeys(option_owner(cls, n) for n in cls.options
+                                   if option_owner(cls, n) in groups)
+            if linked:
+                out += ["", "Shared options: " + ", ".join(_group_link(cls, o) for o in linked)
+                        + "."]
             out.append("")
     return "\n".join(out).rstrip() + "\n"
 

@@ -62,3 +62,38 @@ def test_undocumented_scene_fields_are_reported(tmp_path):
         "collisions.sound", "file sparkle_{i:05d}.png", "flags.mystery (not an option of movi_a)",
         "instances.aura", "metadata.vibe"]
     shutil.rmtree(scene)
+
+
+def test_recipes_page_says_shared_text_once_and_every_default_where_linked():
+    """docs/recipes.md writes a family's shared text once (no paragraph twice), and each recipe's
+    options appear, with the default the recipe really uses (its ``options``), either in its own
+    table or in a shared group its section links to."""
+    import re
+
+    from kubric.pipeline.recipe import load_builtin
+    page = docgen.recipes_markdown()
+    paragraphs = [p for p in page.split("\n\n") if len(p) > 80 and not p.startswith(
+        ("|", "Shared options:", "Builds on"))]
+    assert len(paragraphs) == len(set(paragraphs)), [p[:60] for p in paragraphs
+                                                     if paragraphs.count(p) > 1]
+    groups = {m.group(1): m.group(2) for m in re.finditer(
+        r'<a id="(options-[^"]+)"></a>\n\n### `[^`]+` options\n(.*?)(?=\n<a id=|\n## |\n### )',
+        page, re.S)}
+
+    def rows(text):
+        return {line.split(" | ")[0][2:]: line.split(" | ")[2]
+                for line in text.splitlines() if line.startswith("| ") and
+                not line.startswith(("| option ", "| `"))}
+    for name, cls in load_builtin().items():
+        section = re.search(rf"\n### `{name}`\n(.*?)(?=\n### |\n## |\Z)", page, re.S).group(1)
+        shown = rows(section)
+        for anchor, replaced in re.findall(r"\]\(#(options-[^)]+)\)(?: \(its ([^)]+) replaced\))?",
+                                           section):
+            group = rows(groups[anchor])
+            for option in re.findall(r"`([^`]+)`", replaced):
+                group.pop(option)
+            assert not set(group) & set(shown), (name, anchor, set(group) & set(shown))
+            shown.update(group)
+        assert set(shown) == set(cls.options), (name, set(shown) ^ set(cls.options))
+        for option, opt in cls.options.items():
+            assert shown[option] == docgen._cell(docgen._default_text(opt)), (name, option)

@@ -98,12 +98,14 @@ def wait_for(predicate, what, timeout=10.0):
     raise AssertionError(f"timed out after {timeout} s waiting for {what}")
 
 
-def open_scene(browser, url, name=SCENE):
-    browser.get(url + "#/scene/" + name)
+def open_scene(browser, url, name=SCENE, link=""):
+    """Open scene ``name`` (``link``: a deep link's ``?...`` part) in a fresh page and wait until
+    its main picture has arrived and the stage's loading state is gone."""
+    browser.get(url + "#/scene/" + name + link)
     browser.refresh()  # a fresh page per test (hash changes alone keep the old state)
     wait_for(lambda: browser.execute_script(
-        "const i = document.getElementById('main-img'); return i && i.complete && i.naturalWidth"),
-        "the main image")
+        "const i = document.getElementById('main-img'); return i && i.complete && i.naturalWidth"
+        " && !document.getElementById('stage').classList.contains('loading')"), "the main image")
 
 
 def image_pixels(browser, element_id):

@@ -55,9 +55,9 @@ def synthetic_scene(directory, seed=3, success=True):
 
 
 @contextlib.contextmanager
-def serving(path, **kwargs):
-    """(host, port) of a viewer serving ``path``, in a background thread."""
-    service = ViewerService(DirectorySource(path), **kwargs)
+def serving(path, service_class=ViewerService, **kwargs):
+    """(host, port) of a viewer (a ``service_class``) serving ``path``, in a background thread."""
+    service = service_class(DirectorySource(path), **kwargs)
     server = make_server(service, "127.0.0.1", 0)
     thread = threading.Thread(target=server.serve_forever, args=(0.05,), daemon=True)
     thread.start()

@@ -13,7 +13,10 @@ and by ``kubric inspect``'s contact sheets. Each layer is drawn by its layer kin
   the values as RGB;
 * ``labels`` (``segmentation``): the label palette (:mod:`kubric.io.palette`: the colours of
   segmentation PNGs; 0 black, then distinct hues); :func:`outline` draws only the label
-  boundaries, transparent elsewhere, for the overlay.
+  boundaries, transparent elsewhere, for the overlay; :func:`fill` every object pixel in its
+  colour, the background transparent (the filled overlay, blended over the main layer);
+* event streams (``events.h5``): :func:`event_picture` accumulates the events of a time
+  interval per pixel, drawn by the sign of ON − OFF counts (:data:`EVENT_COLOURS`).
 """
 
 from __future__ import annotations
@@ -53,6 +56,41 @@ def outline(labels: np.ndarray) -> np.ndarray:
     rgba[..., :3] = label_palette(max(int(lab.max()) + 1, 2))[lab]
     rgba[..., 3] = np.where(edge, 255, 0)
     return rgba
+
+
+def fill(labels: np.ndarray) -> np.ndarray:
+    """(H, W, 4) uint8: every pixel of label > 0 in its palette colour (alpha 255), the
+    background (label 0) transparent (alpha 0)."""
+    lab = labels[..., 0].astype(np.int64)
+    rgba = np.zeros((*lab.shape, 4), dtype=np.uint8)
+    rgba[..., :3] = label_palette(max(int(lab.max()) + 1, 2))[lab]
+    rgba[..., 3] = np.where(lab > 0, 255, 0)
+    return rgba
+
+
+#: accumulated event frame colours by the sign of (ON − OFF) events at a pixel
+EVENT_COLOURS = {"none": (0, 0, 0), "on": (230, 57, 70), "off": (69, 123, 237),
+                 "balanced": (150, 150, 150)}
+
+
+def event_picture(x, y, p, height: int, width: int) -> np.ndarray:
+    """(H, W, 3) uint8 accumulated event frame of events at columns ``x``, rows ``y``,
+    polarities ``p`` (1 ON, 0 OFF): per pixel, more ON than OFF events ``EVENT_COLOURS["on"]``
+    (red), more OFF ``"off"`` (blue), as many of each (at least one) ``"balanced"`` (grey),
+    none black."""
+    x, y = np.asarray(x, np.int64), np.asarray(y, np.int64)
+    if x.size and (x.min() < 0 or y.min() < 0 or x.max() >= width or y.max() >= height):
+        raise ValueError(f"event pixels outside the {width}x{height} image: columns "
+                         f"{x.min()}..{x.max()}, rows {y.min()}..{y.max()}")
+    sign = np.where(np.asarray(p) > 0, 1, -1)
+    flat = y * width + x
+    net = np.bincount(flat, weights=sign, minlength=height * width).reshape(height, width)
+    count = np.bincount(flat, minlength=height * width).reshape(height, width)
+    out = np.zeros((height, width, 3), dtype=np.uint8)
+    out[(count > 0) & (net == 0)] = EVENT_COLOURS["balanced"]
+    out[net > 0] = EVENT_COLOURS["on"]
+    out[net < 0] = EVENT_COLOURS["off"]
+    return out
 
 
 def kind_of(layer: str, kind: str | LayerKind | None = None) -> LayerKind:

@@ -9,7 +9,9 @@ Endpoints (all answers are computed by :class:`~kubric.viewer.service.ViewerServ
 ``/api/scene/NAME``                        metadata, events, worker command, palette
 ``/api/frame/NAME/LAYER/INDEX.png``        one layer frame as a picture (``?lo=&hi=``: the
                                            depth range in metres, or ``hi`` = full-colour flow
-                                           magnitude); LAYER ``outline`` = segmentation edges
+                                           magnitude); LAYER ``outline`` / ``fill`` =
+                                           segmentation edges / filled objects (RGBA), LAYER
+                                           ``events`` = the frame's accumulated events
 ``/api/probe/NAME/INDEX?row=R&col=C``      the pixel's label, instance, asset, depth, flows,
                                            world point
 ``/api/tracks/NAME``                       up to 64 point tracks (positions, occlusion)

@@ -19,6 +19,8 @@ from kubric.viewer.source import SceneError, SceneSource
 CACHE_BYTES = 512 * 2**20
 #: tracks sent to the page (evenly spread)
 MAX_TRACKS = 64
+#: pictures the server derives from a scene's files beyond its layers
+DERIVED_PICTURES = ("outline", "fill", "events")
 
 
 class LRUCache:
@@ -119,6 +121,9 @@ class ViewerService:
         except SceneError as err:
             command = f"# {err}"
         layers = self.source.vocabulary(name)
+        if "events" in summary["layers"]:
+            layers["events"] = {"label": "events (ON red, OFF blue)", "kind": "events",
+                                "adjustable_range": False}
         for layer in summary["layers"]:  # the range a depth-like layer is first drawn over
             if layers[layer]["adjustable_range"]:
                 try:
@@ -146,12 +151,45 @@ class ViewerService:
         return self.cache.get_or_make(("frame", name, layer, index),
                                       lambda: self.source.frame(name, layer, index))
 
+    def event_frame(self, name: str, index: int) -> np.ndarray:
+        """(H, W, 3) uint8 accumulated events of frame ``index``: those with
+        t_{index−1} < t ≤ t_index (t_i = i / frame_rate s, the file frames' times; frame 0: t ≤ 0),
+        drawn by :func:`kubric.annotations.pictures.event_picture`."""
+        meta = self.source.metadata(name)
+        info = meta.get("metadata", {})
+        count, rate = self.summary(name)["num_frames"] or 1, info.get("frame_rate")
+        if not 0 <= index < count:
+            raise KeyError(f"event frame {index} is outside frames 0..{count - 1}")
+        if not isinstance(rate, int | float) or isinstance(rate, bool) or rate <= 0:
+            raise SceneError(f"{name}/metadata.json: frame_rate {rate!r} is not a positive "
+                             "number: the event frames cannot be timed")
+        stream = self.cache.get_or_make(("events", name), lambda: self._event_array(name))
+        x, y, t, p = stream
+        w, h = info.get("resolution") or meta["camera"]["resolution"]
+        t0, t1 = (index - 1) * 1e6 / rate, index * 1e6 / rate
+        lo = 0 if index == 0 else int(np.searchsorted(t, t0, side="right"))
+        hi = int(np.searchsorted(t, t1, side="right"))
+        return render.event_picture(x[lo:hi], y[lo:hi], p[lo:hi], h, w)
+
+    def _event_array(self, name: str) -> np.ndarray:
+        """(4, N) int64 rows x, y, t (µs), p of the scene's event stream; KeyError when none."""
+        events = self.source.event_stream(name)
+        if events is None:
+            raise KeyError(f"{name} has no event stream (events.h5: --set events=true)")
+        return np.stack([np.asarray(events[k], np.int64) for k in ("x", "y", "t", "p")]) \
+            .reshape(4, -1)
+
     def picture_png(self, name: str, layer: str, index: int, lo: float | None = None,
                     hi: float | None = None) -> bytes:
-        """PNG bytes of a layer frame (``layer`` may also be ``outline``: segmentation edges)."""
+        """PNG bytes of a layer frame; ``layer`` may also be one of :data:`DERIVED_PICTURES`
+        (segmentation ``outline`` / ``fill`` overlays, accumulated ``events``)."""
         def make():
-            if layer == "outline":
-                return render.to_png(render.outline(self.frame(name, "segmentation", index)))
+            if layer in ("outline", "fill"):
+                labels = self.frame(name, "segmentation", index)
+                return render.to_png(render.outline(labels) if layer == "outline"
+                                     else render.fill(labels))
+            if layer == "events":
+                return render.to_png(self.event_frame(name, index))
             fmt = self.source.formats(name).get(layer)
             return render.to_png(render.picture(layer, self.frame(name, layer, index), lo, hi,
                                                 fmt.kind if fmt is not None else None))

@@ -20,7 +20,9 @@ import time
 import numpy as np
 
 from kubric.annotations.track_files import read_tracks
-from kubric.errors import KubricError
+from kubric.errors import InputError, KubricError
+from kubric.extras import EXTRA_OF, message
+from kubric.io.event_h5 import EVENTS_H5_FILE, read_events
 from kubric.io.json_io import read_json
 from kubric.io.layers import LAYER_LABELS, LAYERS, LayerFormat, frame_filename, read_frame
 from kubric.io.scene_dir import EVENTS_FILE, METADATA_FILE, SCHEMA_FILE, SUCCESS_FILE, TRACKS_FILE
@@ -67,6 +69,11 @@ class SceneSource(abc.ABC):
     @abc.abstractmethod
     def tracks(self, name: str) -> dict | None:
         """The scene's point tracks (``tracks.npz`` fields) or None when it has none."""
+
+    def event_stream(self, name: str) -> dict | None:
+        """The scene's event stream ({"x", "y", "t" µs, "p"}, t sorted) or None when it has
+        none (default: no source holds events)."""
+        return None
 
     def output_root(self, name: str) -> str:
         """The ``--out`` that regenerates the scene in place (shown in its worker command)."""
@@ -174,6 +181,8 @@ class DirectorySource(SceneSource):
                    layers=[n for n, fmt in self.formats(name).items()
                            if (directory / frame_filename(fmt.template, 0)).is_file()],
                    has_tracks=(directory / TRACKS_FILE).is_file())
+        if (directory / EVENTS_H5_FILE).is_file():  # drawn as accumulated event frames
+            row["layers"].append("events")
         frames = frame_count_error(name, row["num_frames"], directory, self.formats(name),
                                    row["layers"])
         if frames is not None:  # a count the files do not back: never sent to the page
@@ -224,6 +233,18 @@ class DirectorySource(SceneSource):
             raise KeyError(str(err)) from None
         except (ValueError, OSError, RuntimeError) as err:  # truncated / corrupt files
             raise SceneError(f"{name}: cannot decode frame {index} of {layer}: {err}") from None
+
+    def event_stream(self, name: str) -> dict | None:
+        path = self.directory(name) / EVENTS_H5_FILE
+        if not path.is_file():
+            return None
+        try:
+            return read_events(path)
+        except ModuleNotFoundError as err:
+            raise SceneError(message(err.name if err.name in EXTRA_OF else "h5py",
+                                       f"showing {name}'s events")) from None
+        except InputError as err:
+            raise SceneError(f"{name}/{EVENTS_H5_FILE} is unreadable: {err}") from None
 
     def tracks(self, name: str) -> dict | None:
         directory = self.directory(name)

@@ -59,7 +59,7 @@ const KVList = (function () {
 
   async function show(app) {
     document.getElementById("crumb").textContent = "";
-    const tableBox = KV.el("div", {});
+    const tableBox = KV.el("div", {}, KV.el("p", { class: "muted" }, "loading the scene list…"));
     const filter = KV.el("input", {
       type: "search", id: "filter", placeholder: "filter: recipe, seed, split, status…",
       value: state.filter, size: 40,

@@ -1,6 +1,9 @@
 "use strict";
 // One scene: main layer + overlays with a frame scrubber and play/pause, a hover readout of what
 // the files hold at a pixel, instance details on click, a 3D view and the reproducing command.
+// While a frame's picture is on its way the stage says so ("loading …"); the address bar links to
+// the view on screen (deeplink.js). Pictures are scaled by whole factors without smoothing
+// (style.css: image-rendering pixelated), so labels and ids never blend.
 // The layers' names and how they are drawn come from the server (scene.layers: label, kind,
 // adjustable_range and its first range), which derives them from kubric.io.layers.
 const KVScene = (function () {
@@ -37,12 +40,63 @@ const KVScene = (function () {
     const start = (s.scene.metadata.metadata || {}).frame_start;
     s.frameLabel.textContent = `frame ${s.frame} / ${s.T - 1}` +
       (start !== undefined ? ` (scene frame ${start + s.frame})` : "");
-    s.img.src = mainUrl();
+    loadMain(mainUrl());
     s.outline.src = KV.frameUrl(s.name, "outline", s.frame);
+    if (s.hasSegmentation) s.fill.src = KV.frameUrl(s.name, "fill", s.frame);
     drawOverlay();
     if (s.view3d) s.view3d.setFrame(s.frame);
     if (s.selected !== null) showInstance(s.selected);
     if (s.lastProbe) probe(s.lastProbe[0], s.lastProbe[1]);
+  }
+
+  // the main picture: the stage shows "loading …" until it arrives (or fails)
+  function loadMain(url) {
+    if (s.img.getAttribute("src") === url && s.img.complete) return;
+    const info = layerInfo(s.layer);
+    s.loading.textContent = `loading ${info.label || s.layer}, frame ${s.frame}…`;
+    s.stage.classList.add("loading");
+    s.img.src = url;
+  }
+
+  function viewState() {
+    const overlays = KVLink.OVERLAYS.filter((o) => s.boxes[o].checked);
+    return { frame: s.frame, layer: s.layer, overlays, opacity: Number(s.opacity.value) };
+  }
+
+  function updateLink() {
+    const hash = KVLink.format(s.name, viewState());
+    if (location.hash !== hash) history.replaceState(null, "", hash);
+    s.link.setAttribute("href", hash);
+  }
+
+  // a deep link's view (deeplink.js), each value checked against the scene; what cannot be
+  // shown is named in a card and left at the scene's default
+  function applyLink(view, layers) {
+    const refused = [];
+    if (view.layer !== undefined) {
+      if (layers.includes(view.layer)) { s.layer = view.layer; s.select.value = view.layer; }
+      else refused.push(`layer ${JSON.stringify(view.layer)} (this scene: ${layers.join(", ")})`);
+    }
+    for (const o of view.overlays || []) {
+      if (s.boxes[o] && !s.boxes[o].disabled) s.boxes[o].checked = true;
+      else refused.push(`overlay ${JSON.stringify(o)} (available: ${KVLink.OVERLAYS.filter((x) => !s.boxes[x].disabled).join(", ")})`);
+    }
+    if (view.opacity !== undefined) {
+      const p = Number(view.opacity);
+      if (view.opacity !== "" && Number.isInteger(p) && p >= 0 && p <= 100) s.opacity.value = p;
+      else refused.push(`opacity ${JSON.stringify(view.opacity)} (a whole number 0..100)`);
+    }
+    let frame = 0;
+    if (view.frame !== undefined) {
+      const f = Number(view.frame);
+      if (view.frame !== "" && Number.isInteger(f) && f >= 0 && f < s.T) frame = f;
+      else refused.push(`frame ${JSON.stringify(view.frame)} (0..${s.T - 1})`);
+    }
+    for (const key of Object.keys(view)) {
+      if (!["frame", "layer", "overlays", "opacity"].includes(key)) refused.push(`parameter ${JSON.stringify(key)} (allowed: frame, layer, overlays, opacity)`);
+    }
+    if (refused.length) s.linkError.replaceChildren(KV.errorCard("this link asks for what the scene cannot show", refused.join("; ")));
+    return frame;
   }
 
   function drawOverlay() {
@@ -50,7 +104,9 @@ const KVScene = (function () {
     ctx.clearRect(0, 0, s.canvas.width, s.canvas.height);
     const k = s.scale, opacity = s.opacity.value / 100;
     s.outline.style.opacity = s.showOutline.checked ? opacity : 0;
+    s.fill.style.opacity = s.boxes.fill.checked ? opacity : 0;
     s.canvas.style.opacity = opacity;
+    updateLink();
     if (s.showBoxes.checked) {
       (s.scene.metadata.instances || []).forEach((inst, i) => {
         const at = (inst.bbox_frames || []).indexOf(s.frame);
@@ -190,7 +246,8 @@ const KVScene = (function () {
     const labels = scene.summary.layers.map((l) => layerInfo(l).label);
     const layers = scene.summary.layers.filter((l, i) => labels.indexOf(labels[i]) === i);
     s.layer = layers[0];
-    const select = KV.el("select", { id: "layer-select", onchange: (e) => {
+    s.layers = layers;
+    const select = s.select = KV.el("select", { id: "layer-select", onchange: (e) => {
       s.layer = e.target.value;
       showRange();
       setFrame(s.frame);
@@ -203,17 +260,21 @@ const KVScene = (function () {
       const box = KV.el("input", { type: "checkbox", id, disabled, onchange: drawOverlay });
       return [box, KV.el("label", { for: id }, label)];
     };
-    const [outlineBox, outlineLabel] = check("overlay-outline", "segmentation outlines", !scene.summary.layers.includes("segmentation"));
+    s.hasSegmentation = scene.summary.layers.includes("segmentation");
+    const [outlineBox, outlineLabel] = check("overlay-outline", "segmentation outlines", !s.hasSegmentation);
+    const [fillBox, fillLabel] = check("overlay-fill", "segmentation (filled)", !s.hasSegmentation);
     const [boxesBox, boxesLabel] = check("overlay-boxes", "2D boxes", false);
     const [tracksBox, tracksLabel] = check("overlay-tracks", "point tracks", !scene.summary.has_tracks);
     const hasKeypoints = (scene.metadata.instances || []).some((inst) => inst.keypoints_2d);
     const [keypointsBox, keypointsLabel] = check("overlay-keypoints", "keypoints", !hasKeypoints);
     s.showOutline = outlineBox; s.showBoxes = boxesBox; s.showTracks = tracksBox;
     s.showKeypoints = keypointsBox;
+    s.boxes = { outline: outlineBox, fill: fillBox, boxes: boxesBox, tracks: tracksBox, keypoints: keypointsBox };
     s.opacity = KV.el("input", { type: "range", min: 0, max: 100, value: 90, id: "overlay-opacity", oninput: drawOverlay });
     s.slider = KV.el("input", { type: "range", min: 0, max: s.T - 1, value: 0, id: "frame-slider",
       oninput: (e) => setFrame(Number(e.target.value)) });
     s.frameLabel = KV.el("span", { id: "frame-label" }, "");
+    s.link = KV.el("a", { id: "deep-link", title: "a link that reopens this view" }, "link to this view");
     const play = KV.el("button", { id: "play", onclick: () => {
       if (s.timer) { clearInterval(s.timer); s.timer = null; play.textContent = "▶ play"; return; }
       const rate = (scene.metadata.metadata || {}).frame_rate || 12;
@@ -222,13 +283,13 @@ const KVScene = (function () {
     } }, "▶ play");
     return [
       KV.el("div", { class: "toolbar" }, "layer ", select, s.depthBox),
-      KV.el("div", { class: "toolbar" }, "overlays ", outlineBox, outlineLabel, boxesBox, boxesLabel,
+      KV.el("div", { class: "toolbar" }, "overlays ", fillBox, fillLabel, outlineBox, outlineLabel, boxesBox, boxesLabel,
         tracksBox, tracksLabel, keypointsBox, keypointsLabel, " opacity ", s.opacity),
-      KV.el("div", { class: "toolbar" }, play, s.slider, s.frameLabel),
+      KV.el("div", { class: "toolbar" }, play, s.slider, s.frameLabel, s.link),
     ];
   }
 
-  async function show(app, name) {
+  async function show(app, name, view) {
     document.getElementById("crumb").textContent = "/ " + name;
     app.replaceChildren(KV.el("p", { class: "muted" }, "loading " + name + "…"));
     let scene;
@@ -242,15 +303,20 @@ const KVScene = (function () {
     const scale = Math.max(1, Math.floor(Math.min(640 / W, 480 / H)));
     s = { name, scene, W, H, scale, T: numFrames(scene), frame: 0, selected: null, timer: null };
     s.img = KV.el("img", { id: "main-img", width: W * scale, height: H * scale, alt: "frame" });
+    s.fill = KV.el("img", { id: "fill-img", width: W * scale, height: H * scale, alt: "" });
     s.outline = KV.el("img", { id: "outline-img", width: W * scale, height: H * scale, alt: "" });
     s.canvas = KV.el("canvas", { id: "overlay-canvas", width: W * scale, height: H * scale });
-    const stage = KV.el("div", { class: "stage", id: "stage", style: `width:${W * scale + 2}px` }, s.img, s.outline, s.canvas);
+    s.loading = KV.el("div", { id: "stage-loading" }, "loading…");
+    const stage = s.stage = KV.el("div", { class: "stage loading", id: "stage", style: `width:${W * scale + 2}px` },
+      s.img, s.fill, s.outline, s.canvas, s.loading);
     s.imgError = KV.el("div", { id: "frame-error" });
+    s.linkError = KV.el("div", { id: "link-error" });
     s.img.addEventListener("error", async () => {
+      if (s) s.stage.classList.remove("loading");
       const url = s.img.src;
       try { await KV.getJSON(url); } catch (err) { if (s) s.imgError.replaceChildren(KV.errorCard("cannot show this frame", err.message)); }
     });
-    s.img.addEventListener("load", () => { if (s) s.imgError.replaceChildren(); });
+    s.img.addEventListener("load", () => { if (s) { s.imgError.replaceChildren(); s.stage.classList.remove("loading"); } });
     s.canvas.addEventListener("mousemove", (e) => { const px = pixelAt(e); if (px) probe(px[0], px[1]); });
     s.canvas.addEventListener("click", async (e) => {
       const px = pixelAt(e);
@@ -272,7 +338,7 @@ const KVScene = (function () {
       sm.error ? KV.errorCard("incomplete scene", sm.error) : "",
       ...buildControls(scene),
       KV.el("div", { class: "layout" },
-        KV.el("div", { style: `width:${Math.max(W * scale + 2, 420)}px` }, stage, s.imgError,
+        KV.el("div", { style: `width:${Math.max(W * scale + 2, 420)}px` }, stage, s.imgError, s.linkError,
           KV.el("div", { class: "panel", style: "margin-top:12px" }, KV.el("h3", {}, "reproduce"),
             KV.el("code", { class: "cmd", id: "worker-command" }, scene.worker_command)),
           KV.el("div", { class: "panel", style: "margin-top:12px" }, KV.el("h3", {}, "camera & trajectories"), canvas3d)),
@@ -286,8 +352,10 @@ const KVScene = (function () {
         s.imgError.append(KV.errorCard("tracks", err.message));
       }
     }
-    setFrame(0);
-    for (let i = 1; i < s.T; i++) new Image().src = KV.frameUrl(name, s.layer, i);  // warm the cache
+    const first = applyLink(view || {}, s.layers);
+    showRange();
+    setFrame(first);
+    for (let i = 0; i < s.T; i++) if (i !== first) new Image().src = KV.frameUrl(name, s.layer, i);  // warm the cache
   }
   document.addEventListener("keydown", (e) => {  // ← / → step through frames, space plays
     if (!s || e.target.tagName === "INPUT" || e.target.tagName === "SELECT") return;
