@@ -10,7 +10,7 @@ DEMO_VENV  := .venv-demo
 DEMO_BIN   := $(DEMO_VENV)/bin
 DEMO_STAMP := $(DEMO_VENV)/.installed
 
-.PHONY: install test test-fast demo bench lint docs clean slurm browser testmodels
+.PHONY: install test test-fast demo bench lint docs docs-pictures clean slurm browser testmodels
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -70,6 +70,9 @@ docs: $(STAMP)  # regenerate the generated pages, then build the HTML site into 
 	$(BIN)/python -m kubric.docgen
 	$(BIN)/python -m pip install --quiet 'mkdocs>=1.6'
 	$(BIN)/mkdocs build --strict --quiet
+
+docs-pictures: $(STAMP)  # one small rendered picture per recipe for docs/recipes.md (a few CPU-minutes)
+	$(BIN)/python -m kubric.docgen_pictures
 
 slurm:  # Debian's Slurm, so that the single-node Slurm test runs instead of being skipped (root)
 	apt-get install -y --no-install-recommends slurmctld slurmd slurm-client munge
