@@ -217,16 +217,18 @@ def test_hover_shows_the_files_instance_and_depth(browser, server, dataset, shot
         "const c = document.getElementById('visibility-plot');"
         "const d = c.getContext('2d').getImageData(0, 0, c.width, c.height).data;"
         "let n = 0; for (let i = 3; i < d.length; i += 4) n += d[i] > 0; return n;") > 100
-    browser.execute_script("document.getElementById('overlay-boxes').click();"
-                           "document.getElementById('overlay-tracks').click();"
-                           "document.getElementById('overlay-outline').click();")
+    browser.execute_script("for (const id of ['overlay-boxes', 'overlay-tracks', "
+                           "'overlay-outline']) { const b = document.getElementById(id); "
+                           "if (!b.checked) b.click(); }")
     time.sleep(0.3)
     browser.save_screenshot(str(shots / "viewer_scene.png"))
 
 
 def test_segmentation_overlay_toggles(browser, server, dataset, shots):
     url, _ = server
-    open_scene(browser, url)
+    open_scene(browser, url)  # outlines on by default, when the scene has segmentation
+    assert browser.find_element("id", "overlay-outline").is_selected()
+    open_scene(browser, url, link="?overlays=")  # a link that asks for none
     wait_for(lambda: browser.execute_script(
         "const i = document.getElementById('outline-img'); return i.complete && i.naturalWidth"),
         "the outline image")

@@ -90,7 +90,7 @@ def test_the_stage_says_loading_until_the_frame_arrives(browser, folder):  # noq
 def test_label_layers_are_drawn_pixel_for_pixel(browser, url, folder):  # noqa: F811
     """Segmentation scaled k× on screen: every screen pixel is its file pixel's palette colour
     (nearest neighbour: no colour between two labels appears)."""
-    open_scene(browser, url, SCENE, "?layer=segmentation&frame=1")
+    open_scene(browser, url, SCENE, "?layer=segmentation&frame=1&overlays=")
     seg = np.asarray(Image.open(folder / SCENE / "segmentation_00001.png"))
     shot = stage_pixels(browser)
     k = shot.shape[1] // W
@@ -108,6 +108,13 @@ def test_a_deep_link_reopens_the_view(browser, url):  # noqa: F811
     assert got["error"] == ""
     assert got["hash"] == got["link"] == \
         f"#/scene/{SCENE}?frame=2&layer=depth&overlays=fill,boxes&opacity=40"
+    # without overlays in the link, the outlines; with an empty list, none
+    open_scene(browser, url, SCENE, "?frame=1")
+    assert state(browser)["hash"] == \
+        f"#/scene/{SCENE}?frame=1&layer=rgba&overlays=outline&opacity=90"
+    open_scene(browser, url, SCENE, "?frame=1&overlays=")
+    assert state(browser)["hash"] == f"#/scene/{SCENE}?frame=1&layer=rgba&overlays=&opacity=90"
+    open_scene(browser, url, SCENE, "?frame=2&layer=depth&overlays=fill,boxes&opacity=40")
     # change the view: the address follows, and opening it again gives the same view
     browser.execute_script("const s = document.getElementById('frame-slider'); s.value = 1;"
                            "s.dispatchEvent(new Event('input'));"
@@ -133,7 +140,7 @@ def test_a_deep_link_to_what_the_scene_lacks_is_named(browser, url):  # noqa: F8
 def test_filled_segmentation_blends_over_rgb(browser, url, folder):  # noqa: F811
     """At opacity p the filled overlay shows (1 − p)·RGB + p·colour on the object and leaves
     the background as it was."""
-    open_scene(browser, url, SCENE, "?frame=1&opacity=50")
+    open_scene(browser, url, SCENE, "?frame=1&opacity=50&overlays=")
     wait_for(lambda: browser.execute_script(
         "const i = document.getElementById('fill-img'); return i.complete && i.naturalWidth"),
         "the fill picture")

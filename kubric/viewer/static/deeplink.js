@@ -26,7 +26,7 @@ const KVLink = {
 
   format(name, view) {
     const parts = [`frame=${view.frame}`, `layer=${encodeURIComponent(view.layer)}`];
-    if (view.overlays.length) parts.push("overlays=" + view.overlays.join(","));
+    parts.push("overlays=" + view.overlays.join(","));  // empty: none (absent: the default)
     parts.push(`opacity=${view.opacity}`);
     return "#/scene/" + encodeURIComponent(name) + "?" + parts.join("&");
   },

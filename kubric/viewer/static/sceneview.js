@@ -77,6 +77,8 @@ const KVScene = (function () {
       if (layers.includes(view.layer)) { s.layer = view.layer; s.select.value = view.layer; }
       else refused.push(`layer ${JSON.stringify(view.layer)} (this scene: ${layers.join(", ")})`);
     }
+    // no overlays in the link: the segmentation outlines, so a scene opens with its objects marked
+    if (view.overlays === undefined && !s.boxes.outline.disabled) s.boxes.outline.checked = true;
     for (const o of view.overlays || []) {
       if (s.boxes[o] && !s.boxes[o].disabled) s.boxes[o].checked = true;
       else refused.push(`overlay ${JSON.stringify(o)} (available: ${KVLink.OVERLAYS.filter((x) => !s.boxes[x].disabled).join(", ")})`);
