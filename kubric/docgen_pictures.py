@@ -7,7 +7,8 @@ Each recipe renders one tiny scene (seed :data:`SEED`, :data:`PICTURE_OPTIONS`: 
 RGB frame, composited over black, is enlarged :data:`ZOOM` × without smoothing and written as the
 recipe's picture. Then ``docs/recipes.md`` is regenerated (it shows the pictures that exist). The
 whole set took 269 s wall and 90 CPU-s on the loaded, shared 2-core machine (2026-11-26; MOVi-C
-84 s of it, converting 50 pybullet_data objects on first use); ``--only NAME[,NAME]`` renders
+84 s of it, converting 50 pybullet_data objects on first use), 176 s wall and 66 CPU-s again with
+that collection cached; ``--only NAME[,NAME]`` renders
 some (``make docs-pictures`` all).
 """
 
