@@ -101,8 +101,8 @@ def wait_for(predicate, what, timeout=10.0):
 def open_scene(browser, url, name=SCENE, link=""):
     """Open scene ``name`` (``link``: a deep link's ``?...`` part) in a fresh page and wait until
     its main picture has arrived and the stage's loading state is gone."""
-    browser.get(url + "#/scene/" + name + link)
-    browser.refresh()  # a fresh page per test (hash changes alone keep the old state)
+    browser.get("about:blank")  # a fresh page per test (a hash change alone keeps the old
+    browser.get(url + "#/scene/" + name + link)  # page, which may rewrite the address first)
     wait_for(lambda: browser.execute_script(
         "const i = document.getElementById('main-img'); return i && i.complete && i.naturalWidth"
         " && !document.getElementById('stage').classList.contains('loading')"), "the main image")
