@@ -93,9 +93,10 @@ def _hub_summary(name: str, result, out) -> str:
 def cmd_hub(args) -> int:
     """``kubric export hf|webdataset`` (the exports of a packed dataset)."""
     name = args.export_format
-    own = dict(scenes_per_shard=args.scenes_per_shard, license_id=args.license) \
-        if name == "hf" else dict(samples_per_shard=args.samples_per_shard,
-                                  per_frame=args.per_frame)
+    shard = {} if getattr(args, "scenes_per_shard", None) is None else \
+        {"scenes_per_shard": args.scenes_per_shard}  # None: the export's own default
+    own = dict(license_id=args.license, **shard) if name == "hf" else \
+        dict(samples_per_shard=args.samples_per_shard, per_frame=args.per_frame)
     result, code = _run(name, args, splits=args.splits, scenes=args.scenes,
                         progress=not args.no_progress, **own)
     if result:
@@ -150,7 +151,9 @@ def add_parser(subparsers) -> None:
                          "folders a packed dataset was made from: the card's licences, "
                          "attribution and command")
         hub.add_argument("--no-progress", action="store_true", help="no progress bar")
-    parsers["hf"].add_argument("--scenes-per-shard", type=int, default=1000)
+    parsers["hf"].add_argument("--scenes-per-shard", type=int, default=None,
+                               help="scenes per Parquet file (default 100: bounds the writer's "
+                               "memory; docs/hub.md)")
     parsers["hf"].add_argument("--license", default=None, help="the Hub licence id (default: "
                                "the assets' own when all are CC0 / CC-BY 4.0, else other)")
     parsers["webdataset"].add_argument("--samples-per-shard", type=int, default=1000)

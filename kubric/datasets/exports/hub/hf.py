@@ -148,8 +148,15 @@ def _size_category(n: int) -> str:
     return "n>1M"
 
 
+#: scenes per Parquet file by default: one row group per scene, and the writer keeps ~7–19 KB
+#: of state per row group until its file closes (docs/hub.md's benchmark), so a shard of 100
+#: bounds that at ~2 MB whatever the dataset's size; 100 MOVi scenes at 256² are a few hundred
+#: MB, the file size the Hub's viewer and streaming readers handle well
+SCENES_PER_SHARD = 100
+
+
 def export_hf(source, out, splits: str = "train=0.9,validation=0.1",
-              scenes_per_shard: int = 1000, scenes=None, license_id: str | None = None,
+              scenes_per_shard: int = SCENES_PER_SHARD, scenes=None, license_id: str | None = None,
               progress: bool = True) -> dict:
     """Write the Hugging Face folder ``out`` (module doc) from ``source``: a packed dataset, or a
     folder of scene directories (packed first with ``splits``). ``scenes`` (the scene folder of a
