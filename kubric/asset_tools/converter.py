@@ -48,7 +48,7 @@ from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from kubric.asset_tools import physics
+from kubric.asset_tools import gltf_pbr, physics
 from kubric.asset_tools.physics import DECOMPOSITION_METHODS
 from kubric.asset_tools.writer import Collision, dumps, package_object, write_manifest
 from kubric.assets.gltf_refs import check_gltf
@@ -59,7 +59,7 @@ from kubric.errors import InputError
 MESH_SUFFIXES = (".obj", ".glb", ".gltf", ".ply", ".stl")
 REPORT_NAME = "conversion_report.json"
 #: version of what :func:`convert_one` writes; archives from another version are converted again.
-CONVERTER_VERSION = 2
+CONVERTER_VERSION = 3
 #: roughness of materials made from a fallback colour (no specular information in a URDF).
 FALLBACK_ROUGHNESS = 0.5
 _PALETTE_BLOCK = 4  # pixels per palette colour (side of the square block)
@@ -73,6 +73,8 @@ class ConvertJob:
     own; ``color_from`` names where it came from (the ``metadata["appearance"]`` value).
     ``repair``: a module-level function ``mesh -> (mesh, counts)`` applied after loading (e.g.
     :func:`kubric.asset_tools.shapenet.repair_mesh`); ``counts`` is stored as ``metadata["repairs"]``.
+    ``max_extent``: scale the loaded mesh so that its bounding box's largest side is this many
+    metres (after ``scale``); the factor is stored as ``metadata["normalised_scale"]``.
     """
 
     asset_id: str
@@ -85,6 +87,7 @@ class ConvertJob:
     color: tuple | None = None
     color_from: str = "urdf_color"
     repair: object = None
+    max_extent: float | None = None
 
 
 def as_rgba(value, what: str) -> tuple[float, float, float, float]:
@@ -374,10 +377,17 @@ def _with_appearance(parts, fallback, color_from: str):
 
 def convert_one(job: ConvertJob, out_dir: str | os.PathLike) -> dict:
     """Convert one mesh into ``out_dir``; returns the manifest entry (raises on failure)."""
-    mesh, look = load_visual(job.mesh_path, job.up, job.scale, job.color, job.color_from)
+    parts = None
+    if gltf_pbr.is_gltf(job.mesh_path):  # glTF: each part keeps its own PBR material
+        mesh, parts, look = gltf_pbr.load_gltf_parts(job.mesh_path, job.scale, job.color)
+    else:
+        mesh, look = load_visual(job.mesh_path, job.up, job.scale, job.color, job.color_from)
+    if job.max_extent is not None:
+        look["normalised_scale"] = gltf_pbr.normalise_extent(mesh, parts or [], job.max_extent)
     repairs = None
     if job.repair is not None:
         mesh, repairs = job.repair(mesh)
+        parts = None if parts is None else [mesh]
     closed, watertight = physics.make_watertight(mesh)
     hulls, method = physics.decompose(closed if watertight else mesh, job.decomposition)
     metadata = dict(job.metadata)
@@ -390,7 +400,8 @@ def convert_one(job: ConvertJob, out_dir: str | os.PathLike) -> dict:
     return package_object(job.asset_id, mesh, out_dir,
                           collision=Collision("hulls", hulls=hulls, method=method),
                           license=job.license, metadata=metadata,
-                          physics_parts=[closed] if watertight else None, visual_format="glb")
+                          physics_parts=[closed] if watertight else None, visual_format="glb",
+                          visual_parts=parts)
 
 
 def read_entry(archive: Path) -> dict | None:
