@@ -82,14 +82,16 @@ def _to_gltf(v):
     return np.stack([v[:, 0], v[:, 2], -v[:, 1]], axis=1).astype(np.float32)
 
 
-def textured_glb(path: Path) -> Path:
-    """Write the four-part GLB described in the module doc; returns ``path``."""
+def textured_glb(path: Path, scale: float = 1.0) -> Path:
+    """Write the four-part GLB described in the module doc (every length times ``scale``);
+    returns ``path``."""
     images = _images()
     order = list(images)
     geometry = {name: _box(*PARTS[name]) for name in "ABD"}
     x0, x1, z0, z1 = PARTS["C"]
     geometry["C"] = _quads([[(x0, FRONT_Y, z0), (x1, FRONT_Y, z0), (x1, FRONT_Y, z1),
                              (x0, FRONT_Y, z1)]])
+    geometry = {k: (v * np.float32(scale), uv, t) for k, (v, uv, t) in geometry.items()}
     blob, views, accessors = bytearray(), [], []
 
     def add(data: bytes, target=None) -> int:
