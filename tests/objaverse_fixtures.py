@@ -59,7 +59,7 @@ class HubServer(LocalServer):
     changed. ``requests``: ``(method, path, Range header)`` in order.
     """
 
-    def __init__(self, files: dict[str, bytes], cut_once=(), corrupt_once=()):  # noqa: PLW0231
+    def __init__(self, files: dict[str, bytes], cut_once=(), corrupt_once=()):
         # (LocalServer's own routes are not used: its start / stop are)
         self.files = dict(files)
         self.sha = {rel: hashlib.sha256(data).hexdigest() for rel, data in self.files.items()}
