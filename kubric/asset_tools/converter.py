@@ -49,6 +49,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from kubric.asset_tools import gltf_pbr, physics
+from kubric.asset_tools.mesh_load import as_rgba, split_parts
 from kubric.asset_tools.physics import DECOMPOSITION_METHODS
 from kubric.asset_tools.writer import Collision, dumps, package_object, write_manifest
 from kubric.assets.gltf_refs import check_gltf
@@ -88,20 +89,6 @@ class ConvertJob:
     color_from: str = "urdf_color"
     repair: object = None
     max_extent: float | None = None
-
-
-def as_rgba(value, what: str) -> tuple[float, float, float, float]:
-    """Validate a colour given as 3 or 4 numbers in [0, 1]; returns RGBA (alpha 1 if absent)."""
-    import numpy as np
-
-    try:
-        vals = np.asarray(value, dtype=np.float64).reshape(-1)
-    except (TypeError, ValueError):
-        vals = np.zeros(0)
-    if vals.size not in (3, 4) or not np.all(np.isfinite(vals)) or \
-            np.any(vals < 0) or np.any(vals > 1):
-        raise InputError(f"{what}: a colour must be 3 or 4 numbers in [0, 1], got {value!r}")
-    return tuple(float(v) for v in (*vals, 1.0)[:4])
 
 
 def _sanitize_id(rel: Path) -> str:
@@ -164,7 +151,7 @@ def load_visual(path: str, up: str = "z", scale=1.0, color=None,
     fallback = None if color is None else as_rgba(color, f"color of {path}")
     resolver = trimesh.resolvers.FilePathResolver(path, allow_anywhere=True)  # "../x.png" maps
     loaded = trimesh.load(path, process=True, resolver=resolver)
-    mesh, look = _with_appearance(_split_parts(loaded), fallback, color_from)
+    mesh, look = _with_appearance(split_parts(loaded), fallback, color_from)
     if suffix in (".glb", ".gltf") or up == "y":
         mesh.apply_transform(trimesh.transformations.rotation_matrix(np.pi / 2, (1, 0, 0)))
     elif up != "z":
@@ -201,23 +188,6 @@ def _check_obj_vertices(path: str) -> None:
 def load_mesh(path: str, up: str = "z", scale=1.0, color=None):
     """Like :func:`load_visual` but returns only the mesh."""
     return load_visual(path, up, scale, color)[0]
-
-
-def _split_parts(loaded) -> list:
-    """The triangle meshes of a loaded file (scene transforms applied), one per material."""
-    trimesh = uninterrupted_import("trimesh")
-
-    if isinstance(loaded, trimesh.Scene):
-        if not loaded.geometry:
-            raise InputError("the file holds no geometry")
-        parts = list(loaded.dump(concatenate=False))
-    else:
-        parts = [loaded]
-    for part in parts:
-        if not isinstance(part, trimesh.Trimesh):
-            raise InputError(f"not a triangle mesh (got {type(part).__name__}, "
-                             "e.g. a point cloud)")
-    return parts
 
 
 def _part_look(part):

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from kubric.asset_tools.mesh_load import as_rgba, split_parts
 from kubric.core.imports import uninterrupted_import
 from kubric.errors import InputError
 
@@ -99,11 +100,9 @@ def load_gltf_parts(path: str, scale=1.0, color=None):
     """
     import numpy as np
     trimesh = uninterrupted_import("trimesh")
-    from kubric.asset_tools.converter import _split_parts, as_rgba
-
     fallback = None if color is None else as_rgba(color, f"color of {path}")
     resolver = trimesh.resolvers.FilePathResolver(path, allow_anywhere=True)
-    parts = _split_parts(trimesh.load(path, process=True, resolver=resolver))
+    parts = split_parts(trimesh.load(path, process=True, resolver=resolver))
     factors = np.broadcast_to(np.asarray(scale, dtype=np.float64), (3,))
     if not np.all(factors > 0):
         raise InputError(f"scale must be positive, got {scale!r}")

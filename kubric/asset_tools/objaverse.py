@@ -93,9 +93,10 @@ class _NoRedirect(urllib.request.HTTPRedirectHandler):
 def announced(url: str) -> tuple[int | None, str | None]:
     """(size, SHA-256) the server announces for ``url``: a ``HEAD`` request, redirects not
     followed; the Hub's ``X-Linked-Size`` / ``X-Linked-Etag`` (Git LFS files: the etag is the
-    content's SHA-256), else ``Content-Length`` and no checksum."""
+    content's SHA-256), else a direct answer's ``Content-Length`` and no checksum."""
     opener = urllib.request.build_opener(_NoRedirect)
     req = urllib.request.Request(url, method="HEAD", headers={"User-Agent": USER_AGENT})
+    redirected = False
     try:
         resp = opener.open(req, timeout=60)  # noqa: S310 - http(s) only (fetch_file checks)
         headers = resp.headers
@@ -103,10 +104,11 @@ def announced(url: str) -> tuple[int | None, str | None]:
     except urllib.error.HTTPError as err:
         if err.code not in (301, 302, 303, 307, 308):
             raise DownloadError(f"HEAD {url}: HTTP {err.code} {err.reason}") from None
-        headers = err.headers
+        headers, redirected = err.headers, True
     except (urllib.error.URLError, OSError) as err:
         raise DownloadError(f"HEAD {url}: {err}") from None
-    size = headers.get("X-Linked-Size") or headers.get("Content-Length")
+    # a redirect's own Content-Length is its body's, not the file's
+    size = headers.get("X-Linked-Size") or (None if redirected else headers.get("Content-Length"))
     etag = (headers.get("X-Linked-Etag") or "").strip().strip('"').removeprefix("W/").strip('"')
     sha = etag.lower() if len(etag) == 64 and all(c in "0123456789abcdefABCDEF" for c in etag) \
         else None
