@@ -10,10 +10,9 @@ from __future__ import annotations
 
 import argparse
 
-import numpy as np
+from extra_layers_picture import write_row
 
 from kubric.io.layers import read_image_dict
-from kubric.io.png_io import encode_png
 
 
 def main() -> None:
@@ -23,10 +22,7 @@ def main() -> None:
     ap.add_argument("--frame", type=int, default=0)
     args = ap.parse_args()
     panels = [read_image_dict(s, ("rgba",))["rgba"][args.frame][..., :3] for s in args.scenes]
-    gap = np.full((panels[0].shape[0], 4, 3), 255, np.uint8)
-    row = np.concatenate([part for p in panels for part in (p, gap)][:-1], axis=1)
-    with open(args.out, "wb") as f:
-        f.write(encode_png(np.ascontiguousarray(row)))
+    write_row(panels, args.out, gap=4)
 
 
 if __name__ == "__main__":
