@@ -19,11 +19,6 @@ OBJECTS = {"a1": ("000-000", "cc0", "mug", 1.0), "b2": ("000-000", "by", "mug", 
            "c3": ("000-000", "by-nc", "chair", 1.0), "d4": ("000-001", "by-sa", None, 0.5)}
 
 
-@pytest.fixture(autouse=True)
-def _isolated_cache(tmp_path, monkeypatch):
-    monkeypatch.setenv("KUBRIC_CACHE_DIR", str(tmp_path / "cache"))
-
-
 @pytest.fixture(scope="module")
 def files(tmp_path_factory):
     return objaverse_files(tmp_path_factory.mktemp("glbs"), OBJECTS)
@@ -125,3 +120,21 @@ def test_bad_selections_are_one_line(tmp_path, files):
             build_objaverse(tmp_path, uids=["a1", "zz"], base_url=hub.url, progress=False)
         with pytest.raises(InputError, match="refusing to convert all of Objaverse"):
             build_objaverse(tmp_path, base_url=hub.url, progress=False)
+
+
+def test_toybox_takes_the_source_with_lvis_classes(two_runs, tmp_path):
+    """ToyBox (raycast, 3 views of 32 px) on the Objaverse source: the LVIS category is the
+    semantic class, each instance carries its object's licence."""
+    from collection_fixtures import run_worker
+
+    out, *_ = two_runs
+    run_worker("toybox", 1, tmp_path, (f"objects={out}", "num_categories=1", "resolution=32",
+                                       "num_views=3", "split_ratio=1,1,1", "renderer=raycast",
+                                       "max_num_objects=4"))
+    meta = json.loads((tmp_path / "scene_00000001" / "metadata.json").read_text())
+    assert meta["metadata"]["semantic_classes"] == ["background", "mug"]
+    manifest = json.loads((out / "manifest.json").read_text())["assets"]
+    assert meta["instances"]
+    for inst in meta["instances"]:
+        assert inst["license"] == manifest[inst["asset_id"]]["license"]
+        assert inst["category"] == "mug"

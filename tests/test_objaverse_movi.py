@@ -45,6 +45,9 @@ def scene(tmp_path_factory):
 
 def test_metadata_coco_and_card_carry_each_objects_licence(scene):
     root, manifest = scene
+    from kubric.docgen import undocumented_scene_fields
+
+    assert undocumented_scene_fields(root / "scenes" / "scene_00000005") == []
     meta = json.loads((root / "scenes" / "scene_00000005" / "metadata.json").read_text())
     assert len(meta["instances"]) >= 1
     for inst in meta["instances"]:
