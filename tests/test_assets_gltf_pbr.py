@@ -131,3 +131,25 @@ def test_cycles_shows_texture_metal_roughness_and_alpha_mask(converted, tmp_path
     assert (hole[:, 3] < 30).all()                       # alpha 0 below the cutoff: not drawn
     assert (leaf[:, 3] > 200).all() and (leaf[:, 1] > 2 * leaf[:, 0]).all()
     assert np.argmax(GREEN) == 1
+
+
+def test_a_gltf_with_its_buffer_and_images_in_files_converts_alike(tmp_path, converted):
+    """The same model as ``.gltf`` JSON + ``.bin`` buffer + PNG files beside it."""
+    root, _ = converted
+    doc, blob = _glb(textured_glb(tmp_path / "x.glb").read_bytes())
+    src = tmp_path / "src" / "sub"
+    src.mkdir(parents=True)
+    for i, image in enumerate(doc["images"]):
+        view = doc["bufferViews"][image.pop("bufferView")]
+        start = view.get("byteOffset", 0)
+        (src / f"tex_{i}.png").write_bytes(blob[start:start + view["byteLength"]])
+        image.pop("mimeType")
+        image["uri"] = f"tex_{i}.png"
+    doc["buffers"][0]["uri"] = "parts.bin"
+    (src / "parts.bin").write_bytes(blob)
+    (src / "parts.gltf").write_text(json.dumps(doc))
+    report = convert_collection(tmp_path / "src", tmp_path / "out", "PBR", "CC0-1.0",
+                                workers=1, progress=False)
+    assert report["converted"] == 1, report
+    ours = AssetSource(tmp_path / "out").db["sub/parts"]["metadata"]["materials"]
+    assert ours == AssetSource(root / "out").db["parts"]["metadata"]["materials"]
