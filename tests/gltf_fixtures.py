@@ -82,9 +82,14 @@ def _to_gltf(v):
     return np.stack([v[:, 0], v[:, 2], -v[:, 1]], axis=1).astype(np.float32)
 
 
-def textured_glb(path: Path, scale: float = 1.0) -> Path:
+#: Sketchfab's root node: its children's vertices are z up, the node turns them y up
+SKETCHFAB_ROOT = [1, 0, 0, 0, 0, 0, -1, 0, 0, 1, 0, 0, 0, 0, 0, 1]  # column-major 4 x 4
+
+
+def textured_glb(path: Path, scale: float = 1.0, sketchfab_root: bool = False) -> Path:
     """Write the four-part GLB described in the module doc (every length times ``scale``);
-    returns ``path``."""
+    with ``sketchfab_root`` the vertices are stored z up under a root node whose matrix turns
+    them y up (as Sketchfab's exports do), the same model once transformed. Returns ``path``."""
     images = _images()
     order = list(images)
     geometry = {name: _box(*PARTS[name]) for name in "ABD"}
@@ -117,7 +122,8 @@ def textured_glb(path: Path, scale: float = 1.0) -> Path:
     for name in "ABDC":
         verts, uvs, tris = geometry[name]
         prim = {"attributes": {
-            "POSITION": accessor(_to_gltf(verts), "VEC3", 5126, 34962, minmax=True),
+            "POSITION": accessor(verts if sketchfab_root else _to_gltf(verts), "VEC3", 5126,
+                                 34962, minmax=True),
             "TEXCOORD_0": accessor(uvs, "VEC2", 5126, 34962)},
             "indices": accessor(tris.reshape(-1), "SCALAR", 5123, 34963),
             "material": material_of[name]}
@@ -137,8 +143,12 @@ def textured_glb(path: Path, scale: float = 1.0) -> Path:
             "baseColorTexture": {"index": tex["masked"]}, "metallicFactor": 0.0},
          "alphaMode": "MASK", "alphaCutoff": 0.5, "doubleSided": True},
     ]
+    roots = list(range(len(nodes)))
+    if sketchfab_root:
+        nodes.append({"name": "Sketchfab_model", "matrix": SKETCHFAB_ROOT, "children": roots})
+        roots = [len(nodes) - 1]
     doc = {"asset": {"version": "2.0", "generator": "kubric tests (hand-written)"},
-           "scene": 0, "scenes": [{"nodes": list(range(len(nodes)))}], "nodes": nodes,
+           "scene": 0, "scenes": [{"nodes": roots}], "nodes": nodes,
            "meshes": meshes, "materials": materials, "accessors": accessors,
            "bufferViews": views, "buffers": [{"byteLength": 0}],
            "samplers": [{"magFilter": 9728, "minFilter": 9728}],

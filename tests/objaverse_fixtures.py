@@ -34,12 +34,14 @@ def sketchfab_record(uid: str, license_slug: str, name: str, author: str) -> dic
 
 def objaverse_files(tmp: Path, objects: dict) -> dict[str, bytes]:
     """Files (layout path → bytes) for ``objects`` = ``{uid: (chunk, licence, LVIS category or
-    None, scale)}``; each GLB is the four-part textured fixture times its scale."""
+    None, scale)}``; each GLB is the four-part textured fixture times its scale, every second
+    one (in uid order) stored under Sketchfab's z-up root node."""
     paths, lvis, chunks, files = {}, {}, {}, {}
-    for uid, (chunk, lic, cat, scale) in objects.items():
+    for k, (uid, (chunk, lic, cat, scale)) in enumerate(sorted(objects.items())):
         rel = f"glbs/{chunk}/{uid}.glb"
         paths[uid] = rel
-        files[rel] = textured_glb(tmp / f"{uid}.glb", scale=scale).read_bytes()
+        files[rel] = textured_glb(tmp / f"{uid}.glb", scale=scale,
+                                  sketchfab_root=k % 2 == 1).read_bytes()
         chunks.setdefault(chunk, {})[uid] = sketchfab_record(uid, lic, f"Thing {uid}",
                                                              f"Author{uid.upper()}")
         if cat:

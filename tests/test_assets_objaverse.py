@@ -87,7 +87,7 @@ def test_source_has_licences_categories_and_normalised_size(two_runs, files):
     assert meta["source_url"] == "https://sketchfab.com/3d-models/b2"
     assert meta["sha256"] == hashlib.sha256(files["glbs/000-000/b2.glb"]).hexdigest()
     assert meta["appearance"] == "gltf_pbr" and len(meta["materials"]) == 4
-    for entry, scale in ((a1, 1.0), (b2, 10.0)):
+    for entry, scale in ((a1, 1.0), (b2, 10.0)):  # b2's GLB nests its parts under a z-up root
         extent = np.ptp(np.asarray(entry["kwargs"]["bounds"]), axis=0)
         assert extent.max() == pytest.approx(1.0, abs=1e-6)       # largest side 1 m
         np.testing.assert_allclose(extent, np.array([3.0, 0.5, 0.6]) / 3.0, atol=1e-6)
@@ -124,7 +124,8 @@ def test_bad_selections_are_one_line(tmp_path, files):
 
 def test_toybox_takes_the_source_with_lvis_classes(two_runs, tmp_path):
     """ToyBox (raycast, 3 views of 32 px) on the Objaverse source: the LVIS category is the
-    semantic class, each instance carries its object's licence."""
+    semantic class, each instance carries its object's licence, and so does each annotation of
+    the COCO export."""
     from collection_fixtures import run_worker
 
     out, *_ = two_runs
@@ -138,3 +139,11 @@ def test_toybox_takes_the_source_with_lvis_classes(two_runs, tmp_path):
     for inst in meta["instances"]:
         assert inst["license"] == manifest[inst["asset_id"]]["license"]
         assert inst["category"] == "mug"
+    from kubric.datasets.exports.coco import export_coco
+
+    export_coco(tmp_path, tmp_path / "coco.json", progress=False)
+    coco = json.loads((tmp_path / "coco.json").read_text())
+    names = {lic["id"]: lic["name"] for lic in coco["licenses"]}
+    assert coco["annotations"] and len(names) == len(set(names.values()))
+    for ann in coco["annotations"]:
+        assert names[ann["license"]] == manifest[ann["asset_id"]]["license"]
