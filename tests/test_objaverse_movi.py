@@ -1,7 +1,7 @@
 """A MOVi-C scene whose objects come from Objaverse-layout GLBs (downloaded from a local Hub-like
 server by ``kubric assets objaverse``): rendered by Cycles at 32 px, packed with ``--verify``,
-exported to COCO and given a dataset card — every object's licence and attribution reach
-metadata.json, the COCO file and the card."""
+exported to COCO and BOP and given a dataset card — every object's licence and attribution
+reach metadata.json, the COCO file, BOP's models index and the card."""
 
 from __future__ import annotations
 
@@ -65,6 +65,10 @@ def test_metadata_coco_and_card_carry_each_objects_licence(scene):
         entry = manifest[ann["asset_id"]]
         assert by_id[ann["license"]]["name"] == entry["license"]
         assert by_id[ann["license"]]["url"] == entry["metadata"]["license_url"]
+    kubric("export", "bop", root / "scenes", "--out", root / "bop", "--no-progress")
+    index = json.loads((root / "bop" / "models" / "models_index.json").read_text())
+    assert index and all(m["license"] == manifest[m["asset_id"]]["license"]
+                         for m in index.values())
     kubric("datasets", "card", root / "ds", "--out", root / "card", "--scenes", root / "scenes",
            "--no-progress")
     readme = (root / "card" / "README.md").read_text()

@@ -16,8 +16,8 @@ object with several material slots). Not kept: material extensions (``KHR_materi
 ``KHR_texture_transform``, a second UV set, texture samplers (Blender repeats and filters
 linearly), vertex colours on textured parts, skins, morph targets and animations (the rest pose
 is converted). trimesh decodes no Draco / Meshopt compression and no KTX2 textures: such a file
-fails (reported by the converter) or loses those parts. ``metadata["materials"]`` records, per part, what its material holds
-(:func:`material_summary`).
+fails (reported by the converter) or loses those parts. ``metadata["materials"]`` records, per
+part, what its material holds (:func:`material_summary`).
 """
 
 from __future__ import annotations
