@@ -12,7 +12,7 @@ from objaverse_fixtures import HubServer, objaverse_files
 
 from kubric.asset_tools.objaverse import LAYOUT, build_objaverse, parse_licenses
 from kubric.assets import AssetSource
-from kubric.errors import InputError
+from kubric.errors import UsageError
 
 #: uid → (metadata chunk, licence, LVIS category, scale of the 3 m wide fixture)
 OBJECTS = {"a1": ("000-000", "cc0", "mug", 1.0), "b2": ("000-000", "by", "mug", 10.0),
@@ -28,7 +28,7 @@ def test_licence_names():
     assert parse_licenses("cc0,cc-by") == {"cc0", "by"}
     assert parse_licenses("CC-BY-NC-4.0, by-sa") == {"by-nc", "by-sa"}
     assert parse_licenses(None) is None
-    with pytest.raises(InputError, match=r"unknown licence 'gpl'; allowed: \[.*'cc-by'"):
+    with pytest.raises(UsageError, match=r"unknown licence 'gpl'; allowed: \[.*'cc-by'"):
         parse_licenses("cc0,gpl")
 
 
@@ -114,11 +114,11 @@ def test_cli_by_uid_and_count(tmp_path, files):
 
 def test_bad_selections_are_one_line(tmp_path, files):
     with HubServer(files) as hub:
-        with pytest.raises(InputError, match=r"unknown LVIS category 'mugs'; close: \['mug'\]"):
+        with pytest.raises(UsageError, match=r"unknown LVIS category 'mugs'; close: \['mug'\]"):
             build_objaverse(tmp_path, categories=["mugs"], base_url=hub.url, progress=False)
-        with pytest.raises(InputError, match=r"1 uid\(s\) not in object-paths.json.gz, e.g. 'zz'"):
+        with pytest.raises(UsageError, match=r"1 uid\(s\) not in object-paths.json.gz, e.g. 'zz'"):
             build_objaverse(tmp_path, uids=["a1", "zz"], base_url=hub.url, progress=False)
-        with pytest.raises(InputError, match="refusing to convert all of Objaverse"):
+        with pytest.raises(UsageError, match="refusing to convert all of Objaverse"):
             build_objaverse(tmp_path, base_url=hub.url, progress=False)
 
 

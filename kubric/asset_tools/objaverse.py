@@ -47,7 +47,7 @@ from pathlib import Path
 
 from kubric.asset_tools.converter import ConvertJob, convert_jobs
 from kubric.assets.download import USER_AGENT, DownloadError, fetch_file, sha256_of
-from kubric.errors import InputError
+from kubric.errors import InputError, UsageError
 
 NAME = "Objaverse"
 VERSION = "1.0"
@@ -79,7 +79,7 @@ def parse_licenses(text) -> set[str] | None:
     for item in (str(i).strip().lower() for i in items):
         slug = by_spdx.get(item, item[3:] if item.startswith("cc-") else item)
         if slug not in LICENSES:
-            raise InputError(f"unknown licence {item!r}; allowed: "
+            raise UsageError(f"unknown licence {item!r}; allowed: "
                              f"{sorted({f'cc-{s}' if s != 'cc0' else s for s in LICENSES})}")
         out.add(slug)
     return out
@@ -157,13 +157,13 @@ def _select_candidates(paths: dict, lvis: dict, uids, categories) -> list[str]:
     if uids:
         unknown = [u for u in uids if u not in paths]
         if unknown:
-            raise InputError(f"{len(unknown)} uid(s) not in {OBJECT_PATHS}, e.g. {unknown[0]!r}")
+            raise UsageError(f"{len(unknown)} uid(s) not in {OBJECT_PATHS}, e.g. {unknown[0]!r}")
         chosen = set(uids)
     if categories:
         bad = [c for c in categories if c not in lvis]
         if bad:
             near = difflib.get_close_matches(bad[0], list(lvis), n=5)
-            raise InputError(f"unknown LVIS category {bad[0]!r}; close: {near} (all: the keys "
+            raise UsageError(f"unknown LVIS category {bad[0]!r}; close: {near} (all: the keys "
                              f"of {LVIS})")
         in_cats = {u for c in categories for u in lvis[c] if u in paths}
         chosen = in_cats if chosen is None else chosen & in_cats
@@ -193,9 +193,9 @@ def select(base_url: str, cache: Path, uids=None, categories=None, licenses=None
     """The selected objects ``[{"uid", "path", "record", "category"}]`` (in GLB-path order) and
     ``{uid: LVIS category}``; reads (and downloads) only the metadata chunks it needs."""
     if count is not None and count < 1:
-        raise InputError(f"count must be at least 1, got {count!r}")
+        raise UsageError(f"count must be at least 1, got {count!r}")
     if not uids and not categories and count is None:
-        raise InputError("select objects with uids, LVIS categories or a count (refusing to "
+        raise UsageError("select objects with uids, LVIS categories or a count (refusing to "
                          "convert all of Objaverse)")
     paths = read_gz_json(fetch(base_url, OBJECT_PATHS, cache))
     lvis = read_gz_json(fetch(base_url, LVIS, cache))
