@@ -356,8 +356,7 @@ def convert_one(job: ConvertJob, out_dir: str | os.PathLike) -> dict:
         look["normalised_scale"] = gltf_pbr.normalise_extent(mesh, parts or [], job.max_extent)
     repairs = None
     if job.repair is not None:
-        mesh, repairs = job.repair(mesh)
-        parts = None if parts is None else [mesh]
+        mesh, repairs = job.repair(mesh)  # a glTF's parts (the visual) keep their materials
     closed, watertight = physics.make_watertight(mesh)
     hulls, method = physics.decompose(closed if watertight else mesh, job.decomposition)
     metadata = dict(job.metadata)
