@@ -27,6 +27,14 @@ PANELS = ("rgba", "segmentation", "amodal_segmentation", "occlusion_boundaries",
           "forward_scene_flow", "material_ids")
 
 
+def write_row(panels, out, gap: int = 2) -> None:
+    """Write (H, W_i, 3) uint8 pictures side by side, ``gap`` white pixels apart, as a PNG."""
+    white = np.full((panels[0].shape[0], gap, 3), 255, np.uint8)
+    row = np.concatenate([part for p in panels for part in (p, white)][:-1], axis=1)
+    with open(out, "wb") as f:
+        f.write(encode_png(np.ascontiguousarray(row)))
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("scene")
@@ -35,10 +43,7 @@ def main() -> None:
     args = ap.parse_args()
     layers = read_image_dict(args.scene, PANELS)
     panels = [layer_pictures(name, layers[name])[args.frame] for name in PANELS]
-    gap = np.full((panels[0].shape[0], 2, 3), 255, np.uint8)
-    row = np.concatenate([part for p in panels for part in (p, gap)][:-1], axis=1)
-    with open(args.out, "wb") as f:
-        f.write(encode_png(np.ascontiguousarray(row)))
+    write_row(panels, args.out)
 
 
 if __name__ == "__main__":

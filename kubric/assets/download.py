@@ -65,15 +65,25 @@ def get_json(url: str, missing_ok: bool = False):
         raise DownloadError(f"GET {url}: the answer is not JSON ({err})") from None
 
 
-def md5_of(path: str | os.PathLike) -> str:
-    digest = hashlib.md5()  # noqa: S324 - the checksum Poly Haven publishes
+def file_digest(path: str | os.PathLike, algorithm: str) -> str:
+    """Hex digest of a file's bytes (``algorithm``: a hashlib name, e.g. ``"sha256"``)."""
+    digest = hashlib.new(algorithm)
     with open(path, "rb") as fh:
         for block in iter(lambda: fh.read(1 << 20), b""):
             digest.update(block)
     return digest.hexdigest()
 
 
-def _verify(path: Path, url: str, size: int | None, md5: str | None) -> None:
+def md5_of(path: str | os.PathLike) -> str:
+    return file_digest(path, "md5")  # the checksum Poly Haven publishes
+
+
+def sha256_of(path: str | os.PathLike) -> str:
+    return file_digest(path, "sha256")
+
+
+def _verify(path: Path, url: str, size: int | None, md5: str | None,
+            sha256: str | None = None, check=None) -> None:
     got = path.stat().st_size
     if size is not None and got != int(size):
         raise DownloadError(f"{url}: got {got} bytes, the listing says {int(size)}")
@@ -81,6 +91,15 @@ def _verify(path: Path, url: str, size: int | None, md5: str | None) -> None:
         got_md5 = md5_of(path)
         if got_md5.lower() != str(md5).lower():
             raise DownloadError(f"{url}: MD5 {got_md5} does not match the listing's {md5}")
+    if sha256 is not None:
+        got_sha = sha256_of(path)
+        if got_sha.lower() != str(sha256).lower():
+            raise DownloadError(f"{url}: SHA-256 {got_sha} does not match the server's {sha256}")
+    if check is not None:
+        try:
+            check(path)
+        except (OSError, ValueError, EOFError) as err:
+            raise DownloadError(f"{url}: the downloaded file is not whole ({err})") from None
 
 
 def _transfer(url: str, part: Path, size: int | None, deadline: float = float("inf")) -> None:
@@ -118,10 +137,13 @@ def _transfer(url: str, part: Path, size: int | None, deadline: float = float("i
 
 
 def fetch_file(url: str, dest: str | os.PathLike, size: int | None = None,
-               md5: str | None = None, retries: int = 3) -> Path:
-    """Download ``url`` to ``dest`` (resuming a ``.part`` file), verify size / MD5, rename.
+               md5: str | None = None, retries: int = 3, sha256: str | None = None,
+               check=None) -> Path:
+    """Download ``url`` to ``dest`` (resuming a ``.part`` file), verify size / MD5 / SHA-256 and
+    ``check(path)`` (a content check raising ``ValueError``, ``OSError`` or ``EOFError``), rename.
 
-    An existing ``dest`` that matches ``size`` / ``md5`` is kept without any request. Returns
+    An existing ``dest`` that matches ``size`` / ``md5`` / ``sha256`` is kept without any
+    request. Returns
     ``dest``. Raises :class:`DownloadError` naming the URL when the server fails, the transfer is
     cut more than ``retries`` times in a row, or the result does not match.
     """
@@ -132,7 +154,7 @@ def fetch_file(url: str, dest: str | os.PathLike, size: int | None = None,
     dest.parent.mkdir(parents=True, exist_ok=True)
     if dest.is_file():
         try:
-            _verify(dest, url, size, md5)
+            _verify(dest, url, size, md5, sha256)
             return dest
         except DownloadError:
             dest.unlink()
@@ -149,7 +171,7 @@ def fetch_file(url: str, dest: str | os.PathLike, size: int | None = None,
                                     f"partial file {str(part)!r} is kept for the next run") from None
             time.sleep(min(2.0 ** attempt * 0.1, 5.0))
     try:
-        _verify(part, url, size, md5)
+        _verify(part, url, size, md5, sha256, check)
     except DownloadError:
         part.unlink(missing_ok=True)
         raise

@@ -12,7 +12,18 @@ Z_UP_TO_GLTF = np.array([[1, 0, 0, 0], [0, 0, 1, 0], [0, -1, 0, 0], [0, 0, 0, 1]
 
 
 def write_visual_glb(mesh, path: Path) -> None:
-    """Write the trimesh ``mesh`` (z up) to ``path`` as a GLB in glTF's y-up convention."""
+    """Write the trimesh ``mesh`` (z up) to ``path`` as a GLB in glTF's y-up convention; a list
+    of trimeshes becomes one primitive (with its own material) each."""
+    if isinstance(mesh, (list, tuple)):
+        import trimesh
+
+        scene = trimesh.Scene()
+        for k, part in enumerate(mesh):
+            m = part.copy()
+            m.apply_transform(Z_UP_TO_GLTF)
+            scene.add_geometry(m, geom_name=f"part_{k:03d}")
+        Path(path).write_bytes(scene.export(file_type="glb"))
+        return
     m = mesh.copy()
     m.apply_transform(Z_UP_TO_GLTF)
     Path(path).write_bytes(m.export(file_type="glb"))

@@ -372,6 +372,9 @@ class Blender(TableView, Renderer):
         if len(mats) == 1 and len(mesh.materials) > 1:
             for i in range(len(mesh.materials)):
                 mesh.materials[i] = mats[0]
+        elif len(mats) == len(mesh.materials):  # slot by slot: clear() would reset every
+            for i, m in enumerate(mats):        # face's material index to 0
+                mesh.materials[i] = m
         else:
             mesh.materials.clear()
             for m in mats:

@@ -4,7 +4,7 @@ Layout (BOP's, as the BOP toolkit reads it)::
 
     DIR/models/obj_{obj_id:06d}.ply      one model per (asset, scale): mm, origin at the box centre
     DIR/models/models_info.json          {obj_id: diameter, min_x/y/z, size_x/y/z} (mm)
-    DIR/models/models_index.json         (addition) {obj_id: asset_id, scale, source}
+    DIR/models/models_index.json         (addition) {obj_id: asset_id, scale, source, license}
     DIR/SPLIT/{scene_id:06d}/            scene_id = the scene's seed; image id = frame index
         rgb/{im_id:06d}.png              RGB (the RGBA frame without alpha)
         depth/{im_id:06d}.png            uint16 z-depth: mm = value · depth_scale; 0 = no surface
@@ -134,8 +134,9 @@ class ModelStore:
             vertices, faces = mdl.load_mesh(source, asset_id)
             bounds = source.db[asset_id].get("kwargs", {}).get("bounds") or \
                 [vertices.min(axis=0).tolist(), vertices.max(axis=0).tolist()]
-            self.meshes[asset_id] = (vertices, faces, bounds, source.name)
-        vertices, faces, bounds, source_name = self.meshes[asset_id]
+            self.meshes[asset_id] = (vertices, faces, bounds, source.name,
+                                     source.db[asset_id].get("license"))
+        vertices, faces, bounds, source_name, licence = self.meshes[asset_id]
         scale = instance_scale(instance, bounds)
         key = (asset_id, tuple(scale.tolist()))
         if key not in self.models:
@@ -145,7 +146,7 @@ class ModelStore:
             path.write_bytes(mdl.ply_bytes(model))
             self.info[str(obj_id)] = model.info()
             self.index[str(obj_id)] = {"asset_id": asset_id, "scale": scale.tolist(),
-                                       "source": source_name}
+                                       "source": source_name, "license": licence}
             self.models[key] = (obj_id, model)
         return self.models[key]
 

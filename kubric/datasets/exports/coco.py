@@ -11,8 +11,10 @@ in that frame, derived from the segmentation layer:
   metadata's normalised ``(ymin, xmin, ymax, xmax)`` times the image size);
 * ``area``: the number of pixels (= ``metadata["instances"][k − 1]["visibility"][i]``);
 * ``iscrowd`` 0, ``category_id`` from the recipe's labels (:mod:`.categories`);
-* additions: ``instance`` (k − 1) and ``asset_id``; images add ``scene``, ``seed``, ``frame``
-  and, for multi-view scenes, ``split``;
+* additions: ``instance`` (k − 1), ``asset_id`` and ``license`` (the id, in the top-level
+  ``licenses``, of the asset's licence and attribution, ``{"id", "name", "url"}``, as
+  ``metadata.json``'s instance ``license`` / ``license_url`` say); images add ``scene``,
+  ``seed``, ``frame`` and, for multi-view scenes, ``split``;
 * scenes made with ``extra_layers=amodal``: KINS's amodal fields (:func:`kins_fields`):
   ``a_segm`` (the amodal mask, RLE), ``a_bbox``, ``a_area`` and the visible ``i_segm``,
   ``i_bbox``, ``i_area`` — for the instances visible in the frame, as KINS annotates.
@@ -111,6 +113,8 @@ def scene_records(scene: Scene, scheme, compressed: bool = True):
                    "segmentation": rle.encode(mask, compressed), "area": int(mask.sum()),
                    "bbox": mask_bbox(mask), "iscrowd": 0, "instance": label - 1,
                    "asset_id": instances[label - 1].get("asset_id")}
+            if isinstance(instances[label - 1].get("license"), str):
+                ann["license"] = instances[label - 1]["license"]  # text; export_coco: an id
             ann.update(scheme.annotation_extras(scene, label - 1, i))
             if amodal is not None:
                 ann.update(kins_fields(amodal[i, label - 1], ann, compressed))
@@ -139,6 +143,19 @@ def kins_fields(amodal: np.ndarray, ann: dict, compressed: bool = True) -> dict:
             "i_area": ann["area"]}
 
 
+def _licence_id(ann: dict, licences: dict, scene: Scene) -> None:
+    """Replace the annotation's licence text by its id in COCO's top-level ``licenses``
+    (``{"id", "name": the asset's licence and attribution, "url"}``), adding it there."""
+    text = ann.pop("license", None)
+    if text is None:
+        return
+    if text not in licences:
+        inst = scene.metadata["instances"][ann["instance"]]
+        licences[text] = {"id": len(licences) + 1, "name": text,
+                          "url": str(inst.get("license_url", ""))}
+    ann["license"] = licences[text]["id"]
+
+
 def _dump(item) -> str:
     return json.dumps(item, separators=(",", ":"), allow_nan=False)
 
@@ -163,8 +180,9 @@ def export_coco(root, out, progress: bool = True, compressed: bool = True,
     n_images = n_annotations = 0
     try:
         with open(tmp, "w", encoding="utf-8") as main, open(side, "w+", encoding="utf-8") as anns:
-            main.write('{"info":' + _dump(info) + ',"licenses":[],"categories":'
+            main.write('{"info":' + _dump(info) + ',"categories":'
                        + _dump(scheme.categories) + ',"images":[')
+            licences: dict[str, dict] = {}
             first_scene = None
             with tqdm(total=len(paths), unit="scene", desc="export coco", file=sys.stderr,
                       disable=not progress) as bar:
@@ -182,6 +200,7 @@ def export_coco(root, out, progress: bool = True, compressed: bool = True,
                         main.write(("," if n_images else "") + _dump(item))
                         n_images += 1
                     for item in annotations:
+                        _licence_id(item, licences, scene)
                         anns.write(("," if n_annotations else "") + _dump(item))
                         n_annotations += 1
                     bar.update(1)
@@ -189,7 +208,7 @@ def export_coco(root, out, progress: bool = True, compressed: bool = True,
             main.write('],"annotations":[')
             anns.seek(0)
             shutil.copyfileobj(anns, main, 1 << 16)
-            main.write("]}\n")
+            main.write('],"licenses":' + _dump(list(licences.values())) + "}\n")
         os.replace(tmp, out)
     finally:
         for p in (tmp, side):
