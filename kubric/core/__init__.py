@@ -5,6 +5,7 @@ from kubric.core.assets import Asset, UndefinedAsset
 from kubric.core.cameras import Camera, OrthographicCamera, PerspectiveCamera, UndefinedCamera
 from kubric.core.characters import Character, MotionClip
 from kubric.core.color import Color, get_color
+from kubric.core.deformables import Deformable
 from kubric.core.lights import (
     DirectionalLight,
     Light,
@@ -31,5 +32,5 @@ __all__ = [
     "PointLight", "RectAreaLight", "SpotLight", "UndefinedLight", "FlatMaterial", "Material",
     "PrincipledBSDFMaterial", "Texture", "UndefinedMaterial", "Cube", "FileBasedObject",
     "Object3D", "PhysicalObject", "Sphere", "Quaternion", "Scene", "TableView", "View",
-    "camera_geometry", "Character", "MotionClip",
+    "camera_geometry", "Character", "MotionClip", "Deformable",
 ]
