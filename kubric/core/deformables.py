@@ -118,6 +118,7 @@ class Deformable(PhysicalObject):
             arr.setflags(write=False)
         kwargs.setdefault("bounds", self.rest_bounds)
         super().__init__(**kwargs)
+        self._check_static(self.static)
 
     @classmethod
     def cloth(cls, size=(1.0, 1.0), resolution=(16, 16), **kwargs) -> Deformable:
@@ -133,10 +134,14 @@ class Deformable(PhysicalObject):
         arr.setflags(write=False)
         return arr
 
-    def _on_property_set(self, name, value):
-        if name == "static" and value:
+    def _check_static(self, value) -> None:
+        if value:
             raise InputError(f"Deformable {self.name!r}: static must be False (a deformable is "
                              "moved by its simulation)")
+
+    def _on_property_set(self, name, value):
+        if name == "static":
+            self._check_static(value)
         super()._on_property_set(name, value)
 
     # ------------------------------------------------------------------ geometry

@@ -1,0 +1,213 @@
+"""Deformable cloth (kubric.core.deformables): the model, the PyBullet soft body, the raycast
+render and the tracks, checked on real output against independent derivations."""
+
+import hashlib
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+import trimesh
+
+import kubric as kb
+from kubric.core.deformables import cloth_grid
+from kubric.errors import InputError
+
+FRAMES = 7
+BALL_RADIUS = 0.25
+
+# a cloth falls onto a ball resting on the floor: the scene the module fixture simulates, renders
+# and tracks, and the determinism test runs in two fresh processes
+SCENE_CODE = """
+import kubric as kb
+from kubric.simulator.pybullet import PyBullet
+
+def cloth_scene(with_cloth=True):
+    scene = kb.Scene(resolution=(32, 32), frame_start=0, frame_end=6, frame_rate=12,
+                     step_rate=240)
+    scene += kb.Cube(name="floor", scale=(3, 3, 0.1), position=(0, 0, -0.1), static=True)
+    ball = kb.Sphere(name="ball", scale=0.25, position=(0.1, 0, 0.25), mass=1.0)
+    scene += ball
+    cloth = kb.Deformable.cloth(size=(1, 1), resolution=(12, 12), position=(0, 0, 0.8),
+                                name="cloth")
+    if with_cloth:
+        scene += cloth
+    scene += kb.DirectionalLight(position=(1, -1, 3), look_at=(0, 0, 0), intensity=1.5)
+    scene.camera = kb.PerspectiveCamera(position=(0, -2.5, 2.0), look_at=(0, 0, 0.3))
+    sim = PyBullet(scene)
+    sim.run(0, 6)
+    sim.close()
+    return scene, ball, cloth
+"""
+
+
+def _digest(cloth) -> str:
+    return hashlib.sha256(np.stack([cloth.deformed_vertices(f) for f in range(FRAMES)])
+                          .tobytes()).hexdigest()
+
+
+namespace: dict = {}
+exec(SCENE_CODE, namespace)
+cloth_scene = namespace["cloth_scene"]
+
+
+@pytest.fixture(scope="module")
+def rendered():
+    pytest.importorskip("embreex")
+    from kubric.annotations.tracks import scene_tracks
+    from kubric.renderer.raycast import Raycast
+    scene, ball, cloth = cloth_scene()
+    layers = Raycast(scene).render()
+    tracks = scene_tracks(scene, layers, [ball, cloth], np.random.RandomState(0),
+                          num_tracks=64, stride=2)
+    return scene, ball, cloth, layers, tracks
+
+
+# ---------------------------------------------------------------------------------- model
+def test_cloth_grid_layout_and_uv():
+    v, f, uv = cloth_grid((2.0, 1.0), (3, 2))
+    assert v.shape == (6, 3) and f.shape == (4, 3) and uv.shape == (4, 3, 2)
+    assert np.allclose(v[[0, 2, 3, 5]], [[-1, -.5, 0], [1, -.5, 0], [-1, .5, 0], [1, .5, 0]])
+    normals = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
+    assert np.all(normals[:, 2] > 0)  # counter-clockwise from +z
+    # uv is the vertex position normalised over the sheet
+    assert np.allclose(uv, (v[f][..., :2] - [-1, -0.5]) / [2.0, 1.0])
+
+
+@pytest.mark.parametrize("kwargs,message", [
+    (dict(size=(0, 1)), "size must be two positive numbers"),
+    (dict(resolution=(1, 4)), "resolution must be two integers ≥ 2"),
+    (dict(resolution=(2.5, 4)), "resolution must be two integers ≥ 2"),
+])
+def test_cloth_grid_bad_input_is_one_line(kwargs, message):
+    with pytest.raises(InputError, match=message):
+        cloth_grid(**kwargs)
+
+
+@pytest.mark.parametrize("kwargs,message", [
+    (dict(faces=[[0, 1, 3]]), r"faces holds 3; allowed: \[0, 2\]"),
+    (dict(faces=[[0, 1, 1]]), "face 0 repeats a vertex"),
+    (dict(kind="jelly"), r"kind 'jelly' is not one of \['cloth'\]"),
+    (dict(static=True), "static must be False"),
+])
+def test_deformable_bad_input_is_one_line(kwargs, message):
+    args = dict(vertices=[[0, 0, 0], [1, 0, 0], [0, 1, 0]], faces=[[0, 1, 2]]) | kwargs
+    with pytest.raises(InputError, match=message):
+        kb.Deformable(**args)
+
+
+def test_simulated_vertices_shape_checked_and_interpolated_linearly():
+    cloth = kb.Deformable.cloth(resolution=(2, 2), position=(0, 0, 1), scale=2)
+    assert np.allclose(cloth.deformed_vertices()[:, 2], 1) and np.allclose(
+        np.ptp(cloth.deformed_vertices()[:, 0]), 2)  # the rest mesh placed by the pose
+    with pytest.raises(InputError, match=r"simulated_vertices must have shape \(4, 3\)"):
+        cloth.simulated_vertices = np.zeros((3, 3))
+    a, b = np.zeros((4, 3)), np.arange(12.0).reshape(4, 3)
+    cloth.record(0, a)
+    cloth.record(2, b)
+    assert np.allclose(cloth.deformed_vertices(0.5), 0.25 * b)
+    assert np.allclose(cloth.deformed_vertices(7), b)  # held after the last key
+    assert np.allclose(cloth.surface_points([0], [[1, 0, 0]], 2), b[cloth.faces[0, 0]])
+
+
+# ---------------------------------------------------------------------------------- simulation
+def test_same_seed_same_vertices_in_two_processes():
+    code = SCENE_CODE + (
+        "\nimport hashlib, numpy as np\n_, _, c = cloth_scene()\n"
+        "print(hashlib.sha256(np.stack([c.deformed_vertices(f) for f in range(7)]).tobytes())"
+        ".hexdigest())\n")
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(sys.path))
+    runs = [subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                           env=env, check=True).stdout.split()[-1] for _ in range(2)]
+    _, _, cloth = cloth_scene()
+    assert runs[0] == runs[1] == _digest(cloth)
+
+
+def test_cloth_falls_drapes_and_pushes_the_ball():
+    _, ball_alone, _ = cloth_scene(with_cloth=False)
+    scene, ball, cloth = cloth_scene()
+    rest = cloth.deformed_vertices(0)
+    assert np.allclose(rest[:, 2], 0.8, atol=1e-6)  # frame 0: the rest state
+    assert cloth.deformed_vertices(6)[:, 2].min() < 0.3  # it fell
+    # two-way: alone the ball rests still; under the cloth it is pushed
+    assert np.allclose(ball_alone.get_value_at("position", 6), (0.1, 0, 0.25), atol=1e-4)
+    assert np.linalg.norm(np.subtract(ball.get_value_at("position", 6), (0.1, 0, 0.25))) > 1e-3
+
+
+def test_no_cloth_vertex_deeper_in_a_collider_than_the_margin():
+    scene, ball, cloth = cloth_scene()
+    margin = cloth.collision_margin
+    for f in range(FRAMES):
+        v = cloth.deformed_vertices(f)
+        centre = np.asarray(ball.get_value_at("position", f))
+        # sphere: signed distance |v − c| − r; floor: its top face is z = 0
+        assert np.linalg.norm(v - centre, axis=1).min() - BALL_RADIUS > -margin, f
+        assert v[:, 2].min() > -margin, f
+
+
+# ---------------------------------------------------------------------------------- render + tracks
+def test_tracks_on_cloth_match_forward_flow(rendered):
+    _, _, _, layers, tracks = rendered
+    q = tracks["query_points"]
+    errors = []
+    for i in np.flatnonzero(tracks["instance_id"] == 2):
+        t, r, c = int(q[i, 0]), int(q[i, 1]), int(q[i, 2])
+        if t + 1 < FRAMES:
+            step = tracks["target_points"][i, t + 1] - tracks["target_points"][i, t]  # (x, y)
+            errors.append(np.abs(step[::-1] - layers["forward_flow"][t, r, c]).max())
+    assert len(errors) >= 20
+    assert np.median(errors) < 1e-3
+    moving = np.abs(layers["forward_flow"][:-1][layers["segmentation"][:-1, ..., 0] == 3])
+    assert moving.max() > 0.5  # the cloth really moves on screen
+
+
+def test_visible_cloth_track_points_keep_their_instance(rendered):
+    _, _, _, layers, tracks = rendered
+    seg = layers["segmentation"][..., 0]
+    for i in np.flatnonzero(tracks["instance_id"] == 2):
+        for t in np.flatnonzero(~tracks["occluded"][i]):
+            x, y = tracks["target_points"][i, t]
+            assert seg[t, int(y), int(x)] == 3  # the cloth's label (third asset)
+
+
+def test_cloth_track_is_a_fixed_barycentric_point_of_the_simulated_mesh(rendered):
+    _, _, cloth, _, tracks = rendered
+    sel = np.flatnonzero(tracks["instance_id"] == 2)
+    world = tracks["points_world"][sel].astype(np.float64)
+    q_t = tracks["query_points"][sel, 0].astype(int)
+    # the material point: the triangle of the query frame's simulated mesh that contains the
+    # tracked point (inside it and on its plane), and the point's barycentrics there (trimesh)
+    tri, bary = np.zeros(len(sel), int), np.zeros((len(sel), 3))
+    for n in range(len(sel)):
+        tris = cloth.deformed_vertices(int(q_t[n]))[cloth.faces]
+        p = world[n, q_t[n]]
+        b = trimesh.triangles.points_to_barycentric(tris, np.broadcast_to(p, (len(tris), 3)))
+        off = np.abs(np.einsum("fk,fkj->fj", b, tris) - p).max(axis=1)
+        inside = np.flatnonzero((b.min(axis=1) > -1e-4) & (off < 1e-5))
+        assert len(inside), n
+        tri[n], bary[n] = inside[0], b[inside[0]]
+    for f in range(FRAMES):
+        verts = cloth.deformed_vertices(f)[cloth.faces[tri]]
+        assert np.abs(np.einsum("nk,nkj->nj", bary, verts) - world[:, f]).max() < 1e-4, f
+
+
+def test_cloth_object_coordinates_are_rest_state_points(rendered):
+    _, _, _, layers, _ = rendered
+    on = layers["segmentation"][..., 0] == 3
+    objc, uv = layers["object_coordinates"][on], layers["uv"][on]
+    # rest sheet: object x, y over its bounds = the grid's (u, v), wherever the cloth has moved
+    assert on.sum() > 300
+    assert np.abs(objc[:, :2] - uv[:, :2]).max() < 1e-5
+    assert np.all(objc[:, 2] == 0)
+
+
+def test_rolling_shutter_refused_with_deformables(rendered):
+    from kubric.renderer.raycast import Raycast
+    scene = rendered[0]
+    scene.camera.rolling_shutter_duration = 0.5
+    try:
+        with pytest.raises(ValueError, match="cannot render deformables"):
+            Raycast(scene).render(frames=[0], return_layers=("depth",))
+    finally:
+        scene.camera.rolling_shutter_duration = 0.0
