@@ -75,6 +75,28 @@ def read(uid: int, client: int) -> np.ndarray:
     return np.asarray(nodes, np.float64).reshape(-1, 3)
 
 
+#: an edge stretched beyond this multiple of its rest length means the simulation blew up
+MAX_STRETCH = 3.0
+
+
+def check_stable(deformable, frames, meshes) -> None:
+    """One line when the simulated ``meshes`` (per frame (V, 3)) of ``deformable`` blew up (a
+    non-finite vertex or an edge over :data:`MAX_STRETCH` × its rest length): a mass-spring
+    sheet needs a time step below about its spacing × sqrt(node mass / stiffness)."""
+    f = np.asarray(deformable.faces, np.int64)
+    edges = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
+    rest = np.linalg.norm(deformable.vertices[edges[:, 0]] - deformable.vertices[edges[:, 1]],
+                          axis=1) * float(np.max(deformable.scale))
+    for frame, verts in zip(frames, meshes, strict=True):
+        stretch = np.linalg.norm(verts[edges[:, 0]] - verts[edges[:, 1]], axis=1) / rest
+        if not np.isfinite(verts).all() or stretch.max() > MAX_STRETCH:
+            raise InputError(f"{deformable.uid}: the cloth simulation blew up at frame {frame} "
+                             f"(an edge stretched {np.nan_to_num(stretch.max(), nan=np.inf):.3g}× "
+                             f"its rest length; allowed ≤ {MAX_STRETCH:g}×): raise the scene's "
+                             "step_rate, or lower the cloth's resolution or stiffness, or raise "
+                             "its mass")
+
+
 def remove(body: SoftBody, client: int) -> None:
     if body.uid is not None:
         pb.removeBody(body.uid, physicsClientId=client)

@@ -470,6 +470,7 @@ class PyBullet(TableView):
         self._writing = True
         try:
             for obj, seq in meshes.items():
+                kb_deformables.check_stable(obj, frames, seq)
                 for frame in sorted(set(obj.keyframes.get("simulated_vertices", {})) -
                                     set(frames)):
                     obj.keyframe_delete("simulated_vertices", frame)
