@@ -23,9 +23,10 @@ SCENE_CODE = """
 import kubric as kb
 from kubric.simulator.pybullet import PyBullet
 
-def cloth_scene(with_cloth=True):
+def cloth_scene(with_cloth=True, simulator_first=False):
     scene = kb.Scene(resolution=(32, 32), frame_start=0, frame_end=6, frame_rate=12,
                      step_rate=240)
+    sim = PyBullet(scene) if simulator_first else None
     scene += kb.Cube(name="floor", scale=(3, 3, 0.1), position=(0, 0, -0.1), static=True)
     ball = kb.Sphere(name="ball", scale=0.25, position=(0.1, 0, 0.25), mass=1.0)
     scene += ball
@@ -35,7 +36,7 @@ def cloth_scene(with_cloth=True):
         scene += cloth
     scene += kb.DirectionalLight(position=(1, -1, 3), look_at=(0, 0, 0), intensity=1.5)
     scene.camera = kb.PerspectiveCamera(position=(0, -2.5, 2.0), look_at=(0, 0, 0.3))
-    sim = PyBullet(scene)
+    sim = sim or PyBullet(scene)
     sim.run(0, 6)
     sim.close()
     return scene, ball, cloth
@@ -122,6 +123,16 @@ def test_same_seed_same_vertices_in_two_processes():
                            env=env, check=True).stdout.split()[-1] for _ in range(2)]
     _, _, cloth = cloth_scene()
     assert runs[0] == runs[1] == _digest(cloth)
+
+
+def test_a_cloth_added_to_a_running_simulator_reopens_it_as_a_deformable_world():
+    # MOVi makes its simulator before the objects: the first deformable rebuilds every body
+    # from the model, so the result is the one of a simulator made after the objects
+    _, ball_a, cloth_a = cloth_scene(simulator_first=True)
+    _, ball_b, cloth_b = cloth_scene()
+    assert _digest(cloth_a) == _digest(cloth_b)
+    assert np.array_equal(ball_a.get_values_over_time("position"),
+                          ball_b.get_values_over_time("position"))
 
 
 def test_cloth_falls_drapes_and_pushes_the_ball():

@@ -4,8 +4,8 @@ coupled with the rigid bodies (cloth pushes them, they push it).
 
 PyBullet simulates soft bodies only in its *deformable world*
 (``resetSimulation(RESET_USE_DEFORMABLE_WORLD)``, a different dynamics world with its own solver),
-which must be chosen before any body exists: :class:`kubric.simulator.pybullet.PyBullet` opens it
-when the scene holds a deformable at construction (adding one later is refused in one line).
+which replaces the engine's world: :class:`kubric.simulator.pybullet.PyBullet` opens it when the
+first deformable joins (at construction or later) and rebuilds every body from the model.
 Facts measured for the choice (docs/deformables.md): the soft body keeps the OBJ's vertex order;
 its nodes are read each frame with ``getMeshData(..., MESH_DATA_SIMULATION_MESH)``; the same scene
 gives bit-identical nodes in two processes; a spring cloth is stable at 240 steps/s up to about
@@ -101,11 +101,3 @@ def remove(body: SoftBody, client: int) -> None:
     if body.uid is not None:
         pb.removeBody(body.uid, physicsClientId=client)
         body.uid = None
-
-
-def check_world(deformable, deformable_world: bool) -> None:
-    """One line when ``deformable`` joins a simulator that was not opened as a deformable world."""
-    if not deformable_world:
-        raise InputError(f"{deformable.uid}: add deformables to the scene before creating the "
-                         "PyBullet simulator (PyBullet simulates soft bodies only in a world "
-                         "opened for them)")

@@ -125,7 +125,8 @@ def _ignore(view, obj, body, value):
 
 
 def _build_deformable(view, deformable):
-    kb_deformables.check_world(deformable, view.deformable_world)
+    if not view.deformable_world:
+        view._open_deformable_world()
     return kb_deformables.SoftBody()
 
 
@@ -202,11 +203,8 @@ class PyBullet(TableView):
         self._assets_by_body: dict[int, PhysicalObject] = {}
         self._keyed_frames: dict[PhysicalObject, set[int]] = {}
         self._links: dict[PhysicalObject, dict[int, PhysicalObject]] = {}  # attach_links
-        # soft bodies need PyBullet's deformable world, chosen before any body exists
-        self.deformable_world = any(isinstance(a, Deformable) for a in scene.assets)
-        if self.deformable_world:
-            pb.resetSimulation(pb.RESET_USE_DEFORMABLE_WORLD, physicsClientId=self.client)
-            self._engine_parameters(solver_iterations)
+        self._solver_iterations = int(solver_iterations)
+        self.deformable_world = False  # opened by the first deformable (_open_deformable_world)
         self._soft_keys: dict = {}
         self._writing = False
         super().__init__(scene)
@@ -216,6 +214,22 @@ class PyBullet(TableView):
             numSolverIterations=int(solver_iterations), deterministicOverlappingPairs=1,
             restitutionVelocityThreshold=0.0, warmStartingFactor=0.0, useSplitImpulse=1,
             contactSlop=0.0, enableConeFriction=0, physicsClientId=self.client)
+
+    def _open_deformable_world(self) -> None:
+        """Switch the engine to PyBullet's deformable world (soft bodies exist only there;
+        :mod:`kubric.simulator.deformables`): reset the engine, then rebuild the scene's settings
+        and every body from the model, which is the truth (same model ⇒ same engine state)."""
+        pb.resetSimulation(pb.RESET_USE_DEFORMABLE_WORLD, physicsClientId=self.client)
+        self.deformable_world = True
+        self._engine_parameters(self._solver_iterations)
+        self._shapes = kb_bodies.ShapeCache(self.client)
+        self._assets_by_body.clear()
+        self._soft_keys.clear()
+        for name, setter in self._setters_for(Scene).items():
+            setter(self, self.scene, self.client, getattr(self.scene, name))
+        for asset in self.scene.assets:
+            if asset.linked_objects.pop(self, None) is not None:
+                self.add(asset)
 
     # ------------------------------------------------------------------ lifetime
     def close(self) -> None:
