@@ -57,11 +57,12 @@ import bpy
 import numpy as np
 
 from kubric.core import camera_geometry as geo
-from kubric.core import cameras, characters, lights, materials, objects, rolling_shutter
+from kubric.core import cameras, characters, deformables, lights, materials, objects, rolling_shutter
 from kubric.core.scene import Scene
 from kubric.core.views import TableView
 from kubric.renderer import allocator
 from kubric.renderer import blender_characters as bc
+from kubric.renderer import blender_deformables as bd
 from kubric.renderer import blender_lens as bl
 from kubric.renderer import blender_materials as bm
 from kubric.renderer import blender_objects as bo
@@ -192,6 +193,7 @@ class Blender(TableView, Renderer):
         objects.Sphere: bo.build_sphere,
         objects.FileBasedObject: bo.build_file_object,
         characters.Character: bc.build_character,
+        deformables.Deformable: bd.build_deformable,
         cameras.PerspectiveCamera: bo.build_perspective_camera,
         cameras.OrthographicCamera: bo.build_orthographic_camera,
         lights.DirectionalLight: bo.build_sun,
@@ -223,6 +225,7 @@ class Blender(TableView, Renderer):
         materials.PrincipledBSDFMaterial: bm.PRINCIPLED_SETTERS,
         materials.FlatMaterial: bm.FLAT_SETTERS,
         characters.Character: bc.SETTERS,
+        deformables.Deformable: bd.SETTERS,
     }
     keyframers = {
         objects.Object3D: bo.object_keyframers(),
@@ -232,6 +235,7 @@ class Blender(TableView, Renderer):
         materials.PrincipledBSDFMaterial: bm.PRINCIPLED_KEYFRAMERS,
         materials.FlatMaterial: bm.FLAT_KEYFRAMERS,
         characters.Character: bc.KEYFRAMERS,
+        deformables.Deformable: bd.KEYFRAMERS,
     }
 
     def __init__(self, scene, scratch_dir=None, adaptive_sampling=False, use_denoising=True,
