@@ -28,6 +28,10 @@
   s later, with no horizontal velocity (instance metadata ``dropped_on``: the person's uid). Each
   person is an instance with its keypoints in the metadata (docs/characters.md); tracks follow
   their skinned surfaces. At 0 the scene is byte for byte what it was without the option.
+* C–F, ``cloths=N`` (default 0): N checker-textured cloth sheets (:mod:`kubric.recipes.cloths`)
+  fall from above onto the objects, simulated by PyBullet's soft bodies, two-way with them; each
+  is an instance whose tracks follow material points of the simulated mesh
+  (docs/deformables.md). At 0 the scene is byte for byte what it was without the option.
 
 Materials (A, B): CLEVR's metal and rubber (BSDF, friction μ, restitution e, density); mass =
 the asset's mass (volume × density 1 at scale 1) × density × size³. The CLEVR values (shapes,
@@ -48,6 +52,7 @@ from kubric.assets.utils import get_clevr_lights
 from kubric.pipeline import Option, OptionError, float_range
 from kubric.recipes import movi_schema
 from kubric.recipes.articulated_models import MODELS, add_model, model_list
+from kubric.recipes.cloths import add_cloths
 from kubric.recipes.common import open_existing_source, source_location
 from kubric.recipes.exposure_schema import EXPOSURE_VARIANTS
 from kubric.recipes.movi_base import (
@@ -211,6 +216,8 @@ class MoviC(MoviBase, name="movi_c"):
                         "bounce off them (0 = none: the scene is as without this option)",
                         low=0, high=10)
     character_source, motion_source = source_options("with characters: ")
+    cloths = Option(0, "cloth sheets that fall onto the objects (PyBullet soft bodies; 0 = none: "
+                    "the scene is as without this option)", low=0, high=5)
 
     #: left out of ``flags`` while ``articulated_objects`` is 0, so that a scene made without
     #: articulated objects is byte for byte the scene made before these options existed
@@ -226,6 +233,8 @@ class MoviC(MoviBase, name="movi_c"):
         if not self.characters:
             for name in self.CHARACTER_OPTIONS:
                 out.pop(name)
+        if not self.cloths:
+            out.pop("cloths")
         return out
 
     def renderer_requests(self) -> dict[str, str]:
@@ -295,6 +304,7 @@ class MoviC(MoviBase, name="movi_c"):
         for _ in range(rng.randint(self.min_num_objects, self.max_num_objects + 1)):
             self.new_object(scene, simulator, rng, sources, DYNAMIC_SPAWN_REGION, True)
         self.add_articulated_objects(scene, simulator, rng)
+        self.add_cloths(scene, simulator, rng)
 
     def add_characters(self, scene, rng, sources) -> list:
         """``characters`` people (no random draw when 0), added before the objects so that the
@@ -344,6 +354,11 @@ class MoviC(MoviBase, name="movi_c"):
             annotate_keypoints(scene, layers)
         return super().write_outputs(scene, layers, collisions, seed, out_dir, background,
                                      render_settings, files)
+
+    def add_cloths(self, scene, simulator, rng) -> None:
+        """``cloths`` sheets above everything (no random draw when 0; module doc)."""
+        if self.cloths:
+            add_cloths(scene, rng, self.cloths, simulator.scratch_dir / "cloths")
 
     def add_articulated_objects(self, scene, simulator, rng) -> None:
         """``articulated_objects`` dynamic multi-link models (no random draw when 0): model,
@@ -396,6 +411,7 @@ class MoviD(MoviC, name="movi_d"):
         for _ in range(rng.randint(self.min_num_dynamic, self.max_num_dynamic + 1)):
             self.new_object(scene, simulator, rng, sources, DYNAMIC_SPAWN_REGION, True)
         self.add_articulated_objects(scene, simulator, rng)
+        self.add_cloths(scene, simulator, rng)
 
 
 def linear_camera_path(rng, inner: float, outer: float, max_length: float):
