@@ -21,7 +21,7 @@ import numpy as np
 import kubric as kb
 from kubric.core.deformables import checker_image
 
-CLOTH_SIZE = (1.0, 2.0)
+CLOTH_SIZE = (1.5, 3.0)
 CLOTH_RESOLUTION = 16
 CLOTH_REGION = (-1.0, 1.0)
 CLOTH_CLEARANCE = (0.3, 1.0)
