@@ -25,7 +25,9 @@ def scene(tmp_path_factory):
 
 
 def test_the_cloth_is_an_instance_with_tracks_that_stay_on_it(scene):
+    from kubric.docgen import undocumented_scene_fields
     from kubric.io.layers import read_image_dict
+    assert undocumented_scene_fields(scene) == []
     meta = json.loads((scene / "metadata.json").read_text())
     assert meta["flags"]["cloths"] == 1
     cloths = [k for k, inst in enumerate(meta["instances"], start=1) if inst.get("cloth")]
