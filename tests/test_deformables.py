@@ -40,6 +40,23 @@ def cloth_scene(with_cloth=True, simulator_first=False):
     sim.run(0, 6)
     sim.close()
     return scene, ball, cloth
+
+
+def soft_scene():
+    scene = kb.Scene(resolution=(32, 32), frame_start=0, frame_end=6, frame_rate=12,
+                     step_rate=240)
+    scene += kb.Cube(name="floor", scale=(3, 3, 0.1), position=(0, 0, -0.1), static=True)
+    cube = kb.Cube(name="cube", scale=0.15, position=(0.05, 0, 0.15), mass=1.0)
+    scene += cube
+    toy = kb.Deformable.soft_box(position=(0, 0, 0.7), euler=(0.3, 0.2, 0), name="toy",
+                                 mass=0.5)
+    scene += toy
+    scene += kb.DirectionalLight(position=(1, -1, 3), look_at=(0, 0, 0), intensity=1.5)
+    scene.camera = kb.PerspectiveCamera(position=(0, -2.0, 1.2), look_at=(0, 0, 0.3))
+    sim = PyBullet(scene)
+    sim.run(0, 6)
+    sim.close()
+    return scene, cube, toy
 """
 
 
@@ -50,19 +67,21 @@ def _digest(cloth) -> str:
 
 namespace: dict = {}
 exec(SCENE_CODE, namespace)
-cloth_scene = namespace["cloth_scene"]
+cloth_scene, soft_scene = namespace["cloth_scene"], namespace["soft_scene"]
 
 
-@pytest.fixture(scope="module")
-def rendered():
+@pytest.fixture(scope="module", params=["cloth", "soft"])
+def rendered(request):
+    """(scene, the rigid object, the deformable, raycast layers, tracks) of the cloth scene and
+    of the soft-box scene (a squishy box falls onto a cube)."""
     pytest.importorskip("embreex")
     from kubric.annotations.tracks import scene_tracks
     from kubric.renderer.raycast import Raycast
-    scene, ball, cloth = cloth_scene()
+    scene, rigid, deformable = (cloth_scene if request.param == "cloth" else soft_scene)()
     layers = Raycast(scene).render()
-    tracks = scene_tracks(scene, layers, [ball, cloth], np.random.RandomState(0),
+    tracks = scene_tracks(scene, layers, [rigid, deformable], np.random.RandomState(0),
                           num_tracks=64, stride=2)
-    return scene, ball, cloth, layers, tracks
+    return scene, rigid, deformable, layers, tracks
 
 
 # ---------------------------------------------------------------------------------- model
@@ -89,7 +108,7 @@ def test_cloth_grid_bad_input_is_one_line(kwargs, message):
 @pytest.mark.parametrize("kwargs,message", [
     (dict(faces=[[0, 1, 3]]), r"faces holds 3; allowed: \[0, 2\]"),
     (dict(faces=[[0, 1, 1]]), "face 0 repeats a vertex"),
-    (dict(kind="jelly"), r"kind 'jelly' is not one of \['cloth'\]"),
+    (dict(kind="jelly"), r"kind 'jelly' is not one of \['cloth', 'soft'\]"),
     (dict(static=True), "static must be False"),
 ])
 def test_deformable_bad_input_is_one_line(kwargs, message):
@@ -115,14 +134,15 @@ def test_simulated_vertices_shape_checked_and_interpolated_linearly():
 # ---------------------------------------------------------------------------------- simulation
 def test_same_seed_same_vertices_in_two_processes():
     code = SCENE_CODE + (
-        "\nimport hashlib, numpy as np\n_, _, c = cloth_scene()\n"
-        "print(hashlib.sha256(np.stack([c.deformed_vertices(f) for f in range(7)]).tobytes())"
-        ".hexdigest())\n")
+        "\nimport hashlib, numpy as np\nfor make in (cloth_scene, soft_scene):\n"
+        "    c = make()[2]\n"
+        "    print(hashlib.sha256(np.stack([c.deformed_vertices(f) for f in range(7)])"
+        ".tobytes()).hexdigest())\n")
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(sys.path))
     runs = [subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                           env=env, check=True).stdout.split()[-1] for _ in range(2)]
-    _, _, cloth = cloth_scene()
-    assert runs[0] == runs[1] == _digest(cloth)
+                           env=env, check=True).stdout.split()[-2:] for _ in range(2)]
+    here = [_digest(cloth_scene()[2]), _digest(soft_scene()[2])]
+    assert runs[0] == runs[1] == here
 
 
 def test_a_cloth_added_to_a_running_simulator_reopens_it_as_a_deformable_world():
@@ -146,6 +166,48 @@ def test_cloth_falls_drapes_and_pushes_the_ball():
     assert np.linalg.norm(np.subtract(ball.get_value_at("position", 6), (0.1, 0, 0.25))) > 1e-3
 
 
+def test_no_soft_box_vertex_deeper_in_the_cube_or_floor_than_the_margin():
+    _, cube, toy = soft_scene()
+    margin = toy.collision_margin
+    assert toy.deformed_vertices(6)[:, 2].min() < 0.32  # it fell onto the cube (top: z 0.3)
+    for f in range(FRAMES):
+        v = toy.deformed_vertices(f)
+        with cube.at_frame(f):
+            m, half = cube.matrix_world, np.asarray(cube.scale)
+        local = (v - m[:3, 3]) @ m[:3, :3]                       # the cube's unscaled frame
+        # box signed distance: inside it is −(the distance to the nearest face)
+        inside = np.all(np.abs(local) < half, axis=1)
+        depth = np.where(inside, (half - np.abs(local)).min(axis=1), 0.0)
+        assert depth.max() < margin, f
+        assert v[:, 2].min() > -margin, f
+
+
+def test_soft_box_mesh_is_a_closed_positive_tetrahedral_solid():
+    from kubric.core import tet_meshes
+    v, t, f, uv = tet_meshes.box((0.4, 0.2, 0.3), (2, 1, 3))
+    assert len(v) == 3 * 2 * 4 and len(t) == 6 * 2 * 1 * 3
+    vol = tet_meshes.signed_volumes(v, t)
+    assert np.all(vol > 0) and np.isclose(vol.sum() / 6, 0.4 * 0.2 * 0.3)
+    # the surface is closed (every edge in two faces) and faces outwards (divergence theorem)
+    edges = np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1)
+    assert np.all(np.unique(edges, axis=0, return_counts=True)[1] == 2)
+    tri = v[f]
+    enclosed = np.einsum("ij,ij->i", np.cross(tri[:, 1], tri[:, 2]), tri[:, 0]).sum() / 6
+    assert np.isclose(enclosed, 0.4 * 0.2 * 0.3)
+    assert uv.shape == (len(f), 3, 2) and uv.min() >= 0 and uv.max() <= 1
+
+
+@pytest.mark.parametrize("kwargs,message", [
+    (dict(kind="soft"), r"a soft solid needs tetrahedra \(T, 4\)"),
+    (dict(kind="soft", tetrahedra=[[0, 2, 1, 3]]), "tetrahedron 0 is not positive"),
+    (dict(tetrahedra=[[0, 1, 2, 3]]), "a cloth has no tetrahedra"),
+])
+def test_soft_solid_bad_input_is_one_line(kwargs, message):
+    args = dict(vertices=np.eye(4, 3)[[3, 0, 1, 2]], faces=[[0, 2, 1]]) | kwargs
+    with pytest.raises(InputError, match=message):
+        kb.Deformable(**args)
+
+
 def test_no_cloth_vertex_deeper_in_a_collider_than_the_margin():
     scene, ball, cloth = cloth_scene()
     margin = cloth.collision_margin
@@ -158,7 +220,7 @@ def test_no_cloth_vertex_deeper_in_a_collider_than_the_margin():
 
 
 # ---------------------------------------------------------------------------------- render + tracks
-def test_tracks_on_cloth_match_forward_flow(rendered):
+def test_tracks_on_the_deformable_match_forward_flow(rendered):
     _, _, _, layers, tracks = rendered
     q = tracks["query_points"]
     errors = []
@@ -173,7 +235,7 @@ def test_tracks_on_cloth_match_forward_flow(rendered):
     assert moving.max() > 0.5  # the cloth really moves on screen
 
 
-def test_visible_cloth_track_points_keep_their_instance(rendered):
+def test_visible_deformable_track_points_keep_their_instance(rendered):
     _, _, _, layers, tracks = rendered
     seg = layers["segmentation"][..., 0]
     for i in np.flatnonzero(tracks["instance_id"] == 2):
@@ -182,7 +244,7 @@ def test_visible_cloth_track_points_keep_their_instance(rendered):
             assert seg[t, int(y), int(x)] == 3  # the cloth's label (third asset)
 
 
-def test_cloth_track_is_a_fixed_barycentric_point_of_the_simulated_mesh(rendered):
+def test_deformable_track_is_a_fixed_barycentric_point_of_the_simulated_mesh(rendered):
     _, _, cloth, _, tracks = rendered
     sel = np.flatnonzero(tracks["instance_id"] == 2)
     world = tracks["points_world"][sel].astype(np.float64)
@@ -203,10 +265,16 @@ def test_cloth_track_is_a_fixed_barycentric_point_of_the_simulated_mesh(rendered
         assert np.abs(np.einsum("nk,nkj->nj", bary, verts) - world[:, f]).max() < 1e-4, f
 
 
-def test_cloth_object_coordinates_are_rest_state_points(rendered):
-    _, _, _, layers, _ = rendered
+def test_object_coordinates_are_rest_state_points(rendered):
+    _, _, deformable, layers, _ = rendered
     on = layers["segmentation"][..., 0] == 3
     objc, uv = layers["object_coordinates"][on], layers["uv"][on]
+    if deformable.kind == "soft":
+        # the rest box's surface: one coordinate of every point is 0 or 1, however squashed
+        assert on.sum() > 300
+        assert np.minimum(objc, 1 - objc).min(axis=1).max() < 1e-5
+        assert np.ptp(objc, axis=0).min() > 0.5
+        return
     # rest sheet: object x, y over its bounds = the grid's (u, v), wherever the cloth has moved
     assert on.sum() > 300
     assert np.abs(objc[:, :2] - uv[:, :2]).max() < 1e-5

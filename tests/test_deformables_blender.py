@@ -1,10 +1,10 @@
-"""Deformable cloth in Blender: the shape-keyed mesh equals the model's simulated vertices, and
+"""Deformable cloth and soft solids in Blender: the shape-keyed mesh equals the model's simulated vertices, and
 every exact layer agrees with the raycast backend (the oracle) on the same simulated scene."""
 
 import numpy as np
 import pytest
 
-from tests.test_deformables import FRAMES, cloth_scene
+from tests.test_deformables import FRAMES, cloth_scene, soft_scene
 
 pytestmark = pytest.mark.blender
 
@@ -12,12 +12,12 @@ LAYERS = ("segmentation", "depth", "forward_flow", "backward_flow", "object_coor
           "normal")
 
 
-@pytest.fixture(scope="module")
-def both():
+@pytest.fixture(scope="module", params=["cloth", "soft"])
+def both(request):
     pytest.importorskip("embreex")
     from kubric.renderer.blender import Blender
     from kubric.renderer.raycast import Raycast
-    scene, _, cloth = cloth_scene()
+    scene, _, cloth = (cloth_scene if request.param == "cloth" else soft_scene)()
     blender = Blender(scene, samples_per_pixel=1, use_denoising=False)
     frames = [1, 3, 5]
     ours = blender.render(frames=frames, return_layers=LAYERS)

@@ -1,4 +1,5 @@
-"""Deformable objects (:class:`Deformable`): cloth sheets whose simulated vertices are the truth.
+"""Deformable objects (:class:`Deformable`): cloth sheets and soft solids whose simulated vertices
+are the truth.
 
 As for skinned characters (:mod:`kubric.core.characters`), the model holds the deforming mesh
 itself and every view follows it: the simulator writes the vertex positions of every frame into
@@ -20,12 +21,13 @@ from __future__ import annotations
 import numpy as np
 
 from kubric.core import skinning as sk
+from kubric.core import tet_meshes
 from kubric.core import traits as kt
 from kubric.core.characters import Character, _array, _integers
 from kubric.core.objects import PhysicalObject
 from kubric.errors import InputError
 
-KINDS = ("cloth",)
+KINDS = ("cloth", "soft")
 
 
 def cloth_grid(size=(1.0, 1.0), resolution=(16, 16)):
@@ -76,14 +78,17 @@ def checker_image(squares=(8, 8), pixels_per_square: int = 16, colors=None) -> n
 
 
 class Deformable(PhysicalObject):
-    """A cloth sheet (module doc): a triangle mesh whose vertices the simulator moves.
+    """A cloth sheet or a soft solid (module doc): a mesh whose vertices the simulator moves.
 
     Mesh (keyword arguments, fixed after construction): ``vertices`` (V, 3) rest positions in the
-    model frame (m), ``faces`` (F, 3) vertex indices, ``uv`` (F, 3, 2) or None. ``kind``:
-    ``"cloth"`` (a mass-spring sheet: stretch, shear and bending springs). Physics (properties):
-    ``mass`` (kg, the whole sheet), ``friction``, ``stiffness`` (spring elastic stiffness, N/m),
-    ``damping`` (spring damping), ``collision_margin`` (m: the engine keeps the cloth this far
-    from colliders). ``static`` is always False.
+    model frame (m), ``faces`` (F, 3) the rendered triangles, ``uv`` (F, 3, 2) or None,
+    ``tetrahedra`` (T, 4) for a soft solid (positive, :mod:`kubric.core.tet_meshes`; vertices no
+    face uses are interior nodes, simulated and not rendered). ``kind``: ``"cloth"`` (a
+    mass-spring sheet: stretch, shear and bending springs) or ``"soft"`` (a NeoHookean solid).
+    Physics (properties): ``mass`` (kg, the whole object), ``friction``, ``collision_margin`` (m:
+    the engine keeps the mesh this far from colliders); cloth: ``stiffness`` (spring elastic
+    stiffness, N/m), ``damping`` (spring damping); soft: ``neo_hookean`` (μ, λ, damping).
+    ``static`` is always False.
     """
 
     simulated_vertices = kt.Property(None, lambda v, o, n: o._convert_vertices(v),
@@ -91,10 +96,13 @@ class Deformable(PhysicalObject):
                                      "the rest mesh placed by the pose", interpolation="linear")
     stiffness = kt.Float(60.0, low=0.0, doc="spring elastic stiffness (N/m)")
     damping = kt.Float(0.1, low=0.0, doc="spring damping stiffness")
-    collision_margin = kt.Float(0.02, low=0.0, doc="contact margin of the cloth (m)")
+    collision_margin = kt.Float(0.02, low=0.0, doc="contact margin of the mesh (m)")
+    neo_hookean = kt.Property((180.0, 600.0, 0.01), kt.as_vector(3),
+                              "soft solids: NeoHookean (mu, lambda, damping)")
     property_defaults = {"mass": 0.2}
 
-    def __init__(self, *, vertices, faces, uv=None, kind: str = "cloth", **kwargs):
+    def __init__(self, *, vertices, faces, uv=None, kind: str = "cloth", tetrahedra=None,
+                 **kwargs):
         where = f"Deformable {kwargs.get('name') or 'Deformable'!r}"
         if kind not in KINDS:
             raise InputError(f"{where}: kind {kind!r} is not one of {list(KINDS)}")
@@ -111,6 +119,7 @@ class Deformable(PhysicalObject):
         if uv is not None:
             uv = _array(where, "uv", uv, np.float32, (len(f), 3, 2))
             uv.setflags(write=False)
+        self.tetrahedra = self._check_tetrahedra(where, kind, tetrahedra, v)
         self.kind = kind
         self.vertices, self.faces, self.uv = v, f.astype(np.int32), uv
         self.rendered_vertices = np.unique(self.faces)
@@ -125,6 +134,32 @@ class Deformable(PhysicalObject):
         """A :func:`cloth_grid` sheet; ``kwargs`` go to the constructor (pose, mass, ...)."""
         vertices, faces, uv = cloth_grid(size, resolution)
         return cls(vertices=vertices, faces=faces, uv=uv, kind="cloth", **kwargs)
+
+    @classmethod
+    def soft_box(cls, size=(0.4, 0.4, 0.4), resolution=(3, 3, 3), **kwargs) -> Deformable:
+        """A soft solid box (:func:`kubric.core.tet_meshes.box`); ``kwargs`` go to the
+        constructor."""
+        vertices, tets, faces, uv = tet_meshes.box(size, resolution)
+        return cls(vertices=vertices, faces=faces, uv=uv, tetrahedra=tets, kind="soft",
+                   **kwargs)
+
+    @staticmethod
+    def _check_tetrahedra(where, kind, tetrahedra, vertices):
+        if kind == "cloth":
+            if tetrahedra is not None:
+                raise InputError(f"{where}: a cloth has no tetrahedra (give kind='soft')")
+            return None
+        if tetrahedra is None:
+            raise InputError(f"{where}: a soft solid needs tetrahedra (T, 4)")
+        t = _integers(where, "tetrahedra", tetrahedra, (None, 4), 0, len(vertices))
+        vol = tet_meshes.signed_volumes(vertices, t) if len(t) else np.zeros(1)
+        if not len(t) or np.any(vol <= 0):
+            bad = int(np.flatnonzero(vol <= 0)[0]) if len(t) else 0
+            raise InputError(f"{where}: tetrahedron {bad} is not positive (need "
+                             "((b − a) × (c − a)) · (d − a) > 0 for every (a, b, c, d))")
+        t = t.astype(np.int32)
+        t.setflags(write=False)
+        return t
 
     def _convert_vertices(self, value):
         if value is None:

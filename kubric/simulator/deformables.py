@@ -1,12 +1,13 @@
-"""Deformables in PyBullet: a :class:`~kubric.core.deformables.Deformable` cloth becomes a
-mass-spring soft body (``pybullet.loadSoftBody`` from an OBJ of its current world vertices), two-way
-coupled with the rigid bodies (cloth pushes them, they push it).
+"""Deformables in PyBullet: a :class:`~kubric.core.deformables.Deformable` becomes a soft body,
+two-way coupled with the rigid bodies (it pushes them, they push it): a cloth a mass-spring body
+(``pybullet.loadSoftBody`` of an OBJ of its current world vertices), a soft solid a NeoHookean
+body (of a VTK file of its vertices and tetrahedra).
 
 PyBullet simulates soft bodies only in its *deformable world*
 (``resetSimulation(RESET_USE_DEFORMABLE_WORLD)``, a different dynamics world with its own solver),
 which replaces the engine's world: :class:`kubric.simulator.pybullet.PyBullet` opens it when the
 first deformable joins (at construction or later) and rebuilds every body from the model.
-Facts measured for the choice (docs/deformables.md): the soft body keeps the OBJ's vertex order;
+Facts measured for the choice (docs/deformables.md): the soft body keeps the file's vertex order;
 its nodes are read each frame with ``getMeshData(..., MESH_DATA_SIMULATION_MESH)``; the same scene
 gives bit-identical nodes in two processes; a spring cloth is stable at 240 steps/s up to about
 24 × 24 vertices per square metre with ``collision_margin`` 0.02 m (finer sheets need more steps).
@@ -14,7 +15,9 @@ gives bit-identical nodes in two processes; a spring cloth is stable at 240 step
 
 from __future__ import annotations
 
+import contextlib
 import os
+import sys
 import tempfile
 from dataclasses import dataclass
 
@@ -42,20 +45,59 @@ def write_obj(path: str, vertices: np.ndarray, faces: np.ndarray) -> None:
         f.writelines(f"f {a} {b} {c}\n" for a, b, c in np.asarray(faces, np.int64) + 1)
 
 
+def write_vtk(path: str, vertices: np.ndarray, tetrahedra: np.ndarray) -> None:
+    """A legacy ASCII VTK unstructured grid of world vertices (V, 3) and tetrahedra (T, 4)."""
+    with open(path, "w", encoding="ascii") as f:
+        f.write("# vtk DataFile Version 2.0\nkubric soft body\nASCII\n"
+                f"DATASET UNSTRUCTURED_GRID\nPOINTS {len(vertices)} double\n")
+        f.writelines(f"{x:.9g} {y:.9g} {z:.9g}\n" for x, y, z in vertices)
+        f.write(f"CELLS {len(tetrahedra)} {5 * len(tetrahedra)}\n")
+        f.writelines(f"4 {a} {b} {c} {d}\n" for a, b, c, d in np.asarray(tetrahedra, np.int64))
+        f.write(f"CELL_TYPES {len(tetrahedra)}\n" + "10\n" * len(tetrahedra))
+
+
+@contextlib.contextmanager
+def _quiet_stdout():
+    """PyBullet's VTK reader prints node / link / face / tetra counts on the C stdout: send the
+    process's file descriptor 1 to /dev/null meanwhile (a worker's stdout stays its own)."""
+    sys.stdout.flush()
+    keep, sink = os.dup(1), os.open(os.devnull, os.O_WRONLY)
+    os.dup2(sink, 1)
+    try:
+        yield
+    finally:
+        os.dup2(keep, 1)
+        os.close(keep)
+        os.close(sink)
+
+
+def _load(deformable, path: str, client: int) -> int:
+    common = dict(basePosition=(0.0, 0.0, 0.0), scale=1.0, mass=float(deformable.mass),
+                  useSelfCollision=0, frictionCoeff=float(deformable.friction), useFaceContact=1,
+                  collisionMargin=float(deformable.collision_margin), physicsClientId=client)
+    if deformable.kind == "soft":
+        mu, lam, damping = (float(x) for x in deformable.neo_hookean)
+        with _quiet_stdout():
+            return pb.loadSoftBody(path, useNeoHookean=1, NeoHookeanMu=mu, NeoHookeanLambda=lam,
+                                   NeoHookeanDamping=damping, **common)
+    return pb.loadSoftBody(path, useNeoHookean=0, useBendingSprings=1, useMassSpring=1,
+                           springElasticStiffness=float(deformable.stiffness),
+                           springDampingStiffness=float(deformable.damping),
+                           springDampingAllDirections=1, **common)
+
+
 def build(deformable, client: int) -> SoftBody:
     """A soft body of ``deformable`` at its current vertices (module doc)."""
     verts = deformable.deformed_vertices()
-    fd, path = tempfile.mkstemp(suffix=".obj", prefix="kubric_cloth_")
+    soft = deformable.kind == "soft"
+    fd, path = tempfile.mkstemp(suffix=".vtk" if soft else ".obj", prefix="kubric_soft_")
     os.close(fd)
     try:
-        write_obj(path, verts, deformable.faces)
-        uid = pb.loadSoftBody(
-            path, basePosition=(0.0, 0.0, 0.0), scale=1.0, mass=float(deformable.mass),
-            useNeoHookean=0, useBendingSprings=1, useMassSpring=1,
-            springElasticStiffness=float(deformable.stiffness),
-            springDampingStiffness=float(deformable.damping), springDampingAllDirections=1,
-            useSelfCollision=0, frictionCoeff=float(deformable.friction), useFaceContact=1,
-            collisionMargin=float(deformable.collision_margin), physicsClientId=client)
+        if soft:
+            write_vtk(path, verts, deformable.tetrahedra)
+        else:
+            write_obj(path, verts, deformable.faces)
+        uid = _load(deformable, path, client)
     finally:
         os.unlink(path)
     if uid < 0:

@@ -134,7 +134,8 @@ def _soft_key(deformable) -> tuple:
     """What a soft body is built from: the current mesh and the physics properties."""
     return (deformable.deformed_vertices().tobytes(), float(deformable.mass),
             float(deformable.stiffness), float(deformable.damping),
-            float(deformable.collision_margin), float(deformable.friction))
+            float(deformable.collision_margin), float(deformable.friction),
+            tuple(float(x) for x in deformable.neo_hookean))
 
 
 def _rebuild_deformable(view, deformable, body, value):
@@ -183,7 +184,7 @@ class PyBullet(TableView):
                     "angular_velocity": _ignore, "static": _ignore, "mass": _ignore},
         Deformable: {**{name: _rebuild_deformable for name in (
             "position", "quaternion", "scale", "mass", "friction", "stiffness", "damping",
-            "collision_margin", "simulated_vertices")},
+            "collision_margin", "neo_hookean", "simulated_vertices")},
             "velocity": _ignore, "angular_velocity": _ignore, "static": _ignore,
             "restitution": _ignore},
     }
