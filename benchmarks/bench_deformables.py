@@ -3,8 +3,8 @@ render of the same scene (RGB + exact layers), in the same run (issue #36's goal
 simulation ≤ 25 % of the default scene's render cost at 256²).
 
 Scene: a MOVi-C-like default scene simulated, not keyframed: a floor, 10 dynamic cubes and spheres
-dropped from 1–3 m, ``--cloths`` checker-textured sheets (``kubric.recipes.cloths``: 16² vertices,
-edge 1–2 m) above them; ``--frames`` frames at 12 frames/s, 240 steps/s, ``--size``², RGB at
+dropped from 1–3 m, ``--cloths`` checker-textured sheets (``kubric.recipes.deformable_objects``:
+16² vertices, edge 1.5–3 m) above them; ``--frames`` frames at 12 frames/s, 240 steps/s, ``--size``², RGB at
 ``--samples`` spp (OIDN on) plus the exact annotation pass. Measured (CPU seconds, the least of 3
 runs for the simulations): the simulation with the sheets minus the same simulation without them,
 and the render of the scene with the sheets.
@@ -25,7 +25,7 @@ import smoke_mode  # noqa: E402
 from bench_render import timed  # noqa: E402
 
 import kubric as kb  # noqa: E402
-from kubric.recipes.cloths import add_cloths  # noqa: E402
+from kubric.recipes.deformable_objects import add_deformables  # noqa: E402
 
 
 def make_scene(args, cloths: int, folder) -> kb.Scene:
@@ -42,7 +42,7 @@ def make_scene(args, cloths: int, folder) -> kb.Scene:
         scene += cls(scale=float(rng.uniform(0.2, 0.4)), mass=1.0,
                      position=(*rng.uniform(-1.5, 1.5, 2), float(rng.uniform(1, 3))),
                      material=kb.PrincipledBSDFMaterial(color=kb.random_hue_color(rng=rng)))
-    add_cloths(scene, rng, cloths, folder)
+    add_deformables(scene, rng, cloths, 0, folder)
     return scene
 
 

@@ -298,9 +298,9 @@ def test_a_blown_up_cloth_simulation_is_one_line():
     from kubric.simulator.deformables import check_stable
     cloth = kb.Deformable.cloth(resolution=(3, 3), name="cloth")
     rest = cloth.deformed_vertices()
-    check_stable(cloth, [0, 1], [rest, rest * 2.9])  # within 3× of the rest length: fine
-    for bad, what in ((rest * 3.1, r"3\.1×"), (np.where(rest == rest[0], np.nan, rest), "inf×")):
+    check_stable(cloth, [0, 1], [rest, rest * 9.9])  # within 10× of the rest length: fine
+    for bad, what in ((rest * 10.5, r"10\.5×"), (np.where(rest == rest[0], np.nan, rest), "inf×")):
         with pytest.raises(InputError, match=r"cloth: the cloth simulation blew up at frame 1 "
                                              rf"\(an edge stretched {what} its rest length; "
-                                             r"allowed ≤ 3×\): raise the scene's step_rate"):
+                                             r"allowed ≤ 10×\): raise the scene's step_rate"):
             check_stable(cloth, [0, 1], [rest, bad])

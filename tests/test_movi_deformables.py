@@ -1,5 +1,6 @@
-"""MOVi-C with a cloth sheet (``cloths=1``, raycast backend, tiny): the sheet is an instance, its
-tracks stay on it where visible and move with the written flow; at 0 nothing changes."""
+"""MOVi-C with a cloth sheet and a soft toy (``cloths=1``, ``soft_objects=1``, raycast backend,
+tiny): each is an instance, their tracks stay on them where visible and move with the written
+flow; at 0 nothing changes."""
 
 from __future__ import annotations
 
@@ -12,7 +13,8 @@ from collection_fixtures import run_worker
 from kubric.pipeline import get_recipe
 
 OPTIONS = ("resolution=48", "frame_end=14", "renderer=raycast", "min_num_objects=2",
-           "max_num_objects=2", "collection_limit=8", "cloths=1", "tracks=256", "track_stride=2",
+           "max_num_objects=2", "collection_limit=8", "cloths=1", "soft_objects=1", "tracks=256",
+           "track_stride=2",
            "track_max_fraction=0.5")
 
 
@@ -24,13 +26,14 @@ def scene(tmp_path_factory):
     return root / "scene_00000001"
 
 
-def test_the_cloth_is_an_instance_with_tracks_that_stay_on_it(scene):
+@pytest.mark.parametrize("kind", ["cloth", "soft"])
+def test_each_deformable_is_an_instance_with_tracks_that_stay_on_it(scene, kind):
     from kubric.docgen import undocumented_scene_fields
     from kubric.io.layers import read_image_dict
     assert undocumented_scene_fields(scene) == []
     meta = json.loads((scene / "metadata.json").read_text())
-    assert meta["flags"]["cloths"] == 1
-    cloths = [k for k, inst in enumerate(meta["instances"], start=1) if inst.get("cloth")]
+    assert meta["flags"]["cloths"] == meta["flags"]["soft_objects"] == 1
+    cloths = [k for k, inst in enumerate(meta["instances"], start=1) if inst.get(kind)]
     assert len(cloths) == 1
     label = cloths[0]
     assert meta["instances"][label - 1]["is_dynamic"]
@@ -54,7 +57,8 @@ def test_the_cloth_is_an_instance_with_tracks_that_stay_on_it(scene):
     assert np.median(steps) < max(1e-3, 2 * (rng["max"] - rng["min"]) / 65535)
 
 
-def test_zero_cloths_leaves_flags_unchanged():
+def test_zero_deformables_leave_flags_unchanged():
     movi_c = get_recipe("movi_c")
-    assert "cloths" not in movi_c(collection_limit=8).flags(0)
+    assert not {"cloths", "soft_objects"} & set(movi_c(collection_limit=8).flags(0))
     assert movi_c(cloths=2).flags(0)["cloths"] == 2
+    assert movi_c(soft_objects=1).flags(0)["soft_objects"] == 1
