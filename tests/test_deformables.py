@@ -304,3 +304,21 @@ def test_a_blown_up_cloth_simulation_is_one_line():
                                              rf"\(an edge stretched {what} its rest length; "
                                              r"allowed ≤ 10×\): raise the scene's step_rate"):
             check_stable(cloth, [0, 1], [rest, bad])
+
+
+def test_cloth_lands_on_a_walking_person():
+    # people are kinematic colliders (kubric.simulator.characters): the cloth stops on the head
+    from kubric.assets.procedural_character import tube_person, walk_clip
+    from kubric.simulator.pybullet import PyBullet
+    scene = kb.Scene(frame_start=0, frame_end=6, frame_rate=12, step_rate=240)
+    scene += kb.Cube(name="floor", scale=(3, 3, 0.1), position=(0, 0, -0.1), static=True)
+    person = tube_person()
+    scene += person
+    person.play(walk_clip(seconds=1.0))
+    top = float(person.aabb(0)[1, 2])
+    cloth = kb.Deformable.cloth(size=(1, 1), resolution=(8, 8), position=(0, 0, top + 0.3))
+    scene += cloth
+    PyBullet(scene).run(0, 6)
+    # in free fall it would be 0.5 · 9.81 · 0.5² = 1.23 m lower by frame 6
+    assert cloth.deformed_vertices(6)[:, 2].max() > top - 0.2
+    assert cloth.deformed_vertices(6)[:, 2].min() < top - 0.05  # it drapes
