@@ -27,9 +27,12 @@ ROWS = {
                      r'^\{"meshes": 1, "median_vhacd_s"'],
     "bench_characters": [r"^render \(RGB \+ layers\)\s+: +[\d.]+ CPU-s",
                          r"^characters' extra cost / render: [\d.]+%"],
+    "bench_cloth_engines": [r"^\| pybullet \| (yes|no) \| [\d.]+ \| -?[\d.]+ \| [\d.]+ \| yes \|"],
     "bench_codecs": [r"^32² .+\n  codec +enc ms", r"^  handwritten +[\d.]+ +[\d.]+ +\d+ +yes"],
     "bench_datasets": [r"^pack, 2 worker\(s\): [\d.]+ s", r"^read, random order, video only: "
                        r"dataset [\d.]+ examples/s"],
+    "bench_deformables": [r"^cloth simulation \(extra\) +: +[\d.]+ CPU-s",
+                          r"^cloth simulation / render : [\d.]+% \(goal ≤ 25%\)"],
     "bench_events": [r"^\| frames \(default\) \| \d+ \| [\d.]+ \| [\d.]+ \|",
                      r"^\| flow K=2 \| \d+ \| [\d.]+ \| [\d.]+ \|"],
     "bench_extra_layers": [r"^\| extra_layers \| CPU-s \| × default scene \|",
@@ -65,7 +68,8 @@ ROWS = {
 NEEDS = {"bench_codecs": ("tifffile", "cv2"), "bench_scale": ("distributed", "s3fs", "moto"),
          "bench_scaling": ("distributed",)}
 #: benchmarks that render or import with bpy
-BLENDER = {"bench_assets", "bench_characters", "bench_datasets", "bench_lens", "bench_multiview",
+BLENDER = {"bench_assets", "bench_characters", "bench_cloth_engines", "bench_datasets",
+           "bench_deformables", "bench_lens", "bench_multiview",
            "bench_quality_calibration", "bench_raycast", "bench_render", "bench_render_levers",
            "bench_scaling", "bench_scene_cost", "bench_shadows", "bench_signals", "bench_stereo",
            "bench_tracks", "bench_viewer"}

@@ -27,7 +27,7 @@ import numpy as np
 from kubric.annotations.character_tracks import anchor_queries
 from kubric.annotations.segmentation import instance_labels
 from kubric.core import camera_geometry as geo
-from kubric.core.characters import Character
+from kubric.core.deformables import DEFORMING
 
 #: the layers :func:`scene_flow` makes: world frame, then camera frame
 WORLD_LAYERS = ("forward_scene_flow", "backward_scene_flow")
@@ -100,7 +100,7 @@ def scene_flow(scene, depth, segmentation, frames: Sequence[int] | None = None,
                                  f"(labels {sorted(by_label)})")
             sel = hit & (lab[t] == label)
             args = (asset, camera, frame, centres[sel], points[sel], (w, h))
-            moves = _character_moves(*args, anchor=anchor) if isinstance(asset, Character) \
+            moves = _character_moves(*args, anchor=anchor) if isinstance(asset, DEFORMING) \
                 else _rigid_moves(*args)
             for step, k, there in moves:
                 out[WORLD_LAYERS[k]][t][sel] = there - points[sel]

@@ -92,7 +92,7 @@ from kubric.annotations.character_tracks import follow_character
 from kubric.annotations.rolling_tracks import rolling_positions
 from kubric.annotations.segmentation import instance_labels
 from kubric.core import camera_geometry as geo
-from kubric.core.characters import Character
+from kubric.core.deformables import DEFORMING
 from kubric.core.rolling_shutter import duration_of, row_offset
 from kubric.errors import InputError
 
@@ -387,7 +387,7 @@ def compute_tracks(camera, frames: Sequence[int], depth, segmentation, assets: S
     for uid in {a.uid for a, fg in zip(qassets, is_fg, strict=False) if fg}:
         sel = np.array([a.uid == uid for a in qassets]) & is_fg
         asset = qassets[int(np.flatnonzero(sel)[0])]
-        if isinstance(asset, Character):  # a deforming surface: kubric.annotations.character_tracks
+        if isinstance(asset, DEFORMING):  # a deforming surface: kubric.annotations.character_tracks
             points_object[sel], points_world[sel] = follow_character(
                 asset, camera, frames, tq[sel], q[sel][:, [2, 1]], world_q[sel], (w, h))
             continue

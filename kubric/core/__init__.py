@@ -5,6 +5,7 @@ from kubric.core.assets import Asset, UndefinedAsset
 from kubric.core.cameras import Camera, OrthographicCamera, PerspectiveCamera, UndefinedCamera
 from kubric.core.characters import Character, MotionClip
 from kubric.core.color import Color, get_color
+from kubric.core.deformables import Deformable
 from kubric.core.lights import (
     DirectionalLight,
     Light,
@@ -33,4 +34,5 @@ __all__ = [
     "PrincipledBSDFMaterial", "Texture", "UndefinedMaterial", "Cube", "FileBasedObject",
     "Object3D", "PhysicalObject", "Sphere", "Quaternion", "Scene", "TableView", "View",
     "camera_geometry", "Character", "MotionClip", "ProceduralMaterial", "ImageMaterial",
+    "Deformable",
 ]

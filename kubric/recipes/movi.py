@@ -28,6 +28,11 @@
   s later, with no horizontal velocity (instance metadata ``dropped_on``: the person's uid). Each
   person is an instance with its keypoints in the metadata (docs/characters.md); tracks follow
   their skinned surfaces. At 0 the scene is byte for byte what it was without the option.
+* C–F, ``cloths=N`` / ``soft_objects=N`` (default 0): N checker-textured cloth sheets / soft
+  toys (:mod:`kubric.recipes.deformable_objects`) fall from above onto the objects, simulated by
+  PyBullet's soft bodies, two-way with them; each is an instance whose tracks follow material
+  points of the simulated mesh (docs/deformables.md). At 0 the scene is byte for byte what it was
+  without the options.
 
 Materials (A, B): CLEVR's metal and rubber (BSDF, friction μ, restitution e, density); mass =
 the asset's mass (volume × density 1 at scale 1) × density × size³. The CLEVR values (shapes,
@@ -49,6 +54,7 @@ from kubric.pipeline import Option, OptionError, float_range
 from kubric.recipes import movi_schema
 from kubric.recipes.articulated_models import MODELS, add_model, model_list
 from kubric.recipes.common import open_existing_source, source_location
+from kubric.recipes.deformable_objects import add_deformables
 from kubric.recipes.exposure_schema import EXPOSURE_VARIANTS
 from kubric.recipes.material_options import MaterialOptions
 from kubric.recipes.movi_base import (
@@ -212,6 +218,11 @@ class MoviC(MaterialOptions, MoviBase, name="movi_c"):
                         "bounce off them (0 = none: the scene is as without this option)",
                         low=0, high=10)
     character_source, motion_source = source_options("with characters: ")
+    cloths = Option(0, "cloth sheets that fall onto the objects (PyBullet soft bodies; 0 = none: "
+                    "the scene is as without this option)", low=0, high=5)
+    soft_objects = Option(0, "soft toys (squishy boxes, PyBullet NeoHookean bodies) that fall "
+                          "onto the objects (0 = none: the scene is as without this option)",
+                          low=0, high=5)
 
     #: left out of ``flags`` while ``articulated_objects`` is 0, so that a scene made without
     #: articulated objects is byte for byte the scene made before these options existed
@@ -230,6 +241,9 @@ class MoviC(MaterialOptions, MoviBase, name="movi_c"):
                 out.pop(name)
         if not self.characters:
             for name in self.CHARACTER_OPTIONS:
+                out.pop(name)
+        for name in ("cloths", "soft_objects"):
+            if not getattr(self, name):
                 out.pop(name)
         return out
 
@@ -305,6 +319,7 @@ class MoviC(MaterialOptions, MoviBase, name="movi_c"):
         for _ in range(rng.randint(self.min_num_objects, self.max_num_objects + 1)):
             self.new_object(scene, simulator, rng, sources, DYNAMIC_SPAWN_REGION, True)
         self.add_articulated_objects(scene, simulator, rng)
+        self.drop_deformables(scene, simulator, rng)
 
     def add_characters(self, scene, rng, sources) -> list:
         """``characters`` people (no random draw when 0), added before the objects so that the
@@ -354,6 +369,13 @@ class MoviC(MaterialOptions, MoviBase, name="movi_c"):
             annotate_keypoints(scene, layers)
         return super().write_outputs(scene, layers, collisions, seed, out_dir, background,
                                      render_settings, files)
+
+    def drop_deformables(self, scene, simulator, rng) -> None:
+        """``cloths`` sheets and ``soft_objects`` toys above everything (no random draw when
+        both are 0; module doc)."""
+        if self.cloths or self.soft_objects:
+            add_deformables(scene, rng, self.cloths, self.soft_objects,
+                            simulator.scratch_dir / "deformables")
 
     def add_articulated_objects(self, scene, simulator, rng) -> None:
         """``articulated_objects`` dynamic multi-link models (no random draw when 0): model,
@@ -406,6 +428,7 @@ class MoviD(MoviC, name="movi_d"):
         for _ in range(rng.randint(self.min_num_dynamic, self.max_num_dynamic + 1)):
             self.new_object(scene, simulator, rng, sources, DYNAMIC_SPAWN_REGION, True)
         self.add_articulated_objects(scene, simulator, rng)
+        self.drop_deformables(scene, simulator, rng)
 
 
 def linear_camera_path(rng, inner: float, outer: float, max_length: float):

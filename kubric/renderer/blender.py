@@ -57,12 +57,21 @@ import bpy
 import numpy as np
 
 from kubric.core import camera_geometry as geo
-from kubric.core import cameras, characters, lights, materials, objects, rolling_shutter
+from kubric.core import (
+    cameras,
+    characters,
+    deformables,
+    lights,
+    materials,
+    objects,
+    rolling_shutter,
+)
 from kubric.core import pbr_materials as pbr
 from kubric.core.scene import Scene
 from kubric.core.views import TableView
 from kubric.renderer import allocator
 from kubric.renderer import blender_characters as bc
+from kubric.renderer import blender_deformables as bd
 from kubric.renderer import blender_lens as bl
 from kubric.renderer import blender_materials as bm
 from kubric.renderer import blender_objects as bo
@@ -194,6 +203,7 @@ class Blender(TableView, Renderer):
         objects.Sphere: bo.build_sphere,
         objects.FileBasedObject: bo.build_file_object,
         characters.Character: bc.build_character,
+        deformables.Deformable: bd.build_deformable,
         cameras.PerspectiveCamera: bo.build_perspective_camera,
         cameras.OrthographicCamera: bo.build_orthographic_camera,
         lights.DirectionalLight: bo.build_sun,
@@ -229,6 +239,7 @@ class Blender(TableView, Renderer):
         pbr.ProceduralMaterial: bpr.PROCEDURAL_SETTERS,
         pbr.ImageMaterial: bpr.IMAGE_SETTERS,
         characters.Character: bc.SETTERS,
+        deformables.Deformable: bd.SETTERS,
     }
     keyframers = {
         objects.Object3D: bo.object_keyframers(),
@@ -238,6 +249,7 @@ class Blender(TableView, Renderer):
         materials.PrincipledBSDFMaterial: bm.PRINCIPLED_KEYFRAMERS,
         materials.FlatMaterial: bm.FLAT_KEYFRAMERS,
         characters.Character: bc.KEYFRAMERS,
+        deformables.Deformable: bd.KEYFRAMERS,
     }
 
     def __init__(self, scene, scratch_dir=None, adaptive_sampling=False, use_denoising=True,

@@ -34,7 +34,7 @@ import numpy as np
 
 from kubric.core import camera_geometry as geo
 from kubric.core import lenses
-from kubric.core.characters import Character
+from kubric.core.deformables import DEFORMING
 
 _TEXT_NAME = "kubric_lens.osl"
 
@@ -219,7 +219,7 @@ def lens_layers(passes, camera, frame, assets, wanted) -> dict:
             sel = owners == i
             asset = assets[i - 1]
             local = aov[rows[sel], cols[sel]]
-            if isinstance(asset, Character):  # the AOV is the rest-pose point: its material point
+            if isinstance(asset, DEFORMING):  # the AOV is the rest-pose point: its material point
                 tri, bary = rest_anchors(asset, local)
                 moved[sel] = asset.surface_points(tri, bary, frame + step)
                 continue

@@ -45,9 +45,10 @@ from kubric.core import camera_geometry as geo
 from kubric.core import lights, materials, objects, rolling_shutter
 from kubric.core import pbr_materials as pbr
 from kubric.core.color import Color, linear_to_srgb, srgb_to_linear
+from kubric.core.deformables import Deformable
 from kubric.core.imports import uninterrupted_import
 from kubric.renderer import procedural_patterns
-from kubric.renderer.base import ALL_LAYERS, PATTERN_NEED, Renderer
+from kubric.renderer.base import ALL_LAYERS, PATTERN_NEED, CapabilityError, Renderer
 from kubric.renderer.raycast_rolling import rolling_flow_ends, rolling_frame
 
 trimesh = uninterrupted_import("trimesh")  # trimesh swallows a Ctrl-C in its import
@@ -260,6 +261,10 @@ class _Geometry:
                               for m in meshes], (0, 3))
         self.corner_uv = _join([np.zeros((len(m.faces), 3, 2)) if m.corner_uv is None
                                 else m.corner_uv for m in meshes], (0, 3, 2))
+        # deformables: (k, asset, first vertex, end) — their vertices come from the model per
+        # frame; their local points are rest-state model-frame points (docs/deformables.md)
+        self.deforming = [(k, e[1], starts[k], starts[k] + counts[k])
+                          for k, e in enumerate(entries) if isinstance(e[1], Deformable)]
 
     def poses(self, frame):
         """(K, 3, 3) rotations, (K, 3) translations and (K, 3) scales of the objects at
@@ -280,6 +285,28 @@ class _Geometry:
         rot, trans, scale = poses
         return np.einsum("nij,nj->ni", rot[owner], points * scale[owner]) + trans[owner]
 
+    def posed_vertices(self, frame, poses):
+        """(V, 3) every vertex in the world at ``frame``: rigid objects with ``poses``,
+        deformables as the model's simulated mesh of that frame."""
+        world = self.to_world(self.vertices, self.vertex_owner, poses)
+        for _, asset, start, end in self.deforming:
+            world[start:end] = asset.deformed_vertices(frame)
+        return world
+
+    def surface_world(self, local, owner, tid, bary, frame):
+        """World positions at ``frame`` of hit points (N) given as local points ``local`` (N, 3)
+        of objects ``owner`` on triangles ``tid`` with barycentrics ``bary`` (N, 3): rigid
+        objects move the local point with their pose, deformables follow the material point
+        (the triangle's vertices at that frame)."""
+        world = self.to_world(local, owner, self.poses(frame))
+        for k, asset, start, _ in self.deforming:
+            sel = np.flatnonzero(owner == k)
+            if len(sel):
+                verts = asset.deformed_vertices(frame)
+                world[sel] = np.einsum("nk,nkj->nj", bary[sel],
+                                       verts[self.faces[tid[sel]] - start])
+        return world
+
 
 def _join(arrays, empty_shape):
     return np.concatenate(arrays) if len(arrays) else np.zeros(empty_shape)
@@ -290,7 +317,7 @@ class _PosedScene:
 
     def __init__(self, geometry: _Geometry, frame):
         self.poses = geometry.poses(frame)
-        world = geometry.to_world(geometry.vertices, geometry.vertex_owner, self.poses)
+        world = geometry.posed_vertices(frame, self.poses)
         self.mesh = trimesh.Trimesh(world, geometry.faces, process=False)
         self.triangles = world[geometry.faces]
         self._ray = None
@@ -341,9 +368,14 @@ class Raycast(Renderer):
                 mesh = sphere_mesh()
             elif isinstance(asset, objects.FileBasedObject):
                 mesh = file_mesh(asset)
+            elif isinstance(asset, Deformable):  # the rest mesh; posed per frame by the model
+                mesh = Mesh(np.asarray(asset.vertices, np.float64),
+                            np.asarray(asset.faces, np.int64), None,
+                            None if asset.uv is None else np.asarray(asset.uv, np.float64))
             else:
                 raise ValueError(f"{asset.uid}: the raycast renderer has no geometry for "
-                                 f"{type(asset).__name__} (Cube, Sphere, FileBasedObject)")
+                                 f"{type(asset).__name__} (Cube, Sphere, FileBasedObject, "
+                                 "Deformable)")
             self._meshes[asset] = mesh
         return self._meshes[asset]
 
@@ -372,6 +404,9 @@ class Raycast(Renderer):
             self.require_patterns(geometry)
         out: dict[str, np.ndarray] = {}
         rolling = rolling_shutter.duration_of(camera) > 0
+        if rolling and geometry.deforming:
+            raise CapabilityError(f"renderer=raycast cannot render deformables "
+                                  f"({geometry.deforming[0][1].uid}) under a rolling shutter")
         for i, frame in enumerate(frames):
             layers = (rolling_frame(self, camera, geometry, frame, wanted) if rolling else
                       self.render_frame(camera, geometry, frame, wanted))
@@ -432,7 +467,7 @@ class Raycast(Renderer):
                     xy = rolling_flow_ends(camera, geometry, local, owner, rolling_from + step,
                                            (w, h))
                 else:
-                    world = geometry.to_world(local, owner, geometry.poses(frame + step))
+                    world = geometry.surface_world(local, owner, tid, bary, frame + step)
                     xy, _ = geo.project_to_pixels(camera, world, frame=frame + step,
                                                   resolution=(w, h))
                 flow = xy[:, ::-1] - centres[idx, ::-1]  # (Δrow, Δcol)

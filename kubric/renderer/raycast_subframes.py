@@ -59,6 +59,9 @@ def exposure_flow(scene, frames, shutter: float) -> np.ndarray:
     if camera is None:
         raise ValueError("exposure_flow: the scene has no camera")
     geometry = renderer.geometry()
+    if geometry.deforming:
+        raise ValueError(f"exposure_flow: deformables ({geometry.deforming[0][1].uid}) have no "
+                         "sub-frame motion; allowed: rigid objects")
     if len(set(geometry.labels.tolist())) != len(geometry.labels):
         raise ValueError("exposure_flow: objects share a segmentation_id; every object needs "
                          "its own label")

@@ -23,7 +23,7 @@ import trimesh
 from kubric.annotations.character_tracks import anchor_queries
 from kubric.annotations.scene_flow import to_camera
 from kubric.core import camera_geometry as geo
-from kubric.core.characters import Character
+from kubric.core.deformables import DEFORMING
 from kubric.renderer.raycast import Raycast, _Geometry, _intersect
 
 
@@ -137,7 +137,7 @@ def amodal_masks(scene, assets: Sequence, frames: Sequence[int] | None = None) -
     frames = list(scene.frames if frames is None else frames)
     camera, (w, h) = scene.camera, scene.resolution
     meshes = Raycast(scene)
-    casters = [_SkinnedCaster(a) if isinstance(a, Character) else
+    casters = [_SkinnedCaster(a) if isinstance(a, DEFORMING) else
                _LocalCaster(a, meshes._mesh_of(a)) for a in assets]
     out = np.zeros((len(frames), len(assets), h * w), bool)
     for t, frame in enumerate(frames):

@@ -33,12 +33,14 @@ import pybullet as pb
 
 from kubric.core.assets import Asset
 from kubric.core.characters import Character
+from kubric.core.deformables import Deformable
 from kubric.core.objects import FileBasedObject, PhysicalObject
 from kubric.core.scene import Scene
 from kubric.core.views import TableView
 from kubric.simulator import bodies as kb_bodies
 from kubric.simulator import characters as kb_characters
 from kubric.simulator import contacts as kb_contacts
+from kubric.simulator import deformables as kb_deformables
 from kubric.simulator.bodies import Body
 
 logger = logging.getLogger(__name__)
@@ -122,6 +124,32 @@ def _ignore(view, obj, body, value):
     """A property the kinematic character colliders do not use (they never move by physics)."""
 
 
+def _build_deformable(view, deformable):
+    if not view.deformable_world:
+        view._open_deformable_world()
+    return kb_deformables.SoftBody()
+
+
+def _soft_key(deformable) -> tuple:
+    """What a soft body is built from: the current mesh and the physics properties."""
+    return (deformable.deformed_vertices().tobytes(), float(deformable.mass),
+            float(deformable.stiffness), float(deformable.damping),
+            float(deformable.collision_margin), float(deformable.friction),
+            tuple(float(x) for x in deformable.neo_hookean))
+
+
+def _rebuild_deformable(view, deformable, body, value):
+    """A soft body at the model's current mesh and physics (rebuilt only when they changed;
+    not while :meth:`PyBullet.run` writes the simulated vertices back)."""
+    if view._writing:
+        return
+    key = _soft_key(deformable)
+    if key != view._soft_keys.get(deformable):
+        kb_deformables.remove(body, view.client)
+        body.uid = kb_deformables.build(deformable, view.client).uid
+        view._soft_keys[deformable] = key
+
+
 class PyBullet(TableView):
     """Rigid-body simulator view of ``scene`` (see the module docstring for conventions).
 
@@ -137,6 +165,7 @@ class PyBullet(TableView):
         Scene: _build_scene,
         PhysicalObject: _build_object,
         Character: _build_character,
+        Deformable: _build_deformable,
         Asset: None,  # cameras, lights, materials, plain Object3D: no physics counterpart
     }
     setters = {
@@ -153,6 +182,11 @@ class PyBullet(TableView):
                     "scale": _rescale_character, "friction": _character_dynamics,
                     "restitution": _character_dynamics, "velocity": _ignore,
                     "angular_velocity": _ignore, "static": _ignore, "mass": _ignore},
+        Deformable: {**{name: _rebuild_deformable for name in (
+            "position", "quaternion", "scale", "mass", "friction", "stiffness", "damping",
+            "collision_margin", "neo_hookean", "simulated_vertices")},
+            "velocity": _ignore, "angular_velocity": _ignore, "static": _ignore,
+            "restitution": _ignore},
     }
     keyframers = {}
 
@@ -165,15 +199,38 @@ class PyBullet(TableView):
         if self.client < 0:
             raise RuntimeError("PyBullet: could not open a physics client (pybullet.connect)")
         self._finalizer = weakref.finalize(self, _disconnect, self.client)
-        pb.setPhysicsEngineParameter(
-            numSolverIterations=int(solver_iterations), deterministicOverlappingPairs=1,
-            restitutionVelocityThreshold=0.0, warmStartingFactor=0.0, useSplitImpulse=1,
-            contactSlop=0.0, enableConeFriction=0, physicsClientId=self.client)
+        self._engine_parameters(solver_iterations)
         self._shapes = kb_bodies.ShapeCache(self.client)
         self._assets_by_body: dict[int, PhysicalObject] = {}
         self._keyed_frames: dict[PhysicalObject, set[int]] = {}
         self._links: dict[PhysicalObject, dict[int, PhysicalObject]] = {}  # attach_links
+        self._solver_iterations = int(solver_iterations)
+        self.deformable_world = False  # opened by the first deformable (_open_deformable_world)
+        self._soft_keys: dict = {}
+        self._writing = False
         super().__init__(scene)
+
+    def _engine_parameters(self, solver_iterations: int) -> None:
+        pb.setPhysicsEngineParameter(
+            numSolverIterations=int(solver_iterations), deterministicOverlappingPairs=1,
+            restitutionVelocityThreshold=0.0, warmStartingFactor=0.0, useSplitImpulse=1,
+            contactSlop=0.0, enableConeFriction=0, physicsClientId=self.client)
+
+    def _open_deformable_world(self) -> None:
+        """Switch the engine to PyBullet's deformable world (soft bodies exist only there;
+        :mod:`kubric.simulator.deformables`): reset the engine, then rebuild the scene's settings
+        and every body from the model, which is the truth (same model ⇒ same engine state)."""
+        pb.resetSimulation(pb.RESET_USE_DEFORMABLE_WORLD, physicsClientId=self.client)
+        self.deformable_world = True
+        self._engine_parameters(self._solver_iterations)
+        self._shapes = kb_bodies.ShapeCache(self.client)
+        self._assets_by_body.clear()
+        self._soft_keys.clear()
+        for name, setter in self._setters_for(Scene).items():
+            setter(self, self.scene, self.client, getattr(self.scene, name))
+        for asset in self.scene.assets:
+            if asset.linked_objects.pop(self, None) is not None:
+                self.add(asset)
 
     # ------------------------------------------------------------------ lifetime
     def close(self) -> None:
@@ -219,6 +276,9 @@ class PyBullet(TableView):
     def destroy(self, asset, obj) -> None:
         if isinstance(obj, Body):
             self._remove_body(obj)
+        elif isinstance(obj, kb_deformables.SoftBody):
+            self._soft_keys.pop(asset, None)
+            kb_deformables.remove(obj, self.client)
         elif isinstance(obj, kb_characters.CharacterBodies):
             for uid in obj.uids:
                 self._assets_by_body.pop(uid, None)
@@ -385,6 +445,8 @@ class PyBullet(TableView):
 
         states: dict = {}
         self._read_all(simulated, states)
+        soft = self._soft_bodies()
+        meshes = {a: [kb_deformables.read(b.uid, self.client)] for a, b in soft}
         events: list[dict] = []
         for step in range(1, n_steps + 1):
             for bodies, schedule in poses:  # kinematic colliders at this step's time
@@ -397,6 +459,8 @@ class PyBullet(TableView):
                     min_contact_force))
             if step % steps_per_frame == 0:
                 self._read_all(simulated, states)
+                for a, b in soft:
+                    meshes[a].append(kb_deformables.read(b.uid, self.client))
 
         if merge_contacts:
             events = kb_contacts.merge_events(events, steps_per_frame)
@@ -404,7 +468,32 @@ class PyBullet(TableView):
         animation = {obj: {name: [s[i] for s in seq] for i, name in enumerate(SIMULATED_PROPERTIES)}
                      for obj, seq in states.items()}
         self._write_keyframes(animation, frame_start, frame_end)
+        self._write_meshes(meshes, frame_start, frame_end)
+        animation.update({a: {"simulated_vertices": seq} for a, seq in meshes.items()})
         return animation, collisions
+
+    def _soft_bodies(self) -> list:
+        """[(deformable, its soft body)] of the scene."""
+        return [(a, a.linked_objects[self]) for a in self.scene.assets
+                if isinstance(a.linked_objects.get(self), kb_deformables.SoftBody)
+                and a.linked_objects[self].uid is not None]
+
+    def _write_meshes(self, meshes, frame_start: int, frame_end: int) -> None:
+        """Key every deformable's vertices at every frame of the run (replacing an earlier run's
+        keys outside it); the engine keeps its state (no rebuild from the written values)."""
+        frames = range(frame_start, frame_end + 1)
+        self._writing = True
+        try:
+            for obj, seq in meshes.items():
+                kb_deformables.check_stable(obj, frames, seq)
+                for frame in sorted(set(obj.keyframes.get("simulated_vertices", {})) -
+                                    set(frames)):
+                    obj.keyframe_delete("simulated_vertices", frame)
+                for frame, verts in zip(frames, seq, strict=True):
+                    obj.record(frame, verts)
+                self._soft_keys[obj] = _soft_key(obj)
+        finally:
+            self._writing = False
 
     def _write_keyframes(self, animation, frame_start: int, frame_end: int) -> None:
         frames = range(frame_start, frame_end + 1)
