@@ -431,11 +431,12 @@ def test_movi_c_gso_card_attributes_every_object(movi_c_gso, tmp_path):
 
 
 @pytest.mark.slow
-def test_export_memory_is_flat_in_the_number_of_scenes(tmp_path):
+def test_export_memory_is_flat_in_the_number_of_scenes(tmp_path, monkeypatch):
     """The peak memory an export adds does not grow with the scenes: 48 scenes within 1.2× (+8
     MB) of 12, where holding the 36 extra scenes' decoded examples alone would take more than
     the allowance (measured from the loader, independently of the export)."""
-    from benchmarks.bench_hub import FORMATS, make_dataset, measure_export
+    monkeypatch.syspath_prepend(str(pathlib.Path(__file__).resolve().parents[1] / "benchmarks"))
+    from benchmarks.bench_hub import FORMATS, make_dataset, measure_export  # imports smoke_mode
     from kubric.datasets.tfds_io import flatten
     options = {"resolution": (128, 128), "frames": 8}
     warmup = make_dataset(tmp_path, 2, options)

@@ -33,7 +33,7 @@ ALLOWED = {
     "pipeline": ABOVE,
     "recipes": ABOVE,
     "datasets": {"core", "io", "errors", "faults", "extras", "pipeline"},
-    "viewer": {"core", "io", "errors", "annotations", "pipeline"},
+    "viewer": {"core", "io", "errors", "extras", "annotations", "pipeline"},
     "datasets.exports.hub": {"core", "io", "errors", "asset_tools", "datasets",
                              "datasets.exports"},
 }
