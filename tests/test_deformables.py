@@ -281,17 +281,6 @@ def test_object_coordinates_are_rest_state_points(rendered):
     assert np.all(objc[:, 2] == 0)
 
 
-def test_rolling_shutter_refused_with_deformables(rendered):
-    from kubric.renderer.raycast import Raycast
-    scene = rendered[0]
-    scene.camera.rolling_shutter_duration = 0.5
-    try:
-        with pytest.raises(ValueError, match="cannot render deformables"):
-            Raycast(scene).render(frames=[0], return_layers=("depth",))
-    finally:
-        scene.camera.rolling_shutter_duration = 0.0
-
-
 def test_a_blown_up_cloth_simulation_is_one_line():
     # a real blow-up (a 24² sheet at stiffness 200 on a ball) takes a minute of exploding
     # contacts: the check runs on the meshes such a run records

@@ -69,8 +69,9 @@ def test_capabilities_are_answered_without_importing_a_backend():
     proc = subprocess.run([sys.executable, "-c", code], env=ENV, capture_output=True, text=True,
                           timeout=120)
     assert proc.returncode == 0, proc.stderr
-    assert proc.stdout.split("\n")[0] == ("True False ['depth_of_field', 'motion_blur'] "
-                                          "['rolling_shutter'] True False ['blender']")
+    assert proc.stdout.split("\n")[0] == ("True False ['depth_of_field', 'motion_blur', "
+                                          "'rolling_shutter'] ['rolling_shutter'] True False "
+                                          "['blender']")
 
 
 def test_capability_declarations_are_checked():
@@ -84,12 +85,11 @@ def test_capability_declarations_are_checked():
     with pytest.raises(ValueError, match=r"unknown renderer 'povray'; allowed: \['blender', "
                                          r"'raycast'\]"):
         base.capabilities("povray")
-    # a rolling shutter is rendered by raycast only
-    assert base.able(["rolling_shutter"]) == ["raycast"]
-    assert base.refusal("blender", {"rolling_shutter": "readout=0.1"}, "x") == (
-        "x: renderer=blender cannot render rolling shutter (readout=0.1); backends that can: "
-        "raycast")
-    assert base.able(["rolling_shutter", "motion_blur"]) == []  # no backend does both
+    # a rolling shutter: raycast, and blender (Cycles' RGB, raycast's exact layers)
+    assert base.able(["rolling_shutter"]) == ["blender", "raycast"]
+    assert base.refusal("raycast", {"motion_blur": "shutter=0.1"}, "x") == (
+        "x: renderer=raycast cannot render motion blur (shutter=0.1); backends that can: "
+        "blender")
 
 
 def _scene(**camera):

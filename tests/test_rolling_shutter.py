@@ -85,17 +85,24 @@ def _posed(asset, local, t):
     return m[:3, :3] @ (np.asarray(local) * s) + m[:3, 3]
 
 
-def test_rows_equal_global_renders_at_each_row_time():
-    scene = _scene()
-    out = base.create("raycast", scene).render(frames=[2], return_layers=LAYERS)
+def rows_equal_row_time_renders(scene, layers=LAYERS) -> dict:
+    """Render frame 2 of ``scene`` under its rolling shutter; assert every row of every layer
+    equals a global-shutter render at that row's time, and that the effect is there. Returns
+    the rolling render."""
+    out = base.create("raycast", scene).render(frames=[2], return_layers=layers)
     times = [2 + D * ((r + 0.5) / H - 0.5) for r in range(H)]
     scene.camera.rolling_shutter_duration = 0.0
-    ref = subframe_layers(scene, [0.0], times, LAYERS)  # (1, H, H, W, C): one render per row
-    for name in LAYERS:
+    ref = subframe_layers(scene, [0.0], times, layers)  # (1, H, H, W, C): one render per row
+    for name in layers:
         for r in range(H):
             assert np.array_equal(out[name][0, r], ref[name][0, r, r]), (name, r)
     glob = base.create("raycast", scene).render(frames=[2], return_layers=("segmentation",))
     assert not np.array_equal(glob["segmentation"], out["segmentation"])  # the effect is there
+    return out
+
+
+def test_rows_equal_global_renders_at_each_row_time():
+    rows_equal_row_time_renders(_scene())
 
 
 @pytest.mark.parametrize("lens", [None, LENS], ids=["pinhole", "brown_conrady"])

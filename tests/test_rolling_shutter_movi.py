@@ -1,7 +1,7 @@
 """MOVi-A with ``rolling_shutter=d`` through the worker (raycast backend, bpy blocked): the
 duration recorded in metadata, the tracks at their rows' times (projected here with OpenCV from
 the recorded camera, interpolated at the solved time), packed as ``movi_a_rolling_shutter`` and
-loaded; the default Blender renderer refuses the option in one line naming raycast."""
+loaded; a rolling shutter with motion blur or depth of field is refused in one line."""
 
 import json
 import os
@@ -27,9 +27,13 @@ def _kubric(*args):
     return proc
 
 
-def test_blender_refuses_rolling_shutter_naming_raycast():
-    with pytest.raises(OptionError, match=r"rolling_shutter=0.5.*raycast"):
-        get_recipe("movi_a").from_assignments(["rolling_shutter=0.5"])
+def test_rolling_shutter_with_motion_blur_or_dof_is_refused_in_one_line():
+    get_recipe("movi_a").from_assignments(["rolling_shutter=0.5"])  # blender: Cycles + raycast
+    with pytest.raises(OptionError, match=r"^movi_f: option rolling_shutter=0.5 with "
+                                          r"max_motion_blur=2.0: no renderer renders both"):
+        get_recipe("movi_f").from_assignments(["rolling_shutter=0.5"])
+    with pytest.raises(OptionError, match=r"rolling_shutter=0.5 with dof=True"):
+        get_recipe("movi_a").from_assignments(["rolling_shutter=0.5", "dof=True"])
 
 
 def test_movi_a_rolling_shutter_records_packs_and_loads(tmp_path):

@@ -68,16 +68,20 @@ def _cast(o, d, verts, faces, camera, frame, resolution, pixels_xy, chunk: int =
     return tri, bary
 
 
-def follow_character(character, camera, frames, query_t, pixels_xy, world_points, resolution):
-    """(points_object (n, 3) rest-pose model-frame points, points_world (n, T, 3)) for queries on
-    ``character`` (query frame index ``query_t``)."""
-    n = len(query_t)
+def follow_character(character, camera, frames, query_times, pixels_xy, world_points,
+                     resolution):
+    """(points_object (n, 3) rest-pose model-frame points, points_world (n, T, 3), triangle (n,),
+    barycentric (n, 3)) for queries on ``character`` (a Character or Deformable) anchored at
+    ``query_times`` (n,): each query's frame, or under a rolling shutter the time its row is read
+    (camera and mesh both at that time)."""
+    query_times = np.asarray(query_times, np.float64)
+    n = len(query_times)
     tri = np.zeros(n, np.int64)
     bary = np.zeros((n, 3))
-    for t in np.unique(query_t):
-        sel = query_t == t
-        tri[sel], bary[sel] = anchor_queries(character, camera, frames[t], pixels_xy[sel],
+    for t in np.unique(query_times):
+        sel = query_times == t
+        tri[sel], bary[sel] = anchor_queries(character, camera, float(t), pixels_xy[sel],
                                              world_points[sel], resolution)
     rest = character.surface_points(tri, bary, space="rest")
     world = np.stack([character.surface_points(tri, bary, f) for f in frames], axis=1)
-    return rest, world
+    return rest, world, tri, bary

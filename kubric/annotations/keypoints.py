@@ -7,6 +7,9 @@ source's and the procedural person's regressors provide):
 * ``keypoints_3d`` (T, K, 3): world position, metres (the regressor on the skinned mesh);
 * ``keypoints_camera`` (T, K, 3): camera frame (Blender axes: x right, y up, looking down −z);
 * ``keypoints_2d`` (T, K, 2): pixel position (x, y), pixel centres at +0.5 (docs/conventions.md);
+  under a rolling shutter (the camera's ``rolling_shutter_duration`` > 0) each keypoint is where
+  it is seen when the row it lands on is read, and the 3D / camera fields are at that time
+  (:func:`kubric.annotations.rolling_tracks.rolling_keypoints`);
 * ``keypoints_depth`` (T, K): distance to the camera centre, metres;
 * ``keypoint_occlusion_reason`` (T, K) uint8 bits, the point tracks' rule (docs/tracks.md):
   1 behind the camera, 2 outside the image, 4 the pixel shows another instance, 8 the rendered
@@ -30,6 +33,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from kubric.annotations.rolling_tracks import rolling_keypoints
 from kubric.annotations.segmentation import instance_labels
 from kubric.annotations.tracks import (
     BEHIND_CAMERA,
@@ -41,6 +45,7 @@ from kubric.annotations.tracks import (
 )
 from kubric.core import camera_geometry as geo
 from kubric.core.characters import COCO_KEYPOINTS, COCO_SKELETON, Character
+from kubric.core.rolling_shutter import duration_of
 from kubric.errors import InputError
 
 KEYPOINT_FIELDS = ("keypoint_names", "keypoint_skeleton", "keypoint_skin_depth", "keypoints_3d",
@@ -73,17 +78,20 @@ def character_keypoints(camera, frames: Sequence[int], depth, segmentation, asse
                          f"{list(character.keypoint_names)}")
     pick = [character.keypoint_names.index(n) for n in names]
     depth, labels, frames = frame_layers(depth, segmentation, frames)
-    num_frames, h, w = depth.shape
+    _, h, w = depth.shape
     label = int(instance_labels(assets)[list(assets).index(character)])
-    world = np.stack([character.keypoints(f)[pick] for f in frames])     # (T, K, 3)
+    if duration_of(camera) > 0:  # each keypoint at the time of the row it lands on
+        world, xy, dist, cam, _ = rolling_keypoints(camera, frames, character, pick, (w, h))
+    else:
+        world = np.stack([character.keypoints(f)[pick] for f in frames])     # (T, K, 3)
+        xy = np.zeros(world.shape[:2] + (2,))
+        dist = np.zeros(world.shape[:2])
+        cam = np.zeros(world.shape)
+        for t, f in enumerate(frames):
+            xy[t], dist[t] = geo.project_to_pixels(camera, world[t], frame=f, resolution=(w, h))
+            m = geo.world_to_camera(camera, f)
+            cam[t] = world[t] @ m[:3, :3].T + m[:3, 3]
     k = world.shape[1]
-    xy = np.zeros((num_frames, k, 2))
-    dist = np.zeros((num_frames, k))
-    cam = np.zeros((num_frames, k, 3))
-    for t, f in enumerate(frames):
-        xy[t], dist[t] = geo.project_to_pixels(camera, world[t], frame=f, resolution=(w, h))
-        m = geo.world_to_camera(camera, f)
-        cam[t] = world[t] @ m[:3, :3].T + m[:3, 3]
     skin = skin_depth(character)[pick] * float(np.max(character.scale))
     reason = occlusion_reasons(xy.transpose(1, 0, 2), cam[..., 2].T, dist.T - skin[:, None],
                                labels, depth, depth_slope(depth, labels) if slope is None

@@ -384,12 +384,15 @@ def compute_tracks(camera, frames: Sequence[int], depth, segmentation, assets: S
                                             frame=float(t), resolution=(w, h))
     points_object = world_q.copy()
     points_world = np.repeat(world_q[:, None, :], num_frames, axis=1)
+    anchors = {}  # track index → (triangle, barycentric) of tracks on deforming surfaces
     for uid in {a.uid for a, fg in zip(qassets, is_fg, strict=False) if fg}:
         sel = np.array([a.uid == uid for a in qassets]) & is_fg
         asset = qassets[int(np.flatnonzero(sel)[0])]
         if isinstance(asset, DEFORMING):  # a deforming surface: kubric.annotations.character_tracks
-            points_object[sel], points_world[sel] = follow_character(
-                asset, camera, frames, tq[sel], q[sel][:, [2, 1]], world_q[sel], (w, h))
+            points_object[sel], points_world[sel], tri, bary = follow_character(
+                asset, camera, frames, qtime[sel], q[sel][:, [2, 1]], world_q[sel], (w, h))
+            anchors.update(zip(np.flatnonzero(sel).tolist(), zip(tri.tolist(), bary, strict=True),
+                               strict=True))
             continue
         mats, scales = _poses(asset, frames)
         for t in np.unique(qtime[sel]):
@@ -410,7 +413,7 @@ def compute_tracks(camera, frames: Sequence[int], depth, segmentation, assets: S
         cam[:, t] = points_world[:, t] @ m[:3, :3].T + m[:3, 3]
     if duration_of(camera) > 0:  # each point at the time of the row it lands on
         xy, dist, cam, points_world = rolling_positions(camera, frames, qassets, is_fg,
-                                                        points_object, (w, h))
+                                                        points_object, (w, h), anchors)
 
     # occlusion
     slope = depth_slope(depth, labels)

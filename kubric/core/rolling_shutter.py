@@ -142,17 +142,43 @@ def rolling_projection(camera, groups, frame: float, resolution):
 
     ``groups``: (asset or None, local points (n_k, 3)) pairs (see :func:`posed_points`).
     Returns (xy (n, 2), depth (n,), time (n,)) over the groups' points in order
-    (:func:`solve_rows` with the camera's ``rolling_shutter_duration``)."""
-    w, h = resolution
+    (:func:`rolling_points`)."""
     local = (np.concatenate([np.asarray(p, np.float64).reshape(-1, 3) for _, p in groups])
              if groups else np.zeros((0, 3)))
     group_of = np.repeat(np.arange(len(groups)), [len(p) for _, p in groups])
 
-    def project_at(times, idx):
+    def world_at(times, idx):
         world = np.empty((len(idx), 3))
         for k in np.unique(group_of[idx]):
             sel = group_of[idx] == k
             world[sel] = posed_points(groups[k][0], local[idx[sel]], times[sel])
-        return project_at_times(camera, world, times, (w, h))
+        return world
 
-    return solve_rows(project_at, float(frame), duration_of(camera), h, len(local))
+    return rolling_points(camera, world_at, len(local), frame, resolution)
+
+
+def rolling_points(camera, world_at: Callable, count: int, frame: float, resolution):
+    """Rolling-shutter image positions of ``count`` moving points in ``frame``: ``world_at(times,
+    idx)`` gives the world positions (len(idx), 3) of points ``idx`` at their own times
+    (len(idx),) (any motion: rigid poses, skinned or simulated meshes, keypoint regressors).
+    Returns (xy (count, 2), depth (count,), time (count,)) at the fixed point (:func:`solve_rows`
+    with the camera's ``rolling_shutter_duration``)."""
+    w, h = resolution
+
+    def project_at(times, idx):
+        return project_at_times(camera, world_at(times, idx), times, (w, h))
+
+    return solve_rows(project_at, float(frame), duration_of(camera), h, int(count))
+
+
+def at_each_time(times, points_at: Callable) -> np.ndarray:
+    """(n, 3) ``points_at(t, sel)`` (the points ``sel`` (indices into ``times``) at time ``t``)
+    gathered over the unique values of ``times`` (n,): one evaluation of a deforming model per
+    distinct time."""
+    times = np.asarray(times, np.float64)
+    out = np.empty((len(times), 3))
+    uniq, inverse = np.unique(times, return_inverse=True)
+    for k, t in enumerate(uniq):
+        sel = np.flatnonzero(inverse == k)
+        out[sel] = points_at(float(t), sel)
+    return out

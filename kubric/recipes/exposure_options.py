@@ -14,7 +14,9 @@ motion blur (``coverage_samples``); the ground truth is :mod:`kubric.annotations
   to close.
 * ``rolling_shutter=d`` (> 0): the camera reads rows top to bottom over d frames
   (:mod:`kubric.core.rolling_shutter`); RGB, every layer and the tracks are at each row's time;
-  the raycast renderer only; recorded in ``metadata.rolling_shutter``.
+  raycast renders it all, blender renders RGB with Cycles' rolling shutter and takes the exact
+  layers from raycast (:mod:`kubric.renderer.blender_rolling`; refused with motion blur or
+  ``dof``); recorded in ``metadata.rolling_shutter``.
 * ``events=True``: ``events.h5`` (DSEC's layout, :mod:`kubric.io.event_h5`), the event stream of
   the sensor model of :mod:`kubric.annotations.event_camera` (``event_threshold`` ±
   ``event_threshold_spread`` per pixel, drawn from an rng derived from the seed;
@@ -59,8 +61,8 @@ class ExposureOptions:
                               "fraction of the exposure each pixel shows each instance "
                               "(0 = none)", low=0, high=256)
     rolling_shutter = Option(0.0, "rolling-shutter readout time from the image's top edge to "
-                             "its bottom edge (frames; 0 = global shutter; raycast renderer "
-                             "only)", low=0.0, high=10.0)
+                             "its bottom edge (frames; 0 = global shutter; not with motion "
+                             "blur or dof)", low=0.0, high=10.0)
     events = Option(False, "write events.h5: an event-camera stream (DSEC layout)")
     event_subframes = Option(0, "event intensity samples per frame: 0 = the rendered frames, "
                              "log intensity linear between them; K = K raycast sub-frames",
@@ -96,10 +98,17 @@ class ExposureOptions:
                                              "row_time": ROW_TIME}
 
     def check_exposure(self) -> None:
-        """``coverage_samples`` needs a shutter: a recipe with ``max_motion_blur`` > 0."""
+        """``coverage_samples`` needs a shutter: a recipe with ``max_motion_blur`` > 0; a
+        rolling shutter goes with neither motion blur nor ``dof``."""
         if self.coverage_samples and getattr(self, "max_motion_blur", 0.0) <= 0:
             raise OptionError(f"{self.name}: option coverage_samples={self.coverage_samples} "
                               "needs a shutter: a recipe with max_motion_blur > 0 (movi_f)")
+        blur = getattr(self, "max_motion_blur", 0.0)
+        for asked, other in ((blur > 0, f"max_motion_blur={blur}"), (self.dof, "dof=True")):
+            if self.rolling_shutter and asked:
+                raise OptionError(f"{self.name}: option rolling_shutter={self.rolling_shutter} "
+                                  f"with {other}: no renderer renders both; allowed: "
+                                  "rolling_shutter=0 or the other off")
 
     def sample_lens(self, scene, seed: int) -> None:
         """With ``dof``: the camera's thin lens, from an rng derived from ``seed``; recorded in

@@ -70,7 +70,7 @@ EXPOSURE_VARIANTS = {name: (
                                 "(events=true): events.h5.")),
     register_schema(base.extend(f"{name}_rolling_shutter", ROLLING_FEATURES,
                                 description=f"{base.description} With a rolling shutter "
-                                "(rolling_shutter=d, raycast renderer).")),
+                                "(rolling_shutter=d).")),
     *((register_schema(base.extend(f"{name}_coverage", COVERAGE_FEATURES,
                                    description=f"{base.description} With the exposure coverage "
                                    "(coverage_samples=K): coverage.npz and exposure_flow.")),)

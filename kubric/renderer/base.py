@@ -144,7 +144,8 @@ class Backend:
 #: name → Backend of every backend (the recipes' ``renderer`` option values)
 BACKENDS = {
     "blender": Backend("kubric.renderer.blender:Blender", Capabilities(
-        photoreal=True, effects={"motion_blur", "depth_of_field"}, state_file_suffix=".blend",
+        photoreal=True, effects={"motion_blur", "depth_of_field", "rolling_shutter"},
+        state_file_suffix=".blend",
         characters=True, quality_profiles=True, lenses=True, procedural_patterns=PATTERNS)),
     "raycast": Backend("kubric.renderer.raycast:Raycast", Capabilities(
         photoreal=False, lenses=True, effects={"rolling_shutter"},

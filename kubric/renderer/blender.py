@@ -77,6 +77,7 @@ from kubric.renderer import blender_materials as bm
 from kubric.renderer import blender_objects as bo
 from kubric.renderer import blender_passes as bp
 from kubric.renderer import blender_procedural as bpr
+from kubric.renderer import blender_rolling as bl_rolling
 from kubric.renderer import blender_shadows as bs
 from kubric.renderer import blender_world as bw
 from kubric.renderer.base import CapabilityError, Renderer
@@ -433,6 +434,7 @@ class Blender(TableView, Renderer):
         if self.motion_blur > 0:  # centred: the exact layers mean the shutter's centre
             s.render.motion_blur_shutter = self.motion_blur
             s.render.motion_blur_position = "CENTER"
+        bl_rolling.configure_cycles(s, self.scene.camera)
         self._camera_dof(restore=True)
         layer = s.view_layers[0]
         layer.material_override = None
@@ -531,6 +533,8 @@ class Blender(TableView, Renderer):
         readout = rolling_shutter.duration_of(cam)
         self.require_effects({"rolling_shutter": readout > 0 and
                               f"camera {cam.name!r} rolling_shutter_duration={readout!r}"})
+        if readout > 0:  # Cycles' rolling RGB, raycast's exact layers (blender_rolling)
+            bl_rolling.check(self.scene, self.motion_blur)
         refusal = bl.check_scene(self.scene)
         if refusal:
             raise CapabilityError(f"Blender.render: {refusal}")
@@ -543,7 +547,9 @@ class Blender(TableView, Renderer):
             for i, f in enumerate(frames):
                 out.put("rgba", i, _read_png_rgba(files[f]))
         ann = [k for k in wanted if k != "rgba"]
-        if ann:
+        if ann and readout > 0:
+            out.arrays.update(bl_rolling.exact_layers(self.scene, frames, ann))
+        elif ann:
             labels, bounds = self._object_tables()
             prefix = self.scratch_dir / "annotations_"
             self._configure_annotations(prefix)

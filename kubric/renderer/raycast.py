@@ -48,7 +48,7 @@ from kubric.core.color import Color, linear_to_srgb, srgb_to_linear
 from kubric.core.deformables import Deformable
 from kubric.core.imports import uninterrupted_import
 from kubric.renderer import procedural_patterns
-from kubric.renderer.base import ALL_LAYERS, PATTERN_NEED, CapabilityError, Renderer
+from kubric.renderer.base import ALL_LAYERS, PATTERN_NEED, Renderer
 from kubric.renderer.raycast_rolling import rolling_flow_ends, rolling_frame
 
 trimesh = uninterrupted_import("trimesh")  # trimesh swallows a Ctrl-C in its import
@@ -404,9 +404,6 @@ class Raycast(Renderer):
             self.require_patterns(geometry)
         out: dict[str, np.ndarray] = {}
         rolling = rolling_shutter.duration_of(camera) > 0
-        if rolling and geometry.deforming:
-            raise CapabilityError(f"renderer=raycast cannot render deformables "
-                                  f"({geometry.deforming[0][1].uid}) under a rolling shutter")
         for i, frame in enumerate(frames):
             layers = (rolling_frame(self, camera, geometry, frame, wanted) if rolling else
                       self.render_frame(camera, geometry, frame, wanted))
@@ -464,8 +461,8 @@ class Raycast(Renderer):
         for name, step in (("forward_flow", 1), ("backward_flow", -1)):
             if name in wanted:
                 if rolling_from is not None:
-                    xy = rolling_flow_ends(camera, geometry, local, owner, rolling_from + step,
-                                           (w, h))
+                    xy = rolling_flow_ends(camera, geometry, (local, owner, tid, bary),
+                                           rolling_from + step, (w, h))
                 else:
                     world = geometry.surface_world(local, owner, tid, bary, frame + step)
                     xy, _ = geo.project_to_pixels(camera, world, frame=frame + step,

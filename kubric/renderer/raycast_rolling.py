@@ -9,8 +9,10 @@ pose of the scene, one Embree scene and one row of rays per row).
 Flow under a rolling shutter (``forward_flow`` / ``backward_flow``, (Δrow, Δcol) px): the surface
 point seen through pixel centre (r, c) at ``t_r`` is followed on its object to frame f ± 1, where
 its image position is the rolling-shutter fixed point (the point and the camera at the time of
-the row it lands on, :func:`kubric.core.rolling_shutter.rolling_projection`); flow = that
+the row it lands on, :func:`kubric.core.rolling_shutter.rolling_points`); flow = that
 position − the pixel centre; 0 on background and where the point has no image position.
+On a Deformable every row's mesh is the simulated mesh at ``t_r`` (linear between keyed frames)
+and the followed point is the material point (triangle, barycentric) of that mesh.
 """
 
 from __future__ import annotations
@@ -35,14 +37,31 @@ def rolling_frame(renderer, camera, geometry, frame, wanted) -> dict[str, np.nda
     return out
 
 
-def rolling_flow_ends(camera, geometry, local, owner, frame, resolution) -> np.ndarray:
-    """(n, 2) rolling-shutter pixel positions (x, y) in ``frame`` of points ``local`` (n, 3) in
-    the unscaled local frames of objects ``owner`` (n,) (indices into ``geometry.entries``)."""
+def rolling_flow_ends(camera, geometry, hits, frame, resolution) -> np.ndarray:
+    """(n, 2) rolling-shutter pixel positions (x, y) in ``frame`` of the surface points ``hits``
+    = (local (n, 3) points in the unscaled local frames of objects owner (n,) (indices into
+    ``geometry.entries``), their triangles tid (n,) and barycentrics bary (n, 3)): a rigid
+    object's point moves with its pose, a deformable's is the material point on its mesh as
+    simulated at each time."""
+    local, owner, tid, bary = hits
     owner = np.asarray(owner)
-    members = [np.flatnonzero(owner == k) for k in range(len(geometry.entries))]
-    groups = [(entry[1], local[sel]) for entry, sel in zip(geometry.entries, members,
-                                                           strict=True)]
-    xy, _, _ = rolling_shutter.rolling_projection(camera, groups, frame, resolution)
-    out = np.empty((len(owner), 2))
-    out[np.concatenate(members + [np.zeros(0, np.int64)])] = xy
-    return out
+    deforming = {k: (asset, start) for k, asset, start, _ in geometry.deforming}
+
+    def world_at(times, idx):
+        out = np.empty((len(idx), 3))
+        for k in np.unique(owner[idx]):
+            sel = np.flatnonzero(owner[idx] == k)
+            pts = idx[sel]
+            if k in deforming:
+                asset, start = deforming[k]
+                corners = geometry.faces[tid[pts]] - start
+                out[sel] = rolling_shutter.at_each_time(
+                    times[sel], lambda t, s, a=asset, c=corners, b=bary[pts]:
+                    np.einsum("nk,nkj->nj", b[s], a.deformed_vertices(t)[c[s]]))
+            else:
+                out[sel] = rolling_shutter.posed_points(geometry.entries[k][1], local[pts],
+                                                        times[sel])
+        return out
+
+    xy, _, _ = rolling_shutter.rolling_points(camera, world_at, len(owner), frame, resolution)
+    return xy
