@@ -337,3 +337,50 @@ def test_tapvid_export_has_every_camera(stereo, tmp_path):
     assert np.array_equal(entry["target_points"], right["target_points"])
     assert np.array_equal(entry["occluded"], right["occluded"])
     assert np.array_equal(entry["video"], _right_layers(scene)["rgba"][..., :3])
+
+
+def test_random_rig_geometry():
+    """random_rig: each camera within its distance and elevation bands about the pivot (the
+    point the reference looks at), looking at it upright; the same rng state, the same rig."""
+    scene = kb.Scene(resolution=(W, H), frame_start=1, frame_end=2)
+    camera = kb.PerspectiveCamera(position=(1, -6, 3), look_at=(0, 0, 0.5))
+    scene.camera = camera
+    d = float(np.linalg.norm(np.subtract((1, -6, 3), (0, 0, 0.5))))
+    rig = rigs.random_rig(camera, 6, d, np.random.RandomState(7), frame=1)
+    cams = rig.build(scene)
+    assert list(cams) == [f"cam{k}" for k in range(6)] and rig.kind == "random"
+    lo, hi = np.radians(rigs.RANDOM_ELEVATION)
+    for c in list(cams.values())[1:]:
+        m = geo.camera_to_world(c, 1)
+        offset = m[:3, 3] - (0, 0, 0.5)
+        r = np.linalg.norm(offset)
+        assert rigs.RANDOM_DISTANCE[0] * d <= r <= rigs.RANDOM_DISTANCE[1] * d
+        assert lo <= np.arcsin(offset[2] / r) <= hi
+        xy, _ = geo.project_to_pixels(c, np.array([0, 0, 0.5]), 1)
+        assert np.allclose(xy, (W / 2, H / 2), atol=1e-6)
+        assert abs(m[2, 0]) < 1e-6  # its x axis horizontal: upright
+    again = rigs.random_rig(camera, 6, d, np.random.RandomState(7), frame=1)
+    other = rigs.random_rig(camera, 6, d, np.random.RandomState(8), frame=1)
+    assert all(np.array_equal(again.mounts[k], rig.mounts[k]) for k in rig.names)
+    assert not np.allclose(other.mounts["cam1"], rig.mounts["cam1"])
+
+
+def test_random_rig_scene_keeps_the_mono_scene(tmp_path):
+    """movi_a cameras=random: the rig's draws leave the mono scene of the seed as it was (same
+    reference camera and object trajectories), and every further camera looks at the origin."""
+    options = ("frame_end=2", "max_num_objects=3")
+    mono = json.loads((_worker(tmp_path / "mono", 4, *options) / "metadata.json").read_text())
+    scene = _worker(tmp_path / "rig", 4, *options, "cameras=random", "num_cameras=3")
+    meta = json.loads((scene / "metadata.json").read_text())
+    assert meta["camera"]["rig"]["kind"] == "random"
+    assert np.array_equal(meta["camera"]["matrices_world"], mono["camera"]["matrices_world"])
+    assert sorted(map(json.dumps, (i["positions"] for i in meta["instances"]))) == \
+        sorted(map(json.dumps, (i["positions"] for i in mono["instances"])))
+    k = np.asarray(meta["camera"]["intrinsics_pixels"])
+    for name in ("cam1", "cam2"):
+        view = meta["camera"]["rig"]["views"][name]
+        ext = np.asarray(view["extrinsics_opencv"])
+        centre = k @ ext[:, :3, 3].T  # the origin in each frame's OpenCV camera
+        assert np.allclose((centre[:2] / centre[2]).T, (W / 2, H / 2), atol=1e-3)
+        assert not np.allclose(view["matrices_world"], meta["camera"]["matrices_world"])
+    assert (scene / "cam2_rgba_00000.png").is_file()

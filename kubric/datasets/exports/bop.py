@@ -30,7 +30,7 @@ instead (cast from the scene model at pixel centres, objects behind the camera i
 ``[x, y, w, h]`` in pixels (``[-1, -1, -1, -1]`` when empty). A scene is written into a hidden
 folder renamed when complete; ``models_info.json`` is written last.
 
-Camera rigs (``cameras=stereo|ring``): one BOP scene holds every camera's frames as images of
+Camera rigs (``cameras=stereo|ring|random``): one BOP scene holds every camera's frames as images of
 their own, as BOP's multi-view scenes hold several viewpoints of one scene: frame ``t`` of
 camera ``c`` (0 = the reference, in ``metadata.camera.rig.cameras`` order) is image
 ``c · T + t`` (T frames; :mod:`kubric.datasets.exports.scenes`), with that camera's ``cam_K``,

@@ -15,7 +15,7 @@ in that frame, derived from the segmentation layer:
   ``licenses``, of the asset's licence and attribution, ``{"id", "name", "url"}``, as
   ``metadata.json``'s instance ``license`` / ``license_url`` say); images add ``scene``,
   ``seed``, ``frame`` and, for multi-view scenes, ``split``;
-* camera-rig scenes (``cameras=stereo|ring``): every camera's frames are images of their own
+* camera-rig scenes (``cameras=stereo|ring|random``): every camera's frames are images of their own
   (``file_name`` ``scene_…/right_rgba_00003.png``, masks from that camera's segmentation layer,
   keypoints from its per-camera fields), each adding ``camera`` (its name) and its geometry
   (:func:`camera_fields`); ids: :mod:`kubric.datasets.exports.scenes`;

@@ -5,7 +5,7 @@ Ids (stable across shards: a scene's ids depend on its seed alone, never on what
 exported with it, so COCO files exported from disjoint sets of scenes merge without clashes):
 
 * ``image_id`` = ``seed · 10⁴ + i`` for image ``i`` of the scene: frame (view) ``i`` (0-based
-  file index) of a one-camera scene; in a camera-rig scene (``cameras=stereo|ring``) frame ``t``
+  file index) of a one-camera scene; in a camera-rig scene (``cameras=stereo|ring|random``) frame ``t``
   of camera ``c`` (0 = the reference, in ``metadata.camera.rig.cameras`` order) is image
   ``i = c · T + t`` (T frames), so the reference camera's ids are those of a one-camera scene;
 * annotation ``id`` = ``image_id · 10⁴ + k`` for segmentation label ``k`` (instance ``k − 1``).
