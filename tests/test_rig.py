@@ -269,6 +269,24 @@ def test_ring_scene_every_camera_every_layer(tmp_path):
             assert np.abs(xy[front] - tracks["target_points"][front, t]).max() < 1e-3
     distances = [np.linalg.norm(np.asarray(v["positions"])[0]) for v in rig["views"].values()]
     assert np.allclose(distances, np.linalg.norm(meta["camera"]["positions"][0]), rtol=1e-5)
+    # kubric export coco: camera cam2's KINS amodal masks are its own amodal layer's, and its
+    # images carry its fisheye coefficients
+    from pycocotools import mask as mask_utils
+
+    from kubric.datasets.exports import exporter
+    exporter("coco")(scene, tmp_path / "coco.json", progress=False)
+    coco = json.loads((tmp_path / "coco.json").read_text())
+    amodal = unpack_masks(file_io.read_layer(scene, "cam2_amodal_segmentation", formats=formats,
+                                             raw=True), n)
+    images = {i["id"]: i for i in coco["images"] if i["camera"] == "cam2"}
+    assert len(images) == 2 and all(np.allclose(i["distortion_coefficients"],
+                                                rig["views"]["cam2"]["distortion_coefficients"])
+                                    for i in images.values())
+    anns = [a for a in coco["annotations"] if a["image_id"] in images]
+    assert anns
+    for a in anns:
+        mask = mask_utils.decode(a["a_segm"]).astype(bool)
+        assert np.array_equal(mask, amodal[images[a["image_id"]]["frame"], a["instance"]])
 
 
 @pytest.mark.blender
@@ -279,7 +297,8 @@ def test_pose_estimation_keypoints_per_camera(tmp_path):
     cmd = [sys.executable, "-m", "kubric", "worker", "pose_estimation", "--seed", "3", "--out",
            str(tmp_path)]
     for o in ("resolution=32", "frame_end=2", "quality=draft", "character_source=procedural",
-              "motion_source=procedural", "cameras=stereo", "max_num_people=2"):
+              "motion_source=procedural", "cameras=stereo", "baseline=0.15",
+              "max_num_people=2"):  # baseline: both cameras see the person at 32 px
         cmd += ["--set", o]
     proc = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-2000:]
@@ -296,6 +315,23 @@ def test_pose_estimation_keypoints_per_camera(tmp_path):
             mine = np.asarray(person["cameras"]["right"]["keypoints_2d"][t])
             assert np.abs(xy - mine).max() < 1e-3
             assert np.abs(mine - np.asarray(person["keypoints_2d"][t])).max() > 0.1
+    # kubric export coco: the right camera's images carry the right camera's keypoints
+    from kubric.datasets.exports import exporter
+    exporter("coco")(tmp_path / "scene_00000003", tmp_path / "coco.json", progress=False)
+    coco = json.loads((tmp_path / "coco.json").read_text())
+    right_images = {i["id"]: i["frame"] for i in coco["images"] if i["camera"] == "right"}
+    checked = 0
+    for ann in coco["annotations"]:
+        if ann["image_id"] not in right_images or "keypoints" not in ann:
+            continue
+        t, own = right_images[ann["image_id"]], meta["instances"][ann["instance"]]
+        own = own["cameras"]["right"]
+        kp, vis = np.reshape(ann["keypoints"], (-1, 3)), np.asarray(own["keypoints_visibility"][t])
+        assert np.array_equal(kp[:, 2], vis)
+        xy = np.asarray(own["keypoints_2d"][t]) - 0.5
+        assert np.abs(kp[vis > 0, :2] - xy[vis > 0]).max() <= 5e-4
+        checked += 1
+    assert checked
 
 
 @pytest.mark.blender
