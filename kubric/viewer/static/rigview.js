@@ -8,7 +8,8 @@ const KVRig = (function () {
     const rig = (scene.metadata.camera || {}).rig;
     if (!rig || !Array.isArray(rig.cameras) || rig.cameras.length < 2) return null;
     const layers = scene.summary.layers || [];
-    const k = Math.max(1, Math.floor(Math.min(300 / W, 220 / H)));
+    const budget = Math.max(150, Math.floor(580 / rig.cameras.length) - 10);  // px per tile
+    const k = Math.max(1, Math.floor(Math.min(budget / W, 220 / H)));
     const tiles = rig.cameras.map((camera, c) => {
       const img = KV.el("img", { id: `rig-img-${camera}`, width: W * k, height: H * k, alt: camera });
       const caption = KV.el("figcaption", { class: "muted" }, camera);
