@@ -206,7 +206,8 @@ def export_coco(root, out, progress: bool = True, compressed: bool = True,
     scheme = scheme_for(load_scene(root, paths[0]), sources)
     info = {"description": f"Kubric scenes exported from {root.resolve().name}",
             "version": "1.0", "categories_from": scheme.kind,
-            "id_scheme": "image_id = seed * 10000 + frame; id = image_id * 10000 + label"}
+            "id_scheme": "image_id = seed * 10000 + frame (a camera rig's camera c: c * T + "
+                         "frame, T frames); id = image_id * 10000 + label"}
     tmp, side = temp_name_for(out), temp_name_for(out.with_name(out.name + ".annotations"))
     n_images = n_annotations = 0
     try:
