@@ -269,6 +269,24 @@ def test_ring_scene_every_camera_every_layer(tmp_path):
             assert np.abs(xy[front] - tracks["target_points"][front, t]).max() < 1e-3
     distances = [np.linalg.norm(np.asarray(v["positions"])[0]) for v in rig["views"].values()]
     assert np.allclose(distances, np.linalg.norm(meta["camera"]["positions"][0]), rtol=1e-5)
+    # kubric export coco: camera cam2's KINS amodal masks are its own amodal layer's, and its
+    # images carry its fisheye coefficients
+    from pycocotools import mask as mask_utils
+
+    from kubric.datasets.exports import exporter
+    exporter("coco")(scene, tmp_path / "coco.json", progress=False)
+    coco = json.loads((tmp_path / "coco.json").read_text())
+    amodal = unpack_masks(file_io.read_layer(scene, "cam2_amodal_segmentation", formats=formats,
+                                             raw=True), n)
+    images = {i["id"]: i for i in coco["images"] if i["camera"] == "cam2"}
+    assert len(images) == 2 and all(np.allclose(i["distortion_coefficients"],
+                                                rig["views"]["cam2"]["distortion_coefficients"])
+                                    for i in images.values())
+    anns = [a for a in coco["annotations"] if a["image_id"] in images]
+    assert anns
+    for a in anns:
+        mask = mask_utils.decode(a["a_segm"]).astype(bool)
+        assert np.array_equal(mask, amodal[images[a["image_id"]]["frame"], a["instance"]])
 
 
 @pytest.mark.blender
@@ -279,7 +297,8 @@ def test_pose_estimation_keypoints_per_camera(tmp_path):
     cmd = [sys.executable, "-m", "kubric", "worker", "pose_estimation", "--seed", "3", "--out",
            str(tmp_path)]
     for o in ("resolution=32", "frame_end=2", "quality=draft", "character_source=procedural",
-              "motion_source=procedural", "cameras=stereo", "max_num_people=2"):
+              "motion_source=procedural", "cameras=stereo", "baseline=0.15",
+              "max_num_people=2"):  # baseline: both cameras see the person at 32 px
         cmd += ["--set", o]
     proc = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-2000:]
@@ -296,6 +315,23 @@ def test_pose_estimation_keypoints_per_camera(tmp_path):
             mine = np.asarray(person["cameras"]["right"]["keypoints_2d"][t])
             assert np.abs(xy - mine).max() < 1e-3
             assert np.abs(mine - np.asarray(person["keypoints_2d"][t])).max() > 0.1
+    # kubric export coco: the right camera's images carry the right camera's keypoints
+    from kubric.datasets.exports import exporter
+    exporter("coco")(tmp_path / "scene_00000003", tmp_path / "coco.json", progress=False)
+    coco = json.loads((tmp_path / "coco.json").read_text())
+    right_images = {i["id"]: i["frame"] for i in coco["images"] if i["camera"] == "right"}
+    checked = 0
+    for ann in coco["annotations"]:
+        if ann["image_id"] not in right_images or "keypoints" not in ann:
+            continue
+        t, own = right_images[ann["image_id"]], meta["instances"][ann["instance"]]
+        own = own["cameras"]["right"]
+        kp, vis = np.reshape(ann["keypoints"], (-1, 3)), np.asarray(own["keypoints_visibility"][t])
+        assert np.array_equal(kp[:, 2], vis)
+        xy = np.asarray(own["keypoints_2d"][t]) - 0.5
+        assert np.abs(kp[vis > 0, :2] - xy[vis > 0]).max() <= 5e-4
+        checked += 1
+    assert checked
 
 
 @pytest.mark.blender
@@ -337,3 +373,50 @@ def test_tapvid_export_has_every_camera(stereo, tmp_path):
     assert np.array_equal(entry["target_points"], right["target_points"])
     assert np.array_equal(entry["occluded"], right["occluded"])
     assert np.array_equal(entry["video"], _right_layers(scene)["rgba"][..., :3])
+
+
+def test_random_rig_geometry():
+    """random_rig: each camera within its distance and elevation bands about the pivot (the
+    point the reference looks at), looking at it upright; the same rng state, the same rig."""
+    scene = kb.Scene(resolution=(W, H), frame_start=1, frame_end=2)
+    camera = kb.PerspectiveCamera(position=(1, -6, 3), look_at=(0, 0, 0.5))
+    scene.camera = camera
+    d = float(np.linalg.norm(np.subtract((1, -6, 3), (0, 0, 0.5))))
+    rig = rigs.random_rig(camera, 6, d, np.random.RandomState(7), frame=1)
+    cams = rig.build(scene)
+    assert list(cams) == [f"cam{k}" for k in range(6)] and rig.kind == "random"
+    lo, hi = np.radians(rigs.RANDOM_ELEVATION)
+    for c in list(cams.values())[1:]:
+        m = geo.camera_to_world(c, 1)
+        offset = m[:3, 3] - (0, 0, 0.5)
+        r = np.linalg.norm(offset)
+        assert rigs.RANDOM_DISTANCE[0] * d <= r <= rigs.RANDOM_DISTANCE[1] * d
+        assert lo <= np.arcsin(offset[2] / r) <= hi
+        xy, _ = geo.project_to_pixels(c, np.array([0, 0, 0.5]), 1)
+        assert np.allclose(xy, (W / 2, H / 2), atol=1e-6)
+        assert abs(m[2, 0]) < 1e-6  # its x axis horizontal: upright
+    again = rigs.random_rig(camera, 6, d, np.random.RandomState(7), frame=1)
+    other = rigs.random_rig(camera, 6, d, np.random.RandomState(8), frame=1)
+    assert all(np.array_equal(again.mounts[k], rig.mounts[k]) for k in rig.names)
+    assert not np.allclose(other.mounts["cam1"], rig.mounts["cam1"])
+
+
+def test_random_rig_scene_keeps_the_mono_scene(tmp_path):
+    """movi_a cameras=random: the rig's draws leave the mono scene of the seed as it was (same
+    reference camera and object trajectories), and every further camera looks at the origin."""
+    options = ("frame_end=2", "max_num_objects=3")
+    mono = json.loads((_worker(tmp_path / "mono", 4, *options) / "metadata.json").read_text())
+    scene = _worker(tmp_path / "rig", 4, *options, "cameras=random", "num_cameras=3")
+    meta = json.loads((scene / "metadata.json").read_text())
+    assert meta["camera"]["rig"]["kind"] == "random"
+    assert np.array_equal(meta["camera"]["matrices_world"], mono["camera"]["matrices_world"])
+    assert sorted(map(json.dumps, (i["positions"] for i in meta["instances"]))) == \
+        sorted(map(json.dumps, (i["positions"] for i in mono["instances"])))
+    k = np.asarray(meta["camera"]["intrinsics_pixels"])
+    for name in ("cam1", "cam2"):
+        view = meta["camera"]["rig"]["views"][name]
+        ext = np.asarray(view["extrinsics_opencv"])
+        centre = k @ ext[:, :3, 3].T  # the origin in each frame's OpenCV camera
+        assert np.allclose((centre[:2] / centre[2]).T, (W / 2, H / 2), atol=1e-3)
+        assert not np.allclose(view["matrices_world"], meta["camera"]["matrices_world"])
+    assert (scene / "cam2_rgba_00000.png").is_file()

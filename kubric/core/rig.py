@@ -29,6 +29,13 @@ Presets:
   the reference rotated by 2πk/num about the world-vertical axis through that point (the
   vertical of the rig's pose at the first frame, held fixed in the rig frame).
 
+* :func:`random_rig`: ``num`` cameras ``cam0`` (the reference) … drawn at random around the same
+  point as the ring's (the reference's pose at the first frame): camera k at distance
+  ``distance · U[RANDOM_DISTANCE]`` from it, in a direction uniform on the band of the upper
+  hemisphere between the elevations :data:`RANDOM_ELEVATION` (z uniform: the sphere's own
+  uniform measure), looking at it with its vertical as close to the world's as possible; its
+  mount, fixed from then on, is its pose in the rig frame at that first frame.
+
 Camera names: lower-case letters and digits, starting with a letter (``left``, ``right``,
 ``cam1``...); they prefix the per-camera layer and file names of a scene directory.
 """
@@ -41,8 +48,12 @@ from collections.abc import Mapping
 import numpy as np
 
 from kubric.core.cameras import PerspectiveCamera
-from kubric.core.quaternion import Quaternion
+from kubric.core.quaternion import Quaternion, look_at_quaternion
 
+#: random_rig: a camera's distance to the pivot, as factors of the reference camera's
+RANDOM_DISTANCE = (0.8, 1.2)
+#: random_rig: a camera's elevation above the pivot's horizontal plane, degrees
+RANDOM_ELEVATION = (10.0, 70.0)
 #: the intrinsics every camera of a rig copies from the reference camera
 SHARED_INTRINSICS = ("focal_length", "sensor_width", "shift_x", "shift_y", "lens")
 _NAME = re.compile(r"[a-z][a-z0-9]*\Z")
@@ -179,4 +190,33 @@ def ring(reference: PerspectiveCamera, num: int, distance: float, frame: float |
     return CameraRig(reference, mounts, "cam0", "ring")
 
 
-__all__ = ["CameraRig", "SHARED_INTRINSICS", "ring", "stereo", "translation"]
+def random_rig(reference: PerspectiveCamera, num: int, distance: float, rng,
+               frame: float | None = None) -> CameraRig:
+    """``num`` cameras ``cam0`` (the reference) … drawn with ``rng`` (a
+    ``numpy.random.RandomState``) around the point ``distance`` metres in front of the
+    reference (its pose at ``frame``; module doc)."""
+    if int(num) != num or num < 2:
+        raise ValueError(f"random_rig: num must be an integer ≥ 2, got {num!r}")
+    if not np.isfinite(distance) or distance <= 0:
+        raise ValueError(f"random_rig: distance must be a positive number of metres, got "
+                         f"{distance!r}")
+    with reference.at_frame(frame):
+        to_world = reference.matrix_world
+    pivot = to_world[:3, :3] @ np.array([0.0, 0.0, -float(distance)]) + to_world[:3, 3]
+    low, high = np.sin(np.radians(RANDOM_ELEVATION))
+    mounts = {}
+    for k in range(1, int(num)):
+        radius = float(distance) * rng.uniform(*RANDOM_DISTANCE)
+        z, azimuth = rng.uniform(low, high), rng.uniform(0.0, 2 * np.pi)
+        across = np.sqrt(1.0 - z * z)
+        position = pivot + radius * np.array([across * np.cos(azimuth),
+                                              across * np.sin(azimuth), z])
+        pose = np.eye(4)
+        pose[:3, :3] = look_at_quaternion(position, pivot).rotation_matrix
+        pose[:3, 3] = position
+        mounts[f"cam{k}"] = np.linalg.inv(to_world) @ pose
+    return CameraRig(reference, mounts, "cam0", "random")
+
+
+__all__ = ["CameraRig", "RANDOM_DISTANCE", "RANDOM_ELEVATION", "SHARED_INTRINSICS",
+           "random_rig", "ring", "stereo", "translation"]

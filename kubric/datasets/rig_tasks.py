@@ -1,4 +1,4 @@
-"""Loader tasks of camera-rig datasets (scenes made with ``--set cameras=stereo|ring``;
+"""Loader tasks of camera-rig datasets (scenes made with ``--set cameras=stereo|ring|random``;
 :mod:`kubric.recipes.rig_options`). Importing :mod:`kubric.datasets.tasks` registers them.
 A rig dataset's further cameras are the features ``cameras/NAME/...`` (nested:
 ``example["cameras"][NAME]["video"]``); the reference camera's are the usual top-level ones; the

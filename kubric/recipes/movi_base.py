@@ -11,7 +11,7 @@ order. Steps (each a method the variants override):
    settle for ``settle_frames`` frames with friction 1 and restitution 0, then are stopped);
 5. simulate frames ``0 .. frame_end + 1`` (so flow is defined at both ends of the rendered range);
 6. render ``frame_start .. frame_end`` with Blender (linked after the simulation, so it sees the
-   final trajectories only); with ``cameras=stereo|ring`` the rig's further cameras are mounted
+   final trajectories only); with ``cameras=stereo|ring|random`` the rig's further cameras are mounted
    on the camera after the simulation and render every layer too (:mod:`kubric.recipes.rig_options`);
 7. annotations: visibility → instance list sorted by visible pixels → segmentation relabelled →
    2D boxes; write the layers, ``metadata.json`` and ``events.json``; with ``tracks=N`` or
@@ -246,7 +246,7 @@ class MoviBase(ExposureOptions, RenderQuality, Recipe, LensOptions, RigOptions):
             if self.save_state:  # the initial state, before the simulation (as upstream)
                 files[BULLET_FILE] = simulator.save_state(state / BULLET_FILE)
             _, collisions = simulator.run(frame_start=0, frame_end=scene.frame_end + 1)
-            self.build_rig(scene)  # cameras=stereo|ring (rig_options): mounted on the camera
+            self.build_rig(scene, seed)  # cameras=stereo|ring|random (rig_options): on the camera
             renderer = kb.renderer.create(self.renderer, scene, scratch,
                                           **self.renderer_settings(motion_blur=blur))
             layers = renderer.render()

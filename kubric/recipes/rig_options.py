@@ -8,16 +8,20 @@ synchronized cameras of one simulated scene (:mod:`kubric.core.rig`; docs/conven
 * ``cameras=ring``: ``num_cameras`` cameras ``cam0`` (the recipe's) … on a horizontal circle
   about the point of the recipe's camera's view axis nearest the world origin (MOVi's cameras
   look at the origin), each looking at it.
+* ``cameras=random``: ``num_cameras`` cameras ``cam0`` (the recipe's) … at random about that same
+  point (:func:`kubric.core.rig.random_rig`: distance 0.8–1.2 × the recipe camera's, elevation
+  10°–70°, each looking at it), drawn with an rng of their own derived from the seed
+  (:data:`RIG_STREAM`).
 
-No random number is drawn, so a rig scene's objects, lights and reference camera are those of
-the mono scene of the same seed. Every further camera renders every layer the reference does
-(the same backend, swapping ``scene.camera``); its files are the standard ones prefixed with its
-name (``right_rgba_00000.png``, ``right_depth_00000.tiff``, ``tracks_right.npz`` …), its packed
-features the scene schema's prefixed with ``cameras/NAME/`` (``instances/cameras/NAME/`` for
-per-instance ones: visibility, boxes, image positions, keypoints), its camera record under
-``metadata.json["camera"]["rig"]["views"][NAME]``. Instances are sorted by their visible pixels
-summed over the cameras; point tracks are the reference camera's surface points seen by each
-camera (:func:`kubric.annotations.rig_views.view_tracks`).
+No random number is drawn from the scene's rng, so a rig scene's objects, lights and reference
+camera are those of the mono scene of the same seed. Every further camera renders every layer
+the reference does (the same backend, swapping ``scene.camera``); its files are the standard
+ones prefixed with its name (``right_rgba_00000.png``, ``right_depth_00000.tiff``,
+``tracks_right.npz`` …), its packed features the scene schema's prefixed with ``cameras/NAME/``
+(``instances/cameras/NAME/`` for per-instance ones: visibility, boxes, image positions,
+keypoints), its camera record under ``metadata.json["camera"]["rig"]["views"][NAME]``. Instances
+are sorted by their visible pixels summed over the cameras; point tracks are the reference
+camera's surface points seen by each camera (:func:`kubric.annotations.rig_views.view_tracks`).
 """
 
 from __future__ import annotations
@@ -39,7 +43,9 @@ from kubric.io.schema import Feature, Schema
 from kubric.pipeline import Option, OptionError
 from kubric.recipes import extra_layers as extra
 
-RIGS = ("mono", "stereo", "ring")
+RIGS = ("mono", "stereo", "ring", "random")
+#: cameras=random: the rig's own rng is ``RandomState([seed, RIG_STREAM])``
+RIG_STREAM = 0x72696721
 #: metres between the stereo cameras when ``baseline`` is not given
 DEFAULT_BASELINE = 0.5
 #: per-instance fields each camera of a rig has its own of (``metadata["cameras"][NAME]``)
@@ -152,10 +158,11 @@ class RigOptions:
 
     cameras = Option("mono", "camera rig: mono; stereo (left + right, a rectified pair baseline "
                      "metres apart, with a disparity layer); ring (num_cameras around the "
-                     "look-at point)", choices=RIGS)
+                     "look-at point); random (num_cameras at random about it, each looking at "
+                     "it)", choices=RIGS)
     baseline = Option(DEFAULT_BASELINE, "cameras=stereo: metres between the two camera centres",
                       low=1e-3, high=100.0)
-    num_cameras = Option(4, "cameras=ring: how many cameras", low=2, high=16)
+    num_cameras = Option(4, "cameras=ring|random: how many cameras", low=2, high=16)
 
     def check_rig(self) -> None:
         """Options a rig does not combine with fail here, in one line."""
@@ -171,14 +178,19 @@ class RigOptions:
                               f"{clash[0]}={clash[1]} (a rig renders pinhole-time layers per "
                               "camera; stereo is a rectified pinhole pair); drop one")
 
-    def build_rig(self, scene) -> None:
-        """Mount the rig's cameras on the scene's (final) camera; nothing for mono."""
+    def build_rig(self, scene, seed: int = 0) -> None:
+        """Mount the rig's cameras on the scene's (final) camera; nothing for mono (``seed``:
+        the scene's, for ``cameras=random``)."""
         self._rig = None
         if self.cameras == "mono":
             return
         ref = scene.camera
         if self.cameras == "stereo":
             rig = rigs.stereo(ref, self.baseline)
+        elif self.cameras == "random":
+            rig = rigs.random_rig(ref, self.num_cameras, ring_distance(ref, scene.frame_start),
+                                  np.random.RandomState([int(seed), RIG_STREAM]),
+                                  scene.frame_start)
         else:
             rig = rigs.ring(ref, self.num_cameras, ring_distance(ref, scene.frame_start),
                             scene.frame_start)

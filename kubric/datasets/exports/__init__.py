@@ -29,15 +29,17 @@ class ExportFormat:
 FORMATS = {
     "coco": ExportFormat(
         "kubric.datasets.exports.coco:export_coco",
-        "COCO instance annotations (one image per frame / view)",
-        "One JSON file: images (file_name relative to SCENES), instance annotations with RLE "
-        "masks, boxes [x, y, w, h] in pixels, areas and categories from the recipe's labels.",
+        "COCO instance annotations (one image per frame / view / rig camera's frame)",
+        "One JSON file: images (file_name relative to SCENES; a camera rig's every camera), "
+        "instance annotations with RLE masks, boxes [x, y, w, h] in pixels, areas and "
+        "categories from the recipe's labels.",
         "output file (.json)"),
     "bop": ExportFormat(
         "kubric.datasets.exports.bop:export_bop",
         "BOP 6D object-pose dataset (models, poses, masks, depth)",
         "BOP's layout: OUT/models (PLY in mm, models_info.json) and OUT/SPLIT/SCENE_ID/ with "
-        "rgb, depth, mask, mask_visib, scene_camera.json, scene_gt.json, scene_gt_info.json.",
+        "rgb, depth, mask, mask_visib, scene_camera.json, scene_gt.json, scene_gt_info.json "
+        "(a camera rig's every camera as images of the scene).",
         "output folder (the BOP dataset root)"),
     "tapvid": ExportFormat(
         "kubric.datasets.exports.tapvid:export_tapvid",

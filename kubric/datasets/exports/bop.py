@@ -6,6 +6,7 @@ Layout (BOP's, as the BOP toolkit reads it)::
     DIR/models/models_info.json          {obj_id: diameter, min_x/y/z, size_x/y/z} (mm)
     DIR/models/models_index.json         (addition) {obj_id: asset_id, scale, source, license}
     DIR/SPLIT/{scene_id:06d}/            scene_id = the scene's seed; image id = frame index
+                                         (camera rigs: c · T + frame for camera c, below)
         rgb/{im_id:06d}.png              RGB (the RGBA frame without alpha)
         depth/{im_id:06d}.png            uint16 z-depth: mm = value · depth_scale; 0 = no surface
         mask/{im_id:06d}_{gt:06d}.png    the object's full silhouette (255), as if unoccluded
@@ -28,6 +29,13 @@ annotation pass samples pixel centres) united with its visible pixels, so ``mask
 instead (cast from the scene model at pixel centres, objects behind the camera included). Boxes are
 ``[x, y, w, h]`` in pixels (``[-1, -1, -1, -1]`` when empty). A scene is written into a hidden
 folder renamed when complete; ``models_info.json`` is written last.
+
+Camera rigs (``cameras=stereo|ring|random``): one BOP scene holds every camera's frames as images of
+their own, as BOP's multi-view scenes hold several viewpoints of one scene: frame ``t`` of
+camera ``c`` (0 = the reference, in ``metadata.camera.rig.cameras`` order) is image
+``c · T + t`` (T frames; :mod:`kubric.datasets.exports.scenes`), with that camera's ``cam_K``,
+``cam_R_w2c``, ``cam_t_w2c``, depth, masks and poses, and (an addition to BOP's fields)
+``camera``: its name in ``scene_camera.json``.
 """
 
 from __future__ import annotations
@@ -44,8 +52,14 @@ import numpy as np
 from kubric.core.lenses import pinhole_refusal
 from kubric.datasets.exports import models as mdl
 from kubric.datasets.exports.coco import amodal_masks, mask_bbox
-from kubric.datasets.exports.scenes import ExportError, Scene, find_scenes, load_scene, model_sources
-from kubric.io.layers import read_frame
+from kubric.datasets.exports.scenes import (
+    ExportError,
+    Scene,
+    camera_views,
+    find_scenes,
+    load_scene,
+    model_sources,
+)
 from kubric.io.output_check import OutputError
 from kubric.io.png_io import encode_png
 
@@ -173,80 +187,106 @@ def is_person(instance: dict) -> bool:
 
 def export_scene(scene: Scene, out: pathlib.Path, store: ModelStore, depth_scale: float
                  ) -> tuple[int, int, int]:
-    """Write one scene's BOP folder; returns (images, annotations, clipped depth pixels)."""
-    meta, camera = scene.metadata, scene.metadata["camera"]
-    refusal = pinhole_refusal(camera, f"export_bop ({scene.path.name}): BOP's cam_K")
-    if refusal:
-        raise ExportError(refusal)
-    w, h = scene.resolution
-    k = opencv_k(camera["intrinsics_pixels"])
-    background = float(meta["metadata"].get("background_depth", 10000.0))
-    instances = meta.get("instances", [])
-    rigid = [(k, inst) for k, inst in enumerate(instances) if not is_person(inst)]
+    """Write one scene's BOP folder (every camera of a camera-rig scene: image ids
+    ``c · T + t``); returns (images, annotations, clipped depth pixels)."""
     work = out.with_name(f".{out.name}.incomplete")
     shutil.rmtree(work, ignore_errors=True)
     for sub in ("rgb", "depth", "mask", "mask_visib"):
         (work / sub).mkdir(parents=True)
-    cams, gts, infos = {}, {}, {}
-    clipped = n_ann = 0
-    amodal = amodal_masks(scene, len(instances))  # (T, N, H, W) or None
-    for i in range(scene.num_frames):
+    files: tuple[dict, dict, dict] = ({}, {}, {})  # scene_camera, scene_gt, scene_gt_info
+    images = n_ann = clipped = 0
+    for view in camera_views(scene):
+        refusal = pinhole_refusal(view.metadata["camera"],
+                                  f"export_bop ({scene.path.name}): BOP's cam_K")
+        if refusal:
+            raise ExportError(refusal)
+        writer = _CameraWriter(view, work, store, depth_scale)
+        for i in range(scene.num_frames):
+            im = str(view.image_index(i))
+            entries = writer.frame(i, view.image_index(i))
+            for table, entry in zip(files, entries, strict=True):
+                table[im] = entry
+            images, n_ann = images + 1, n_ann + len(entries[1])
+        clipped += writer.clipped
+    for name, data in zip(("scene_camera.json", "scene_gt.json", "scene_gt_info.json"), files,
+                          strict=True):
+        (work / name).write_text(json.dumps(data, indent=1) + "\n")
+    shutil.rmtree(out, ignore_errors=True)
+    os.replace(work, out)
+    return images, n_ann, clipped
+
+
+class _CameraWriter:
+    """One camera's frames of a scene into a BOP scene folder (``work``)."""
+
+    def __init__(self, view: Scene, work: pathlib.Path, store: ModelStore, depth_scale: float):
+        self.view, self.work, self.store, self.depth_scale = view, work, store, depth_scale
+        meta = view.metadata
+        self.k = opencv_k(meta["camera"]["intrinsics_pixels"])
+        self.background = float(meta["metadata"].get("background_depth", 10000.0))
+        instances = meta.get("instances", [])
+        self.rigid = [(k, inst) for k, inst in enumerate(instances) if not is_person(inst)]
+        self.amodal = amodal_masks(view, len(instances))  # (T, N, H, W) or None
+        self.clipped = 0
+
+    def frame(self, i: int, im: int) -> tuple[dict, list, list]:
+        """Write frame ``i`` as image ``im``; its (scene_camera, scene_gt, scene_gt_info)
+        entries."""
+        view, work, k = self.view, self.work, self.k
+        w, h = view.resolution
         try:
-            rgba = read_frame(scene.path, "rgba", i)
-            depth = read_frame(scene.path, "depth", i)[..., 0]
-            seg = read_frame(scene.path, "segmentation", i)[..., 0]
+            rgba = view.read_frame("rgba", i)
+            depth = view.read_frame("depth", i)[..., 0]
+            seg = view.read_frame("segmentation", i)[..., 0]
         except FileNotFoundError as err:
-            raise ExportError(f"{scene.path.name}: {err} (the BOP export needs rgba, depth "
+            raise ExportError(f"{view.path.name}: {err} (the BOP export needs rgba, depth "
                               "and segmentation)") from None
-        z = read_frame(scene.path, "z", i)[..., 0].astype(np.float64) \
-            if (scene.path / f"z_{i:05d}.tiff").is_file() else z_from_distance(depth, k)
-        (work / "rgb" / f"{i:06d}.png").write_bytes(_png(rgba[..., :3]))
-        hit = depth < background * 0.999
-        units = np.where(hit, np.rint(z * 1000.0 / depth_scale), 0)
+        z = view.read_frame("z", i)[..., 0].astype(np.float64) \
+            if (view.path / f"{view.prefix}z_{i:05d}.tiff").is_file() \
+            else z_from_distance(depth, k)
+        (work / "rgb" / f"{im:06d}.png").write_bytes(_png(rgba[..., :3]))
+        hit = depth < self.background * 0.999
+        units = np.where(hit, np.rint(z * 1000.0 / self.depth_scale), 0)
         over = units > 65535
-        clipped += int(over.sum())
+        self.clipped += int(over.sum())
         units[over] = 0
         depth_u16 = units.astype(np.uint16)
-        (work / "depth" / f"{i:06d}.png").write_bytes(_png(depth_u16))
-        r_w2c, t_w2c = world_to_camera(camera["matrices_world"][i])
-        cams[str(i)] = {"cam_K": k.ravel().tolist(), "depth_scale": depth_scale,
-                        "cam_R_w2c": r_w2c.ravel().tolist(), "cam_t_w2c": t_w2c.tolist()}
-        gts[str(i)], infos[str(i)] = [], []
-        for g, (label, inst) in enumerate(rigid):
-            obj_id, model = store.get(inst)
+        (work / "depth" / f"{im:06d}.png").write_bytes(_png(depth_u16))
+        r_w2c, t_w2c = world_to_camera(view.metadata["camera"]["matrices_world"][i])
+        cam = {"cam_K": k.ravel().tolist(), "depth_scale": self.depth_scale,
+               "cam_R_w2c": r_w2c.ravel().tolist(), "cam_t_w2c": t_w2c.tolist()}
+        if view.camera_name:
+            cam["camera"] = view.camera_name
+        gts, infos = [], []
+        for g, (label, inst) in enumerate(self.rigid):
+            obj_id, model = self.store.get(inst)
             r_obj = quaternion_matrix(inst["quaternions"][i])
             r = r_w2c @ r_obj
             t = r_w2c @ (np.asarray(inst["positions"][i], dtype=np.float64) * 1000.0) + t_w2c
             t = t + r @ model.centre
             visib = seg == label + 1
-            if amodal is not None:  # the scene's exact amodal layer (extra_layers=amodal)
-                full = amodal[i, label] | visib
+            if self.amodal is not None:  # the scene's exact amodal layer (extra_layers=amodal)
+                full = self.amodal[i, label] | visib
             else:
                 cam_pts = model.vertices @ r.T + t
                 if np.any(cam_pts[:, 2] <= 1.0):
-                    raise ExportError(f"{scene.path.name}: frame {i}: instance {label} "
+                    raise ExportError(f"{view.path.name}: frame {i}: instance {label} "
                                       f"({inst.get('asset_id')}) reaches behind the camera; its "
                                       "silhouette cannot be projected")
                 px = cam_pts[:, :2] / cam_pts[:, 2:3] * [k[0, 0], k[1, 1]] + [k[0, 2], k[1, 2]]
                 full = mdl.rasterise(px, model.faces, h, w) | visib
-            name = f"{i:06d}_{g:06d}.png"
+            name = f"{im:06d}_{g:06d}.png"
             (work / "mask" / name).write_bytes(_png(full.astype(np.uint8) * 255))
             (work / "mask_visib" / name).write_bytes(_png(visib.astype(np.uint8) * 255))
             n_all, n_vis = int(full.sum()), int(visib.sum())
-            gts[str(i)].append({"cam_R_m2c": r.ravel().tolist(), "cam_t_m2c": t.tolist(),
-                                "obj_id": obj_id})
-            infos[str(i)].append({"bbox_obj": _bbox(full), "bbox_visib": _bbox(visib),
-                                  "px_count_all": n_all,
-                                  "px_count_valid": int((full & (depth_u16 > 0)).sum()),
-                                  "px_count_visib": n_vis,
-                                  "visib_fract": n_vis / n_all if n_all else 0.0})
-            n_ann += 1
-    for name, data in (("scene_camera.json", cams), ("scene_gt.json", gts),
-                       ("scene_gt_info.json", infos)):
-        (work / name).write_text(json.dumps(data, indent=1) + "\n")
-    shutil.rmtree(out, ignore_errors=True)
-    os.replace(work, out)
-    return scene.num_frames, n_ann, clipped
+            gts.append({"cam_R_m2c": r.ravel().tolist(), "cam_t_m2c": t.tolist(),
+                        "obj_id": obj_id})
+            infos.append({"bbox_obj": _bbox(full), "bbox_visib": _bbox(visib),
+                          "px_count_all": n_all,
+                          "px_count_valid": int((full & (depth_u16 > 0)).sum()),
+                          "px_count_visib": n_vis,
+                          "visib_fract": n_vis / n_all if n_all else 0.0})
+        return cam, gts, infos
 
 
 def export_bop(root, out, split: str = "train_pbr", depth_scale: float = 1.0,

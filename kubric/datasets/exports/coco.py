@@ -15,6 +15,10 @@ in that frame, derived from the segmentation layer:
   ``licenses``, of the asset's licence and attribution, ``{"id", "name", "url"}``, as
   ``metadata.json``'s instance ``license`` / ``license_url`` say); images add ``scene``,
   ``seed``, ``frame`` and, for multi-view scenes, ``split``;
+* camera-rig scenes (``cameras=stereo|ring|random``): every camera's frames are images of their own
+  (``file_name`` ``scene_…/right_rgba_00003.png``, masks from that camera's segmentation layer,
+  keypoints from its per-camera fields), each adding ``camera`` (its name) and its geometry
+  (:func:`camera_fields`); ids: :mod:`kubric.datasets.exports.scenes`;
 * scenes made with ``extra_layers=amodal``: KINS's amodal fields (:func:`kins_fields`):
   ``a_segm`` (the amodal mask, RLE), ``a_bbox``, ``a_area`` and the visible ``i_segm``,
   ``i_bbox``, ``i_area`` — for the instances visible in the frame, as KINS annotates.
@@ -42,12 +46,12 @@ from kubric.datasets.exports.scenes import (
     ExportError,
     Scene,
     annotation_id,
+    camera_views,
     find_scenes,
     image_id,
     load_scene,
 )
 from kubric.io.bitmask import MAX_MASKS, unpack_masks
-from kubric.io.layers import read_layer
 from kubric.io.output_check import OutputError
 from kubric.io.paths import temp_name_for
 
@@ -78,15 +82,26 @@ def mask_bbox(mask: np.ndarray) -> list[int]:
 
 
 def scene_records(scene: Scene, scheme, compressed: bool = True):
-    """(images, annotations) of one scene, as lists of dicts."""
+    """(images, annotations) of one scene, as lists of dicts: every camera of a camera-rig
+    scene (:func:`~kubric.datasets.exports.scenes.camera_views`), the reference first."""
+    images, annotations = [], []
+    for view in camera_views(scene):
+        more = camera_records(view, scheme, compressed)
+        images += more[0]
+        annotations += more[1]
+    return images, annotations
+
+
+def camera_records(scene: Scene, scheme, compressed: bool = True):
+    """(images, annotations) of one camera of a scene (a view of :func:`camera_views`)."""
     w, h = scene.resolution
     try:
-        seg = read_layer(scene.path, "segmentation")[..., 0]
+        seg = scene.read_layer("segmentation")[..., 0]
     except FileNotFoundError as err:
         raise ExportError(str(err)) from None
     if seg.shape != (scene.num_frames, h, w):
-        raise ExportError(f"{scene.path.name}: segmentation has shape {seg.shape[:3]}, metadata "
-                          f"says {scene.num_frames} frames of {w}×{h}")
+        raise ExportError(f"{scene.path.name}: {scene.prefix}segmentation has shape "
+                          f"{seg.shape[:3]}, metadata says {scene.num_frames} frames of {w}×{h}")
     instances = scene.metadata.get("instances", [])
     if seg.max(initial=0) > len(instances):
         raise ExportError(f"{scene.path.name}: segmentation label {int(seg.max())} but only "
@@ -95,13 +110,16 @@ def scene_records(scene: Scene, scheme, compressed: bool = True):
     amodal = amodal_masks(scene, len(instances))
     images, annotations = [], []
     for i in range(scene.num_frames):
-        rgb = f"rgba_{i:05d}.png"
+        rgb = f"{scene.prefix}rgba_{i:05d}.png"
         if not (scene.path / rgb).is_file():
             raise ExportError(f"{scene.path.name}: frame {i} has no {rgb}")
-        img = {"id": image_id(scene.seed, i), "file_name": scene.file(rgb), "width": w,
-               "height": h, "scene": scene.path.name, "seed": scene.seed, "frame": i}
+        img = {"id": image_id(scene.seed, scene.image_index(i)), "file_name": scene.file(rgb),
+               "width": w, "height": h, "scene": scene.path.name, "seed": scene.seed, "frame": i}
         if views:
             img["split"] = views[i].get("split")
+        if scene.camera_name:
+            img.update(camera_fields(scene.metadata["camera"], i))
+            img["camera"] = scene.camera_name
         images.append(img)
         for label in np.unique(seg[i]):
             label = int(label)
@@ -122,14 +140,27 @@ def scene_records(scene: Scene, scheme, compressed: bool = True):
     return images, annotations
 
 
+def camera_fields(camera: dict, frame: int) -> dict:
+    """A rig camera's image fields: ``intrinsics_pixels`` (3 × 3 OpenCV pixel K, pixel centres
+    at +0.5), ``distortion_coefficients`` (OpenCV's order) and ``extrinsics_opencv`` (4 × 4
+    world → OpenCV camera, metres) at ``frame``, as ``metadata.json`` records them."""
+    out = {"intrinsics_pixels": np.asarray(camera["intrinsics_pixels"], float).tolist(),
+           "extrinsics_opencv": np.asarray(camera["extrinsics_opencv"][frame], float).tolist()}
+    if "distortion_coefficients" in camera:
+        out["distortion_coefficients"] = np.asarray(camera["distortion_coefficients"],
+                                                    float).tolist()
+    return out
+
+
 def amodal_masks(scene: Scene, count: int):
-    """(T, N, H, W) amodal masks of a scene made with ``extra_layers=amodal``, else None."""
-    if not any(scene.path.glob("amodal_segmentation_*.png")):
+    """(T, N, H, W) amodal masks of a scene (camera) made with ``extra_layers=amodal``, else
+    None."""
+    if not any(scene.path.glob(f"{scene.prefix}amodal_segmentation_*.png")):
         return None
     if count > MAX_MASKS:
         raise ExportError(f"{scene.path.name}: {count} instances; the amodal bit planes hold at "
                           f"most {MAX_MASKS}")
-    return unpack_masks(read_layer(scene.path, "amodal_segmentation"), count)
+    return unpack_masks(scene.read_layer("amodal_segmentation"), count)
 
 
 def kins_fields(amodal: np.ndarray, ann: dict, compressed: bool = True) -> dict:
@@ -175,7 +206,8 @@ def export_coco(root, out, progress: bool = True, compressed: bool = True,
     scheme = scheme_for(load_scene(root, paths[0]), sources)
     info = {"description": f"Kubric scenes exported from {root.resolve().name}",
             "version": "1.0", "categories_from": scheme.kind,
-            "id_scheme": "image_id = seed * 10000 + frame; id = image_id * 10000 + label"}
+            "id_scheme": "image_id = seed * 10000 + frame (a camera rig's camera c: c * T + "
+                         "frame, T frames); id = image_id * 10000 + label"}
     tmp, side = temp_name_for(out), temp_name_for(out.with_name(out.name + ".annotations"))
     n_images = n_annotations = 0
     try:
@@ -194,7 +226,8 @@ def export_coco(root, out, progress: bool = True, compressed: bool = True,
                         raise ExportError(f"{path.name}: recipe {scene.recipe!r} differs from "
                                           f"the first scene's {first_scene!r}; export each "
                                           "recipe's scenes separately")
-                    scheme.check(scene)
+                    for view in camera_views(scene):
+                        scheme.check(view)
                     images, annotations = scene_records(scene, scheme, compressed)
                     for item in images:
                         main.write(("," if n_images else "") + _dump(item))
@@ -218,4 +251,5 @@ def export_coco(root, out, progress: bool = True, compressed: bool = True,
                        skipped)
 
 
-__all__ = ["CocoSummary", "export_coco", "mask_bbox", "scene_records"]
+__all__ = ["CocoSummary", "camera_fields", "camera_records", "export_coco", "mask_bbox",
+           "scene_records"]

@@ -4,11 +4,19 @@ the stable id scheme, the asset sources that hold their meshes, and the errors t
 Ids (stable across shards: a scene's ids depend on its seed alone, never on what else is
 exported with it, so COCO files exported from disjoint sets of scenes merge without clashes):
 
-* ``image_id`` = ``seed · 10⁴ + i`` for frame (view) ``i`` of the scene (0-based file index);
+* ``image_id`` = ``seed · 10⁴ + i`` for image ``i`` of the scene: frame (view) ``i`` (0-based
+  file index) of a one-camera scene; in a camera-rig scene (``cameras=stereo|ring|random``) frame ``t``
+  of camera ``c`` (0 = the reference, in ``metadata.camera.rig.cameras`` order) is image
+  ``i = c · T + t`` (T frames), so the reference camera's ids are those of a one-camera scene;
 * annotation ``id`` = ``image_id · 10⁴ + k`` for segmentation label ``k`` (instance ``k − 1``).
 
-Frames and labels must therefore stay below 10⁴ (the recipes' default bounds); the largest id,
-for seed 2³² − 1, is about 4.3·10¹⁷ (< 2⁶³).
+Images and labels must therefore stay below 10⁴ per scene (cameras × frames; the recipes' default
+bounds keep them there); the largest id, for seed 2³² − 1, is about 4.3·10¹⁷ (< 2⁶³).
+
+Camera rigs: :func:`camera_views` gives one :class:`Scene` per camera, each reading its own
+layers (``NAME_<layer>``) and seeing its own camera record and per-instance fields as the
+reference camera's (``metadata.camera.rig.views[NAME]``, ``instances[k].cameras[NAME]``), so an
+export written for one camera writes every camera of a rig by looping over them.
 """
 
 from __future__ import annotations
@@ -16,10 +24,14 @@ from __future__ import annotations
 import dataclasses
 import pathlib
 
+import numpy as np
+
 from kubric import asset_tools
 from kubric.errors import InputError
 from kubric.io import scene_dir
 from kubric.io.json_io import read_json
+from kubric.io.layers import read_frame, read_layer
+from kubric.io.stored_schema import stored_schema
 
 ID_BASE = 10_000
 
@@ -33,6 +45,30 @@ class Scene:
     path: pathlib.Path
     relative: str          # the scene folder relative to the export's root ("" for the root)
     metadata: dict
+    camera_name: str = ""  # a camera-rig scene's camera ("" for a one-camera scene)
+    camera_index: int = 0  # its position in the rig, 0 = the reference camera
+    formats: dict | None = None  # the scene's own layer formats (a rig's per-camera layers)
+
+    @property
+    def prefix(self) -> str:
+        """Prefix of this camera's layer names: ``NAME_`` for a rig's further camera, else ''."""
+        return f"{self.camera_name}_" if self.camera_index else ""
+
+    def read_layer(self, name: str, **kwargs) -> np.ndarray:
+        """(T, H, W, C) layer ``name`` as this camera sees it."""
+        return read_layer(self.path, self.prefix + name, formats=self.formats, **kwargs)
+
+    def read_frame(self, name: str, frame: int) -> np.ndarray:
+        """(H, W, C) frame ``frame`` of layer ``name`` as this camera sees it."""
+        return read_frame(self.path, self.prefix + name, frame, formats=self.formats)
+
+    def image_index(self, frame: int) -> int:
+        """The scene's image index of this camera's ``frame`` (module doc: c · T + frame)."""
+        index = self.camera_index * self.num_frames + int(frame)
+        if index >= ID_BASE:
+            raise ExportError(f"{self.path.name}: camera {self.camera_name!r} frame {frame} is "
+                              f"image {index}; the id scheme holds cameras × frames < {ID_BASE}")
+        return index
 
     @property
     def seed(self) -> int:
@@ -54,6 +90,31 @@ class Scene:
     def file(self, name: str) -> str:
         """``name`` (a file of the scene) relative to the export's root, with ``/``."""
         return f"{self.relative}/{name}" if self.relative else name
+
+
+def camera_views(scene: Scene) -> list[Scene]:
+    """One :class:`Scene` per camera of a camera-rig scene, the reference (``scene`` itself,
+    named) first; ``[scene]`` for a one-camera scene (module doc)."""
+    rig = scene.metadata["camera"].get("rig")
+    if not rig:
+        return [scene]
+    schema = stored_schema(scene.path)
+    if schema is None:
+        raise ExportError(f"{scene.path.name}: a camera-rig scene without its schema.json (its "
+                          "per-camera layers are declared there)")
+    views = []
+    for index, name in enumerate(rig["cameras"]):
+        meta = scene.metadata
+        if index:
+            try:
+                meta = {**meta, "camera": rig["views"][name], "instances": [
+                    {**inst, **inst["cameras"][name]} for inst in meta.get("instances", [])]}
+            except KeyError as err:
+                raise ExportError(f"{scene.path.name}: metadata.json has no record of rig "
+                                  f"camera {name!r} ({err})") from None
+        views.append(dataclasses.replace(scene, metadata=meta, camera_name=name,
+                                         camera_index=index, formats=schema.layers))
+    return views
 
 
 def image_id(seed: int, frame: int) -> int:
@@ -134,6 +195,7 @@ def model_sources(flags: dict, extra=()) -> list:
     return objects_sources(flags, extra) + [_kubasic(flags)]
 
 
-__all__ = ["ExportError", "ID_BASE", "Scene", "annotation_id", "find_scenes", "image_id",
+__all__ = ["ExportError", "ID_BASE", "Scene", "annotation_id", "camera_views", "find_scenes",
+           "image_id",
            "load_scene", "model_sources",
            "objects_sources"]

@@ -69,7 +69,7 @@ def scene_dirs_with_tracks(root) -> list[pathlib.Path]:
 
 def rig_examples(scene: pathlib.Path) -> dict[str, dict]:
     """``{"SCENE:NAME": video dict}`` of each further camera NAME of a camera-rig scene
-    (``cameras=stereo|ring``: ``tracks_NAME.npz`` and the layer ``NAME_rgba``, the same surface
+    (``cameras=stereo|ring|random``: ``tracks_NAME.npz`` and the layer ``NAME_rgba``, the same surface
     points as the reference camera's tracks); empty for a one-camera scene."""
     paths = sorted(scene.glob("tracks_*.npz"))
     schema = stored_schema(scene) if paths else None

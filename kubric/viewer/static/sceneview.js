@@ -1,6 +1,7 @@
 "use strict";
 // One scene: main layer + overlays with a frame scrubber and play/pause, a hover readout of what
-// the files hold at a pixel, instance details on click, a 3D view and the reproducing command.
+// the files hold at a pixel, instance details on click, a 3D view and the reproducing command;
+// a camera rig's cameras side by side under the stage (rigview.js).
 // While a frame's picture is on its way the stage says so ("loading …"); the address bar links to
 // the view on screen (deeplink.js). Pictures are scaled by whole factors without smoothing
 // (style.css: image-rendering pixelated), so labels and ids never blend.
@@ -45,6 +46,7 @@ const KVScene = (function () {
     if (s.hasSegmentation) s.fill.src = KV.frameUrl(s.name, "fill", s.frame);
     drawOverlay();
     if (s.view3d) s.view3d.setFrame(s.frame);
+    if (s.rig) s.rig.show(s.frame, s.layer);
     if (s.selected !== null) showInstance(s.selected);
     if (s.lastProbe) probe(s.lastProbe[0], s.lastProbe[1]);
   }
@@ -329,6 +331,7 @@ const KVScene = (function () {
     s.readout = KV.el("div", { id: "readout" }, KV.el("span", { class: "muted" }, "hover the image"));
     s.instancePanel = KV.el("div", { id: "instance-panel" }, KV.el("p", { class: "muted" }, "click an object"));
     const canvas3d = KV.el("canvas", { class: "view3d", width: 420, height: 300, id: "view3d" });
+    s.rig = KVRig.create(scene, name, W, H);  // a camera rig: its cameras side by side
     const sm = scene.summary, info = scene.metadata.metadata || {};
     const facts = KV.el("div", { class: "kv" },
       ["recipe", sm.recipe, "seed", sm.seed, "split", sm.split, "instances", sm.num_instances,
@@ -341,6 +344,7 @@ const KVScene = (function () {
       ...buildControls(scene),
       KV.el("div", { class: "layout" },
         KV.el("div", { style: `width:${Math.max(W * scale + 2, 420)}px` }, stage, s.imgError, s.linkError,
+          s.rig ? s.rig.element : "",
           KV.el("div", { class: "panel", style: "margin-top:12px" }, KV.el("h3", {}, "reproduce"),
             KV.el("code", { class: "cmd", id: "worker-command" }, scene.worker_command)),
           KV.el("div", { class: "panel", style: "margin-top:12px" }, KV.el("h3", {}, "camera & trajectories"), canvas3d)),
