@@ -24,7 +24,8 @@
   names a file the folder lacks (a kill during the final renames) is not trusted: the pack starts
   afresh. The dataset is finished in the work folder (final shard names, metadata, marker) and,
   with ``verify``, checked there; only then is the work folder renamed to the output: a directory
-  at the output's name is complete and (when asked) verified, or absent.
+  at the output's name is complete and (when asked) verified, or absent (the work folder and its
+  shards: :mod:`kubric.datasets.pack_shards`).
 * One pack per output: ``.NAME.lock`` beside it is held while packing (a second pack refuses).
 * ``overwrite`` replaces a dataset only when the output holds nothing but what the packer wrote
   (:func:`packer_files`); any other file in it is refused by name, never deleted.
@@ -52,14 +53,23 @@ from kubric import faults
 from kubric.datasets import layout, tfds_io
 from kubric.datasets.layout import DatasetError, DatasetUsageError
 from kubric.datasets.pack_schema import check_scene_schema, schema_origin_and_dims
+from kubric.datasets.pack_shards import (  # noqa: F401  (PROGRESS_FILE: dask_pack's)
+    PROGRESS_FILE,
+    ShardWriter,
+    done_names,
+    finalise,
+    finish_shard,
+    open_work,
+    swap_into_place,
+    work_dir,
+)
 from kubric.io import scene_dir
-from kubric.io.json_io import read_json, write_json
+from kubric.io.json_io import read_json
 from kubric.io.output_check import check_output, scene_folders
 from kubric.io.output_lock import OutputLock
 from kubric.io.scene_reader import SceneError, SceneReader
 from kubric.io.schema import Schema, SchemaError
 
-PROGRESS_FILE = "progress.json"
 DEFAULT_SPLITS = "train=0.9,validation=0.1"
 
 
@@ -325,12 +335,12 @@ def pack(scenes_dir, out, name: str | None = None, splits=DEFAULT_SPLITS, worker
     with output_lock(out):
         check_out(out, overwrite)  # again, now that no other pack can change it
         work = work_dir(out)
-        state = _open_work(work, plan_key)
+        state = open_work(work, plan_key)
         resumed = sum(len(sh["scenes"]) + len(sh.get("corrupt", []))
                       for shards in state["shards"].values() for sh in shards)
         corrupt += [tuple(c) for shards in state["shards"].values() for sh in shards
                     for c in sh.get("corrupt", [])]
-        done = {split: _done_names(state, split) for split in assignment}  # once: O(N), not O(N²)
+        done = {split: done_names(state, split) for split in assignment}  # once: O(N), not O(N²)
         todo = [(split, scene) for split, scenes in assignment.items() for scene in scenes
                 if scene.name not in done[split]]
         from kubric.datasets import tfds_io
@@ -357,11 +367,6 @@ def pack(scenes_dir, out, name: str | None = None, splits=DEFAULT_SPLITS, worker
                       origin)
 
 
-def work_dir(out: pathlib.Path) -> pathlib.Path:
-    """The work folder of a pack into ``out``: ``.NAME.incomplete`` beside it."""
-    return out.parent / f".{out.name}.incomplete"
-
-
 def output_lock(out: pathlib.Path):
     """The lock held while packing into ``out`` (``.NAME.lock`` beside it)."""
     @contextlib.contextmanager
@@ -381,23 +386,23 @@ def _write_shards(work, state, todo, schema, dims, name, workers, examples_per_s
     results = _encoded(todo, schema, dims, workers)
     from tqdm import tqdm
     bar = tqdm(total=len(todo), unit="scene", desc=f"pack {name}", disable=not progress)
-    current: dict[str, _ShardWriter] = {}
+    current: dict[str, ShardWriter] = {}
     try:
         for (split, scene), (scene_name, data, error) in zip(todo, results, strict=True):
             bar.update(1)
             writer = current.get(split)
             if writer is None:
                 index = len(state["shards"].setdefault(split, []))
-                writer = current[split] = _ShardWriter(work, name, split, index)
+                writer = current[split] = ShardWriter(work, name, split, index)
             if error is not None:
                 writer.corrupt.append((str(scene), error))
                 corrupt.append((str(scene), error))
             else:
                 writer.add(scene_name, data)
             if len(writer.scenes) >= examples_per_shard:
-                _finish_shard(work, state, current.pop(split))
+                finish_shard(work, state, current.pop(split))
         for split in list(current):
-            _finish_shard(work, state, current.pop(split))
+            finish_shard(work, state, current.pop(split))
     finally:
         bar.close()
         for writer in current.values():  # interrupted: the unfinished shards are dropped
@@ -442,167 +447,3 @@ def _stop_pool(pool: concurrent.futures.ProcessPoolExecutor) -> None:
             if proc.is_alive():
                 proc.kill()
                 proc.join(1.0)
-
-
-def _open_work(work: pathlib.Path, plan_key: str) -> dict:
-    """The work directory's progress (fresh unless it was made for the same plan)."""
-    progress_path = work / PROGRESS_FILE
-    if progress_path.is_file():
-        try:
-            state = read_json(progress_path)
-            keep = {sh["file"] for shards in state["shards"].values() for sh in shards}
-        except (ValueError, KeyError, TypeError, AttributeError):
-            state, keep = {}, set()
-        # trusted only when every file it names is there (not renamed or removed since)
-        if state.get("plan") == plan_key and all((work / f).is_file() for f in keep if f):
-            for entry in work.iterdir():  # drop a shard that was being written
-                if entry.name != PROGRESS_FILE and entry.name not in keep:
-                    if entry.is_dir() and not entry.is_symlink():
-                        shutil.rmtree(entry)
-                    else:
-                        entry.unlink()
-            return state
-    if work.is_symlink() or work.is_file():
-        work.unlink()
-    elif work.exists():
-        shutil.rmtree(work)
-    work.mkdir(parents=True)
-    state = {"plan": plan_key, "shards": {}}
-    write_json(state, progress_path)
-    return state
-
-
-def _done_names(state: dict, split: str) -> set[str]:
-    done = set()
-    for shard in state["shards"].get(split, []):
-        done.update(shard["scenes"])
-        done.update(pathlib.Path(p).name for p, _ in shard.get("corrupt", []))
-    return done
-
-
-class _ShardWriter:
-    """One shard being written (a temporary name until finished)."""
-
-    def __init__(self, work: pathlib.Path, name: str, split: str, index: int):
-        from array_record.python import array_record_module
-        self.split, self.index = split, index
-        self.file = f"{name}-{split}.part-{index:05d}"
-        self.path = work / self.file
-        with self._errors_named():
-            self._writer = array_record_module.ArrayRecordWriter(
-                str(self.path), layout.SHARD_WRITER_OPTIONS)
-        self.scenes: list[str] = []
-        self.corrupt: list[tuple[str, str]] = []
-        self.num_bytes = 0
-
-    @contextlib.contextmanager
-    def _errors_named(self):
-        """A failed write (a full disk: array_record says only "Failed to write") names the
-        shard and the reason."""
-        try:
-            yield
-        except (OSError, RuntimeError, ValueError) as err:
-            reason = err.strerror if isinstance(err, OSError) and err.strerror else \
-                " ".join(str(err).split())[:300]
-            free = shutil.disk_usage(self.path.parent).free
-            raise DatasetError(f"{str(self.path)!r}: cannot write the shard: {reason} "
-                               f"({free / 2**20:.0f} MiB free there)") from None
-
-    def add(self, scene_name: str, data: bytes) -> None:
-        with self._errors_named():
-            faults.point("pack.shard_write", self.path)
-            self._writer.write(data)
-        self.scenes.append(scene_name)
-        self.num_bytes += len(data)
-
-    def close(self) -> None:
-        with self._errors_named():
-            self._writer.close()
-
-    def abandon(self) -> None:
-        with contextlib.suppress(Exception):
-            self._writer.close()
-        self.path.unlink(missing_ok=True)
-
-
-def _finish_shard(work: pathlib.Path, state: dict, writer: _ShardWriter) -> None:
-    writer.close()
-    if not writer.scenes:
-        writer.path.unlink()
-    state["shards"].setdefault(writer.split, []).append(
-        {"file": writer.file if writer.scenes else "", "scenes": writer.scenes,
-         "corrupt": writer.corrupt, "num_bytes": writer.num_bytes})
-    write_json(state, work / PROGRESS_FILE)
-
-
-def finalise(work, state, schema, name, dims, split_fractions, incomplete, features,
-             hash_files: bool = True) -> dict:
-    """Final shard names, TFDS metadata and the kubric marker; returns counts per split. A
-    shard's checksum and size are its state entry's ``sha256`` and ``file_bytes``, else
-    (``hash_files``) its file's."""
-    import tensorflow_datasets as tfds
-
-    from kubric import __version__
-    split_infos, counts, scenes, shard_lengths, digests, sizes = [], {}, {}, {}, {}, {}
-    # the record goes before the renames: a kill among them leaves no record naming moved files
-    # (the next run starts afresh), never one that a rerun would trust
-    (work / PROGRESS_FILE).unlink()
-    for split in split_fractions:
-        shards = [sh for sh in state["shards"].get(split, []) if sh["scenes"]]
-        for i, shard in enumerate(shards):
-            final = layout.shard_name(name, split, i, len(shards))
-            os.replace(work / shard["file"], work / final)
-            faults.point("pack.shard_renamed")
-            digest = shard.get("sha256") or (layout.file_sha256(work / final) if hash_files
-                                             else None)
-            if digest:
-                digests[final] = digest
-            file_bytes = shard.get("file_bytes") or \
-                ((work / final).stat().st_size if hash_files else None)
-            if file_bytes:
-                sizes[final] = file_bytes
-        counts[split] = sum(len(sh["scenes"]) for sh in shards)
-        scenes[split] = [s for sh in shards for s in sh["scenes"]]
-        shard_lengths[split] = [len(sh["scenes"]) for sh in shards]
-        if shards:
-            split_infos.append(tfds.core.SplitInfo(
-                name=split, shard_lengths=[len(sh["scenes"]) for sh in shards],
-                num_bytes=sum(sh["num_bytes"] for sh in shards)))
-    tfds.folder_dataset.write_metadata(
-        data_dir=str(work), features=features, split_infos=split_infos, check_data=False,
-        description=f"Kubric {schema.name} scenes packed by kubric {__version__}. "
-                    f"{schema.description}",
-        homepage="https://github.com/google-research/kubric")
-    write_json({"format": layout.FORMAT, "format_version": layout.FORMAT_VERSION,
-                "name": name, "schema": schema.name, "schema_version": schema.version,
-                "dims": dims, "splits": split_fractions, "counts": counts,
-                "shard_lengths": shard_lengths, "scenes": scenes,
-                "incomplete_skipped": incomplete, "kubric_version": __version__,
-                "shard_writer_options": layout.SHARD_WRITER_OPTIONS,
-                "shard_sha256": digests, "shard_bytes": sizes,
-                "schema_json": schema.to_json()},
-               work / layout.INFO_FILE)
-    return counts
-
-
-def swap_into_place(work: pathlib.Path, out: pathlib.Path) -> None:
-    """Rename the finished work directory to ``out``, replacing an old dataset (checked to hold
-    only packer files) or an empty directory. The old one is first renamed to ``.NAME.old`` (a
-    fixed name: one left by a kill here is removed by the next pack) and then deleted."""
-    faults.point("pack.before_swap")
-    old = out.parent / f".{out.name}.old"
-    if old.exists() or old.is_symlink():
-        _remove(old)
-    if out.exists():
-        os.replace(out, old)
-        faults.point("pack.old_moved")
-    os.replace(work, out)
-    if old.exists():
-        _remove(old)
-
-
-def _remove(path: pathlib.Path) -> None:
-    if path.is_dir() and not path.is_symlink():
-        shutil.rmtree(path)
-    else:
-        path.unlink()

@@ -3,7 +3,8 @@
 ``Blender(scene, ...)`` resets Blender to factory settings, sets every render option explicitly
 (Cycles, **Standard** view transform, samples, denoising, light tree, bounces, device) and then
 links itself to the scene, which replays the scene and its assets through the mapping tables
-``builders`` / ``setters`` / ``keyframers`` below (one row per model class / property).
+``builders`` / ``setters`` / ``keyframers`` (one row per model class / property:
+:mod:`kubric.renderer.blender_tables`).
 
 Rendering: :meth:`Blender.render` renders every requested frame in two Blender calls (contiguous
 frame runs are one ``render(animation=True)`` each): the RGB render at ``samples_per_pixel`` and
@@ -16,7 +17,7 @@ It implements the renderer protocol of :mod:`kubric.renderer.base` (registered a
 recipes build it with ``kubric.renderer.create``); :meth:`Blender.settings` is what a scene's
 ``metadata["renderer"]`` records.
 
-Options:
+Options (each checked in one line by :mod:`kubric.renderer.blender_options`):
   samples_per_pixel (int ≥ 1; with adaptive sampling the most per pixel), adaptive_sampling
   (bool: Cycles stops sampling a pixel once its noise estimate is below adaptive_threshold,
   a number in (0, 1], default 0.01 = Blender's; recorded in settings() while adaptive sampling is
@@ -47,9 +48,6 @@ Depth of field comes from the perspective camera's ``use_dof`` / ``focus_distanc
 
 from __future__ import annotations
 
-import contextlib
-import os
-import sys
 import tempfile
 from pathlib import Path
 
@@ -57,208 +55,62 @@ import bpy
 import numpy as np
 
 from kubric.core import camera_geometry as geo
-from kubric.core import (
-    cameras,
-    characters,
-    deformables,
-    lights,
-    materials,
-    objects,
-    rolling_shutter,
-)
-from kubric.core import pbr_materials as pbr
-from kubric.core.scene import Scene
+from kubric.core import cameras, materials, rolling_shutter
 from kubric.core.views import TableView
 from kubric.renderer import allocator
-from kubric.renderer import blender_characters as bc
-from kubric.renderer import blender_deformables as bd
 from kubric.renderer import blender_lens as bl
 from kubric.renderer import blender_materials as bm
-from kubric.renderer import blender_objects as bo
 from kubric.renderer import blender_passes as bp
-from kubric.renderer import blender_procedural as bpr
 from kubric.renderer import blender_rolling as bl_rolling
 from kubric.renderer import blender_shadows as bs
-from kubric.renderer import blender_world as bw
+from kubric.renderer import blender_tables as bt
 from kubric.renderer.base import CapabilityError, Renderer
+from kubric.renderer.blender_options import (
+    as_bool,
+    as_int,
+    as_threshold,
+    choice,
+    custom_scene_path,
+    live_option,
+    render_device,
+    render_threads,
+    set_cycles,
+    shutter,
+    silenced,
+)
 from kubric.renderer.render_progress import frame_bar
-
-
-@contextlib.contextmanager
-def _silenced(active: bool):
-    """Redirect the process's stdout/stderr file descriptors to /dev/null while active."""
-    if not active:
-        yield
-        return
-    sys.stdout.flush()
-    sys.stderr.flush()
-    saved = os.dup(1), os.dup(2)
-    devnull = os.open(os.devnull, os.O_WRONLY)
-    try:
-        os.dup2(devnull, 1)
-        os.dup2(devnull, 2)
-        yield
-    finally:
-        os.dup2(saved[0], 1)
-        os.dup2(saved[1], 2)
-        for fd in (*saved, devnull):
-            os.close(fd)
-
-
-def _as_bool(name, value):
-    if not isinstance(value, (bool, np.bool_)):
-        raise TypeError(f"Blender option {name} must be True or False, got {value!r}")
-    return bool(value)
-
-
-def _as_int(name, value, low):
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < low:
-        raise ValueError(f"Blender option {name} must be an integer ≥ {low}, got {value!r}")
-    return int(value)
-
-
-def _as_threshold(name, value):
-    if isinstance(value, bool) or not isinstance(value, (int, float, np.floating)) \
-            or not 0 < value <= 1:
-        raise ValueError(f"Blender option {name} must be a number in (0, 1], got {value!r}")
-    return float(value)
-
-
-def _motion_blur(value):
-    if isinstance(value, (bool, np.bool_)):
-        return 0.5 if value else 0.0
-    if isinstance(value, (int, float, np.number)) and 0 <= float(value) <= 10:
-        return float(value)
-    raise ValueError(f"Blender option motion_blur must be a bool or a shutter length in frames in "
-                     f"[0, 10], got {value!r}")
-
-
-def _device(value):
-    if value is None:
-        value = "GPU" if os.environ.get("KUBRIC_USE_GPU", "").lower() in ("1", "true", "yes") \
-            else "CPU"
-    if value not in ("CPU", "GPU"):
-        raise ValueError(f"Blender option device must be 'CPU' or 'GPU', got {value!r}")
-    return value
-
-
-def _choice(allowed):
-    def convert(name, value):
-        if not isinstance(value, str) or value.upper() not in allowed:
-            raise ValueError(f"Blender option {name} must be one of {list(allowed)}, "
-                             f"got {value!r}")
-        return value.upper()
-    return convert
-
-
-def _live_option(name, convert, apply):
-    """A renderer option: validated by ``convert(name, value)``, applied to the Blender scene at
-    once by ``apply(bpy_scene, value)`` (upstream scripts set these after construction)."""
-    def fget(self):
-        return self._options[name]
-
-    def fset(self, value):
-        self._options[name] = convert(name, value)
-        if getattr(self, "bpy_scene", None) is not None:
-            apply(self.bpy_scene, self._options[name])
-    return property(fget, fset, doc=f"Renderer option {name} (applied to Blender when set).")
-
-
-def _set_cycles(attr):
-    return lambda bscene, value: setattr(bscene.cycles, attr, value)
-
-
-def render_threads() -> int | None:
-    """The render thread count from KUBRIC_RENDER_THREADS (None = Blender's automatic count)."""
-    value = os.environ.get("KUBRIC_RENDER_THREADS", "").strip()
-    if not value:
-        return None
-    if not value.isdigit() or int(value) < 1:
-        raise ValueError(f"KUBRIC_RENDER_THREADS must be an integer ≥ 1, got {value!r}")
-    return int(value)
 
 
 class Blender(TableView, Renderer):
     """Cycles renderer view (see module doc for options and output); implements the renderer
     protocol of :mod:`kubric.renderer.base`."""
 
-    samples_per_pixel = _live_option("samples_per_pixel", lambda n, v: _as_int(n, v, 1),
-                                     _set_cycles("samples"))
-    adaptive_sampling = _live_option("adaptive_sampling", _as_bool,
-                                     _set_cycles("use_adaptive_sampling"))
-    adaptive_threshold = _live_option("adaptive_threshold", _as_threshold,
-                                      _set_cycles("adaptive_threshold"))
-    use_denoising = _live_option("use_denoising", _as_bool, _set_cycles("use_denoising"))
-    denoising_quality = _live_option("denoising_quality", _choice(("HIGH", "BALANCED", "FAST")),
-                                     _set_cycles("denoising_quality"))
-    denoising_prefilter = _live_option("denoising_prefilter",
-                                       _choice(("ACCURATE", "FAST", "NONE")),
-                                       _set_cycles("denoising_prefilter"))
-    background_transparency = _live_option(
-        "background_transparency", _as_bool,
+    samples_per_pixel = live_option("samples_per_pixel", lambda n, v: as_int(n, v, 1),
+                                    set_cycles("samples"))
+    adaptive_sampling = live_option("adaptive_sampling", as_bool,
+                                    set_cycles("use_adaptive_sampling"))
+    adaptive_threshold = live_option("adaptive_threshold", as_threshold,
+                                     set_cycles("adaptive_threshold"))
+    use_denoising = live_option("use_denoising", as_bool, set_cycles("use_denoising"))
+    denoising_quality = live_option("denoising_quality", choice(("HIGH", "BALANCED", "FAST")),
+                                    set_cycles("denoising_quality"))
+    denoising_prefilter = live_option("denoising_prefilter",
+                                      choice(("ACCURATE", "FAST", "NONE")),
+                                      set_cycles("denoising_prefilter"))
+    background_transparency = live_option(
+        "background_transparency", as_bool,
         lambda bscene, value: setattr(bscene.render, "film_transparent", value))
 
-    builders = {
-        Scene: bw.build_scene,
-        objects.Cube: bo.build_cube,
-        objects.Sphere: bo.build_sphere,
-        objects.FileBasedObject: bo.build_file_object,
-        characters.Character: bc.build_character,
-        deformables.Deformable: bd.build_deformable,
-        cameras.PerspectiveCamera: bo.build_perspective_camera,
-        cameras.OrthographicCamera: bo.build_orthographic_camera,
-        lights.DirectionalLight: bo.build_sun,
-        lights.PointLight: bo.build_point,
-        lights.SpotLight: bo.build_spot,
-        lights.RectAreaLight: bo.build_area,
-        materials.PrincipledBSDFMaterial: bm.build_principled,
-        materials.FlatMaterial: bm.build_flat,
-        pbr.ProceduralMaterial: bpr.build,
-        pbr.ImageMaterial: bpr.build,
-        materials.Texture: None,  # read by the materials / world that use it
-    }
-    setters = {
-        Scene: bw.SCENE_SETTERS,
-        objects.Object3D: {"position": bo.set_location, "quaternion": bo.set_rotation},
-        objects.PhysicalObject: {"scale": bo.set_scale, "material": bo.set_object_material},
-        cameras.Camera: {"shift_x": bo.data_setter("shift_x"),
-                         "shift_y": bo.data_setter("shift_y")},
-        cameras.PerspectiveCamera: {"focal_length": bo.data_setter("lens"),
-                                    "sensor_width": bo.data_setter("sensor_width"),
-                                    "use_dof": bo.set_dof,
-                                    "focus_distance": bo.set_focus_distance,
-                                    "aperture_fstop": bo.set_fstop},
-        cameras.OrthographicCamera: {"orthographic_scale": bo.data_setter("ortho_scale")},
-        lights.Light: {"color": bo.set_light_color, "intensity": bo.data_setter("energy")},
-        lights.DirectionalLight: {"shadow_softness": bo.data_setter("angle")},
-        lights.SpotLight: {"spot_size": bo.data_setter("spot_size"),
-                           "spot_blend": bo.data_setter("spot_blend")},
-        lights.RectAreaLight: {"width": bo.data_setter("size"),
-                               "height": bo.data_setter("size_y")},
-        materials.PrincipledBSDFMaterial: bm.PRINCIPLED_SETTERS,
-        materials.FlatMaterial: bm.FLAT_SETTERS,
-        pbr.ProceduralMaterial: bpr.PROCEDURAL_SETTERS,
-        pbr.ImageMaterial: bpr.IMAGE_SETTERS,
-        characters.Character: bc.SETTERS,
-        deformables.Deformable: bd.SETTERS,
-    }
-    keyframers = {
-        objects.Object3D: bo.object_keyframers(),
-        objects.PhysicalObject: bo.physical_keyframers(),
-        cameras.PerspectiveCamera: bo.camera_keyframers(),
-        lights.Light: bo.light_keyframers(),
-        materials.PrincipledBSDFMaterial: bm.PRINCIPLED_KEYFRAMERS,
-        materials.FlatMaterial: bm.FLAT_KEYFRAMERS,
-        characters.Character: bc.KEYFRAMERS,
-        deformables.Deformable: bd.KEYFRAMERS,
-    }
+    builders = bt.BUILDERS
+    setters = bt.SETTERS
+    keyframers = bt.KEYFRAMERS
 
     def __init__(self, scene, scratch_dir=None, adaptive_sampling=False, use_denoising=True,
                  samples_per_pixel=128, background_transparency=False, *, motion_blur=False,
                  device=None, max_bounces=None, light_tree=False, verbose=False,
                  denoising_quality="HIGH", denoising_prefilter="ACCURATE", custom_scene=None,
                  adaptive_threshold=0.01, keep_freed_memory=False):
-        custom_scene = _custom_scene(custom_scene)
+        custom_scene = custom_scene_path(custom_scene)
         if keep_freed_memory:  # per-frame buffers reused, not faulted in again (allocator.py)
             allocator.keep_freed_memory()
         self.bpy_scene = None
@@ -275,12 +127,12 @@ class Blender(TableView, Renderer):
         self.denoising_quality = denoising_quality
         self.denoising_prefilter = denoising_prefilter
         self.background_transparency = background_transparency
-        self.motion_blur = _motion_blur(motion_blur)
-        self.device = _device(device)
-        self.max_bounces = None if max_bounces is None else _as_int("max_bounces",
+        self.motion_blur = shutter(motion_blur)
+        self.device = render_device(device)
+        self.max_bounces = None if max_bounces is None else as_int("max_bounces",
                                                                      max_bounces, 0)
-        self.light_tree = _as_bool("light_tree", light_tree)
-        self.verbose = _as_bool("verbose", verbose)
+        self.light_tree = as_bool("light_tree", light_tree)
+        self.verbose = as_bool("verbose", verbose)
         if scratch_dir is None:
             scratch_dir = tempfile.mkdtemp(prefix="kubric_blender_")
         self.scratch_dir = Path(scratch_dir)
@@ -307,7 +159,7 @@ class Blender(TableView, Renderer):
     # ------------------------------------------------------------------ setup
     def quiet(self):
         """Context manager silencing Blender's console output unless ``verbose``."""
-        return _silenced(not self.verbose)
+        return silenced(not self.verbose)
 
     def _setup_render_engine(self):
         s = self.bpy_scene
@@ -642,18 +494,6 @@ class _FrameStack:
         if layer not in self.arrays:
             self.arrays[layer] = np.empty((self.num_frames,) + frame.shape, frame.dtype)
         self.arrays[layer][index] = frame
-
-
-def _custom_scene(path) -> str | None:
-    """``custom_scene`` (upstream's option): None or an existing ``.blend`` file, as a str."""
-    if path is None:
-        return None
-    if not isinstance(path, (str, os.PathLike)) or Path(path).suffix.lower() != ".blend":
-        raise ValueError(f"Blender option custom_scene must be the path of a .blend file, got "
-                         f"{path!r}")
-    if not Path(path).is_file():
-        raise FileNotFoundError(f"Blender option custom_scene: {str(path)!r} does not exist")
-    return str(Path(path).resolve())
 
 
 def missing_texture_files() -> list[str]:
