@@ -25,10 +25,10 @@ from kubric.io.json_io import read_json, write_json
 
 PROGRESS_FILE = "progress.json"
 
+
 def work_dir(out: pathlib.Path) -> pathlib.Path:
     """The work folder of a pack into ``out``: ``.NAME.incomplete`` beside it."""
     return out.parent / f".{out.name}.incomplete"
-
 
 
 def open_work(work: pathlib.Path, plan_key: str) -> dict:

@@ -53,7 +53,7 @@ from kubric import faults
 from kubric.datasets import layout, tfds_io
 from kubric.datasets.layout import DatasetError, DatasetUsageError
 from kubric.datasets.pack_schema import check_scene_schema, schema_origin_and_dims
-from kubric.datasets.pack_shards import (  # noqa: F401  (PROGRESS_FILE: dask_pack's)
+from kubric.datasets.pack_shards import (  # noqa: F401  (PROGRESS_FILE: read as packer.PROGRESS_FILE)
     PROGRESS_FILE,
     ShardWriter,
     done_names,

@@ -42,7 +42,7 @@ from kubric.core.deformables import Deformable
 from kubric.core.imports import uninterrupted_import
 from kubric.renderer import procedural_patterns
 from kubric.renderer.base import ALL_LAYERS, PATTERN_NEED, Renderer
-from kubric.renderer.raycast_meshes import (  # noqa: F401  (imported from here)
+from kubric.renderer.raycast_meshes import (  # noqa: F401  (public names of this module)
     GREY,
     MESH_FORMATS,
     Mesh,
