@@ -1,8 +1,8 @@
 """Blender counterparts of the model's objects, cameras and lights (builders, setters, keyframers).
 
-Every function here is a row of one of :class:`kubric.renderer.blender.Blender`'s tables: builders
-``fn(view, asset) -> bpy object``, setters ``fn(view, asset, bpy_obj, value)``, keyframers
-``fn(view, asset, bpy_obj, frame)``.
+Every function here is a row of one of :class:`kubric.renderer.blender.Blender`'s tables
+(:mod:`kubric.renderer.blender_tables`): builders ``fn(view, asset) -> bpy object``, setters
+``fn(view, asset, bpy_obj, value)``, keyframers ``fn(view, asset, bpy_obj, frame)``.
 
 Geometry conventions (must agree with the model):
   * Cube: a mesh with vertices at ±1 (bounds ±1) and Blender's default cube UVs, flat shaded.
