@@ -22,8 +22,8 @@ def _blender(scene, **kw):
 
 def _write_blend(path, objects):
     """Save a .blend holding mesh cubes ``{name: (half size, location)}`` (nothing else)."""
+    import bpy  # noqa: I001  (before bmesh, which bpy provides)
     import bmesh
-    import bpy  # before bmesh, which bpy provides
     bpy.ops.wm.read_factory_settings(use_empty=True)
     for name, (half, location) in objects.items():
         mesh = bpy.data.meshes.new(name)
