@@ -156,3 +156,26 @@ def test_toybox_takes_objects_source_as_movi_does_and_not_both(scenes, tmp_path)
                        r"\(objects='.*a', objects_source='.*objaverse'\)$"):
         get_recipe("toybox").from_assignments([f"objects={tmp_path / 'a'}",
                                                f"objects_source={root / 'objaverse'}"])
+
+
+def test_people_and_an_hdri_source_are_attributed_from_their_manifests(tmp_path):
+    """The kinds real scenes above do not draw: people (a procedural character, a motion clip
+    of a source folder) and a background from an ``hdri_source`` folder; a procedural material
+    holds no third-party data and is not listed."""
+    from kubric.datasets.exports.licences import PROCEDURAL_LICENCE, scene_licences
+
+    for name, asset, licence in (("motions", "walk_01", "CC-BY-4.0 (CMU mocap)"),
+                                 ("hdris", "sunset", "CC0-1.0 (Poly Haven)")):
+        (tmp_path / name).mkdir()
+        (tmp_path / name / "manifest.json").write_text(json.dumps(
+            {"assets": {asset: {"id": asset, "license": licence}}}))
+    meta = {"flags": {"recipe": "x", "character_source": "procedural",
+                      "motion_source": str(tmp_path / "motions"),
+                      "hdri_source": str(tmp_path / "hdris")},
+            "metadata": {"background": "sunset", "material_licenses": {}},
+            "instances": [{"character_id": "child_3", "motion_id": "walk_01",
+                           "material": {"type": "ProceduralMaterial", "source": "procedural"}}]}
+    assert {(a.kind, a.asset, a.license) for a in scene_licences(meta)} == {
+        ("character", "child_3", PROCEDURAL_LICENCE),
+        ("motion", "walk_01", "CC-BY-4.0 (CMU mocap)"),
+        ("background", "sunset", "CC0-1.0 (Poly Haven)")}
