@@ -128,3 +128,17 @@ class HubServer(LocalServer):
         """How many times the bytes of layout file ``rel`` were requested."""
         return sum(1 for m, p, _ in self.requests if m == "GET" and p == f"/lfs/{rel}")
 
+
+
+def objaverse_source(root: Path, objects: dict) -> tuple[Path, dict]:
+    """``root/objaverse``: an asset source built by ``build_objaverse`` from ``objects`` (as
+    :func:`objaverse_files` takes them) served by a local :class:`HubServer`; returns (the
+    folder, its manifest's assets)."""
+    from kubric.asset_tools.objaverse import build_objaverse
+
+    with HubServer(objaverse_files(root, objects)) as hub:
+        report = build_objaverse(root / "objaverse", count=len(objects), base_url=hub.url,
+                                 workers=1, progress=False)
+    assert report["converted"] == len(objects), report
+    return root / "objaverse", json.loads((root / "objaverse" / "manifest.json").read_text())[
+        "assets"]

@@ -1,7 +1,8 @@
 """A MOVi-C scene whose objects come from Objaverse-layout GLBs (downloaded from a local Hub-like
-server by ``kubric assets objaverse``): rendered by Cycles at 32 px, packed with ``--verify``,
-exported to COCO and BOP and given a dataset card — every object's licence and attribution
-reach metadata.json, the COCO file, BOP's models index and the card."""
+server by ``kubric assets objaverse``) and whose objects and floor get random procedural PBR
+materials (``material_source=procedural``): rendered by Cycles at 32 px, packed with
+``--verify``, exported to COCO and BOP and given a dataset card — every object's licence and
+attribution reach metadata.json, the COCO file, BOP's models index and the card."""
 
 from __future__ import annotations
 
@@ -11,9 +12,7 @@ import sys
 from pathlib import Path
 
 import pytest
-from objaverse_fixtures import HubServer, objaverse_files
-
-from kubric.asset_tools.objaverse import build_objaverse
+from objaverse_fixtures import objaverse_source
 
 pytestmark = [pytest.mark.blender, pytest.mark.slow]
 ROOT = Path(__file__).resolve().parents[1]
@@ -30,16 +29,12 @@ def kubric(*args):
 @pytest.fixture(scope="module")
 def scene(tmp_path_factory):
     root = tmp_path_factory.mktemp("objaverse_movi")
-    with HubServer(objaverse_files(root, OBJECTS)) as hub:
-        report = build_objaverse(root / "objaverse", count=2, base_url=hub.url, workers=1,
-                                 progress=False)
-    assert report["converted"] == 2
+    objects, manifest = objaverse_source(root, OBJECTS)
     options = ["resolution=32", "frame_end=1", "samples=2", "denoise=false",
-               "min_num_objects=3", "max_num_objects=3", f"objects_source={root / 'objaverse'}",
-               "split=train"]
+               "min_num_objects=3", "max_num_objects=3", f"objects_source={objects}",
+               "split=train", "material_source=procedural"]
     kubric("worker", "movi_c", "--seed", 5, "--out", root / "scenes",
            *[a for o in options for a in ("--set", o)])
-    manifest = json.loads((root / "objaverse" / "manifest.json").read_text())["assets"]
     return root, manifest
 
 
@@ -50,7 +45,11 @@ def test_metadata_coco_and_card_carry_each_objects_licence(scene):
     assert undocumented_scene_fields(root / "scenes" / "scene_00000005") == []
     meta = json.loads((root / "scenes" / "scene_00000005" / "metadata.json").read_text())
     assert len(meta["instances"]) >= 1
+    # every object and the floor drew a procedural material (probability 1), recorded
+    assert meta["flags"]["material_source"] == "procedural"
+    assert meta["metadata"]["floor_material"]["type"] == "ProceduralMaterial"
     for inst in meta["instances"]:
+        assert inst["material"]["type"] == "ProceduralMaterial", inst["material"]
         entry = manifest[inst["asset_id"]]
         assert inst["license"] == entry["license"]
         assert inst["author"] == entry["metadata"]["author"]

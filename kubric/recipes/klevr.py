@@ -3,9 +3,10 @@
 * ``klevr``: 4–12 upright KuBasic shapes (classes: ``shapes``, default cube, cylinder, sphere,
   cone, torus) of random hue on a neutral-grey dome, CLEVR lamps; views on a sphere cap.
 * ``toybox``: the same layout with the objects of an asset source that has categories
-  (``--set objects=DIR``; assets need ``metadata.category``): the ``num_categories`` most common
-  categories (5 = ToyBox5, 13 = ToyBox13) or the named ``categories``; each object's largest extent
-  is U(``size_range``); an HDRI background (as MOVi-C's).
+  (``--set objects=DIR``, or ``objects_source=DIR`` as MOVi-C–F name it; assets need
+  ``metadata.category``): the ``num_categories`` most common categories (5 = ToyBox5, 13 =
+  ToyBox13) or the named ``categories``; each object's largest extent is U(``size_range``); an
+  HDRI background (as MOVi-C's).
 
 Both write, per view, ``semantic_{i:05d}.png`` (class ids: 0 = background, i.e. floor and
 backdrop, k = ``metadata.semantic_classes[k]``; each instance's class is its ``semantic_id``) and,
@@ -195,6 +196,8 @@ class ToyBox(MaterialOptions, _SemanticScenes, name="toybox"):
 
     objects = Option(None, "asset source folder whose assets have metadata.category (required)",
                      type=source_location)
+    objects_source = Option(None, "the same as objects (the name MOVi-C–F use); give one of "
+                            "the two; scenes record it as objects", type=source_location)
     num_categories = Option(5, "use the N most common categories (5 = ToyBox5, 13 = ToyBox13)",
                             low=1, high=1000)
     categories = Option("", "comma-separated categories to use instead (empty: the most common)")
@@ -204,7 +207,9 @@ class ToyBox(MaterialOptions, _SemanticScenes, name="toybox"):
                          type=source_location)
 
     def flags(self, seed: int) -> dict:
-        return self.material_flags(super().flags(seed))
+        out = self.material_flags(super().flags(seed))
+        out.pop("objects_source", None)  # the alias, recorded as objects (check)
+        return out
 
     def renderer_requests(self) -> dict[str, str]:
         return {**super().renderer_requests(), **self.material_requests()}
@@ -215,11 +220,17 @@ class ToyBox(MaterialOptions, _SemanticScenes, name="toybox"):
         self.apply_materials(scene, seed, dome)
 
     def check(self):
+        if self.objects is not None and self.objects_source is not None:
+            raise OptionError(f"{self.name}: give objects or objects_source, not both (objects="
+                              f"{str(self.objects)!r}, objects_source="
+                              f"{str(self.objects_source)!r})")
+        if self.objects_source is not None:  # the alias: recorded as objects
+            self.values["objects"], self.values["objects_source"] = self.objects_source, None
         super().check()
         self.open_materials()
         if self.objects is None:
-            raise OptionError(f"{self.name}: option objects is required: an asset source folder "
-                              "whose assets have metadata.category")
+            raise OptionError(f"{self.name}: option objects (or objects_source) is required: an "
+                              "asset source folder whose assets have metadata.category")
         self.chosen_categories(open_source(self.objects, "objects"))
 
     def chosen_categories(self, source) -> list[str]:

@@ -32,32 +32,35 @@ FORMATS = {
         "COCO instance annotations (one image per frame / view / rig camera's frame)",
         "One JSON file: images (file_name relative to SCENES; a camera rig's every camera), "
         "instance annotations with RLE masks, boxes [x, y, w, h] in pixels, areas and "
-        "categories from the recipe's labels.",
+        "categories from the recipe's labels; every asset's licence (licenses, attribution).",
         "output file (.json)"),
     "bop": ExportFormat(
         "kubric.datasets.exports.bop:export_bop",
         "BOP 6D object-pose dataset (models, poses, masks, depth)",
         "BOP's layout: OUT/models (PLY in mm, models_info.json) and OUT/SPLIT/SCENE_ID/ with "
         "rgb, depth, mask, mask_visib, scene_camera.json, scene_gt.json, scene_gt_info.json "
-        "(a camera rig's every camera as images of the scene).",
+        "(a camera rig's every camera as images of the scene) and licenses.json (every "
+        "asset's licence).",
         "output folder (the BOP dataset root)"),
     "tapvid": ExportFormat(
         "kubric.datasets.exports.tapvid:export_tapvid",
         "point tracks in TAP-Vid's pickle layout",
-        "Pickle {scene name: {video, points, occluded, target_points, query_points}} "
+        "Pickle {scene name: {video, points, occluded, target_points, query_points, licenses}} "
         "(TAP-Vid's tapvid_davis.pkl layout) of every scene's tracks.npz.",
         "output file (.pkl)"),
     "nerf": ExportFormat(
         "kubric.datasets.exports.nerf:export_nerf",
         "multi-view scenes as NeRF / instant-ngp / nerfstudio folders",
-        "OUT/SCENE/ with transforms_{train,val,test}.json and the files their views name "
-        "(RGBA PNGs, depth, segmentation, ...), nothing else.",
+        "OUT/SCENE/ with transforms_{train,val,test}.json (with every asset's licence: "
+        "licenses) and the files their views name (RGBA PNGs, depth, segmentation, ...), nothing "
+        "else.",
         "output folder (must not exist)"),
     "lasr": ExportFormat(
         "kubric.datasets.exports.lasr:export_lasr",
         "one scene as a LASR / ViSER video sequence (DAVIS layout)",
         "OUT/DAVIS/{JPEGImages,Annotations,FlowFW,FlowBW,Cameras,CamerasWorld}/"
-        "Full-Resolution/SEQ/ and OUT/configs/SEQ.config for one scene directory.",
+        "Full-Resolution/SEQ/, OUT/configs/SEQ.config and OUT/export.json (with every asset's "
+        "licence: licenses) for one scene directory.",
         "the LASR folder to create"),
     "hf": ExportFormat(
         "kubric.datasets.exports.hub.hf:export_hf",

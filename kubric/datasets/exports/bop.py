@@ -15,6 +15,8 @@ Layout (BOP's, as the BOP toolkit reads it)::
         scene_gt.json                    {im_id: [{cam_R_m2c, cam_t_m2c (mm), obj_id}, ...]}
         scene_gt_info.json               {im_id: [{bbox_obj, bbox_visib, px_count_all,
                                           px_count_valid, px_count_visib, visib_fract}, ...]}
+        licenses.json                    (addition) every asset the images show and its
+                                         licence (:mod:`kubric.datasets.exports.licences`)
 
 ``gt`` indexes the scene's rigid instances: ``metadata["instances"]`` (every instance, visible or
 not) without the people (instances with ``keypoints_2d`` or a ``character_id``): BOP models are
@@ -50,6 +52,7 @@ import sys
 import numpy as np
 
 from kubric.core.lenses import pinhole_refusal
+from kubric.datasets.exports import licences
 from kubric.datasets.exports import models as mdl
 from kubric.datasets.exports.coco import amodal_masks, mask_bbox
 from kubric.datasets.exports.scenes import (
@@ -65,6 +68,7 @@ from kubric.io.png_io import encode_png
 
 #: our camera axes (x right, y up, looking down -z) → OpenCV's
 BLENDER_TO_OPENCV = np.diag([1.0, -1.0, -1.0])
+LICENSES_FILE = "licenses.json"
 
 
 @dataclasses.dataclass
@@ -208,8 +212,9 @@ def export_scene(scene: Scene, out: pathlib.Path, store: ModelStore, depth_scale
                 table[im] = entry
             images, n_ann = images + 1, n_ann + len(entries[1])
         clipped += writer.clipped
-    for name, data in zip(("scene_camera.json", "scene_gt.json", "scene_gt_info.json"), files,
-                          strict=True):
+    assets = licences.as_json(licences.scene_licences(scene.metadata))
+    for name, data in zip(("scene_camera.json", "scene_gt.json", "scene_gt_info.json",
+                           LICENSES_FILE), (*files, assets), strict=True):
         (work / name).write_text(json.dumps(data, indent=1) + "\n")
     shutil.rmtree(out, ignore_errors=True)
     os.replace(work, out)

@@ -14,7 +14,10 @@ in that frame, derived from the segmentation layer:
 * additions: ``instance`` (k − 1), ``asset_id`` and ``license`` (the id, in the top-level
   ``licenses``, of the asset's licence and attribution, ``{"id", "name", "url"}``, as
   ``metadata.json``'s instance ``license`` / ``license_url`` say); images add ``scene``,
-  ``seed``, ``frame`` and, for multi-view scenes, ``split``;
+  ``seed``, ``frame`` and, for multi-view scenes, ``split``; top-level ``attribution``: every
+  asset the images show — objects, background HDRI, PBR image sets, people
+  (:mod:`kubric.datasets.exports.licences`) — with the ``license_id`` of its licence in
+  ``licenses``;
 * camera-rig scenes (``cameras=stereo|ring|random``): every camera's frames are images of their own
   (``file_name`` ``scene_…/right_rgba_00003.png``, masks from that camera's segmentation layer,
   keypoints from its per-camera fields), each adding ``camera`` (its name) and its geometry
@@ -40,6 +43,7 @@ import sys
 import numpy as np
 
 from kubric import faults
+from kubric.datasets.exports import licences as asset_licences
 from kubric.datasets.exports import rle
 from kubric.datasets.exports.categories import scheme_for
 from kubric.datasets.exports.scenes import (
@@ -187,6 +191,16 @@ def _licence_id(ann: dict, licences: dict, scene: Scene) -> None:
     ann["license"] = licences[text]["id"]
 
 
+def _register(scene: Scene, licences: dict) -> list:
+    """Every asset of ``scene`` (:mod:`kubric.datasets.exports.licences`), each licence text
+    added to COCO's top-level ``licenses`` if not yet there."""
+    assets = asset_licences.scene_licences(scene.metadata)
+    for a in assets:
+        licences.setdefault(a.license, {"id": len(licences) + 1, "name": a.license,
+                                        "url": a.url})
+    return assets
+
+
 def _dump(item) -> str:
     return json.dumps(item, separators=(",", ":"), allow_nan=False)
 
@@ -215,6 +229,7 @@ def export_coco(root, out, progress: bool = True, compressed: bool = True,
             main.write('{"info":' + _dump(info) + ',"categories":'
                        + _dump(scheme.categories) + ',"images":[')
             licences: dict[str, dict] = {}
+            assets: list = []
             first_scene = None
             with tqdm(total=len(paths), unit="scene", desc="export coco", file=sys.stderr,
                       disable=not progress) as bar:
@@ -236,12 +251,16 @@ def export_coco(root, out, progress: bool = True, compressed: bool = True,
                         _licence_id(item, licences, scene)
                         anns.write(("," if n_annotations else "") + _dump(item))
                         n_annotations += 1
+                    assets.append(_register(scene, licences))
                     bar.update(1)
                     faults.point("export.scene_written")
             main.write('],"annotations":[')
             anns.seek(0)
             shutil.copyfileobj(anns, main, 1 << 16)
-            main.write('],"licenses":' + _dump(list(licences.values())) + "}\n")
+            attribution = [{**a.to_json(), "license_id": licences[a.license]["id"]}
+                           for a in asset_licences.merged(assets)]
+            main.write('],"licenses":' + _dump(list(licences.values())) + ',"attribution":'
+                       + _dump(attribution) + "}\n")
         os.replace(tmp, out)
     finally:
         for p in (tmp, side):

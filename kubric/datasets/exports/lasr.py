@@ -16,6 +16,8 @@ and ``metadata.json``::
     OUT/DAVIS/CamerasWorld/Full-Resolution/SEQ/{i:05d}.txt   world → camera (an addition)
     OUT/configs/SEQ.config                                   the loader's config ([data], [meta])
     OUT/export.json                                          what was exported, with conventions
+                                                             and ``licenses``: every asset the
+                                                             images show and its licence
 
 Conventions (what LASR's loaders expect; ours are in docs/conventions.md):
 
@@ -53,6 +55,7 @@ import numpy as np
 from kubric.core import camera_geometry as geo
 from kubric.core.lenses import pinhole_refusal
 from kubric.core.quaternion import Quaternion
+from kubric.datasets.exports import licences
 from kubric.errors import InputError
 from kubric.io import json_io, png_io
 from kubric.io.paths import atomic_write_bytes
@@ -257,6 +260,7 @@ def export_lasr(scene_dir, out_dir, sequence: str | None = None,
                            "occ-*.pfm: 1 = not visible at the flow target; Cameras: root "
                            "object -> camera, CamerasWorld: world -> camera, OpenCV axes, rows "
                            "[R|T] then [fx, fy, px, py], pixel centres at integers",
+            licences.KEY: licences.as_json(licences.scene_licences(meta)),
         }
         json_io.write_json(summary, tmp / "export.json")
         os.replace(tmp, out_dir)

@@ -44,6 +44,7 @@ import numpy as np
 
 from kubric.core import camera_geometry as geo
 from kubric.core import lenses
+from kubric.datasets.exports import licences
 from kubric.errors import InputError
 from kubric.io import png_io, tiff_io
 from kubric.io import scene_dir as scene_dirs
@@ -213,8 +214,10 @@ def view_files(data: Mapping) -> list[str]:
 
 def export_nerf(root, out) -> tuple[pathlib.Path, int]:
     """Copy every complete multi-view scene under ``root`` (or ``root`` itself) into
-    ``out/<scene name>/``: its ``transforms_{train,val,test}.json`` and the files their views
-    name, nothing else (a folder NeRF, instant-ngp and nerfstudio read as it is). ``out`` must
+    ``out/<scene name>/``: its ``transforms_{train,val,test}.json``, each with the field
+    ``licenses`` added (every asset the views show and its licence:
+    :mod:`kubric.datasets.exports.licences`), and the files their views name, nothing else (a
+    folder NeRF, instant-ngp and nerfstudio read as it is). ``out`` must
     not exist; it is written through a temporary sibling and appears complete or not at all.
     Returns (out, number of scenes)."""
     scenes = scene_dirs.scenes_under(root)
@@ -225,9 +228,12 @@ def export_nerf(root, out) -> tuple[pathlib.Path, int]:
     try:
         for scene in scenes:
             (tmp / scene.name).mkdir(parents=True)
+            assets = licences.as_json(licences.scene_licences(
+                json.loads((scene / scene_dirs.METADATA_FILE).read_text())))
             for split in SPLITS:
                 data = read_transforms(scene, split, scene.name)
-                shutil.copy2(scene / f"transforms_{split}.json", tmp / scene.name)
+                (tmp / scene.name / f"transforms_{split}.json").write_text(
+                    json.dumps({**data, licences.KEY: assets}, indent=1) + "\n")
                 for name in view_files(data):
                     shutil.copy2(scene / name, tmp / scene.name / name)
         os.replace(tmp, out)

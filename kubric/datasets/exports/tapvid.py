@@ -2,7 +2,7 @@
 (``tracks.npz``, :mod:`kubric.annotations.track_files`) of every complete scene as one pickle.
 
 It holds a dict ``{scene name: video dict}`` (:func:`export_tapvid`) in the layout of TAP-Vid's
-``tapvid_davis.pkl`` (TAP-Vid's loaders accept it) with two extra keys; a camera-rig scene adds
+``tapvid_davis.pkl`` (TAP-Vid's loaders accept it) with three extra keys; a camera-rig scene adds
 one entry ``"SCENE:NAME"`` per further camera NAME (:func:`rig_examples`):
 
 ==============  ==============  =======  ========================================================
@@ -17,6 +17,9 @@ occluded        (N, T)          bool     True = occluded
 target_points   (N, T, 2)       float32  (x, y) in raster pixels (= points · (W, H)), the
                                          ``target_points`` of TAP-Vid's training/eval batches
 query_points    (N, 3)          float32  (t, y, x): frame index and raster pixel position
+licenses        list of dicts            every asset the video shows and its licence
+                                         (:mod:`kubric.datasets.exports.licences`: kind, asset,
+                                         license, source, attribution, url, description)
 ==============  ==============  =======  ========================================================
 """
 
@@ -28,10 +31,13 @@ import pickle
 import numpy as np
 
 from kubric.annotations.track_files import TRACKS_FILE, read_tracks
+from kubric.datasets.exports import licences
 from kubric.datasets.exports.scenes import find_scenes
 from kubric.errors import InputError
+from kubric.io.json_io import read_json
 from kubric.io.layers import read_layer
 from kubric.io.paths import atomic_write_bytes
+from kubric.io.scene_dir import METADATA_FILE
 from kubric.io.stored_schema import stored_schema
 
 
@@ -89,7 +95,9 @@ def export_tapvid(root, out) -> tuple[pathlib.Path, int]:
     data = {}
     for scene in scenes:
         tracks = read_tracks(scene / TRACKS_FILE)
-        data[scene.name] = tapvid_example(tracks, read_layer(scene, "rgba"))
-        data.update(rig_examples(scene))
+        assets = licences.as_json(licences.scene_licences(read_json(scene / METADATA_FILE)))
+        videos = {scene.name: tapvid_example(tracks, read_layer(scene, "rgba")),
+                  **rig_examples(scene)}
+        data.update({name: {**video, licences.KEY: assets} for name, video in videos.items()})
     payload = pickle.dumps(data, protocol=pickle.HIGHEST_PROTOCOL)
     return atomic_write_bytes(payload, out), len(data)
