@@ -36,6 +36,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from dataclasses import replace
 
 import numpy as np
 
@@ -141,33 +142,43 @@ def errors(img: np.ndarray, ref: np.ndarray, masks: dict[str, np.ndarray]) -> di
 
 # -- one scene, in a child process -----------------------------------------------------------------
 
-def measure_settings(r, reference_samples: int) -> dict:
-    """The calibration of one scene's middle frame on renderer ``r`` (see the module doc)."""
-    from kubric.recipes.render_quality import CALIBRATION_SETTINGS
+def apply_profile(r, p) -> None:
+    """Set every field of the quality profile ``p`` on the Blender renderer ``r`` (levers too)."""
+    from kubric.renderer.blender_sampling import BLENDER_DEFAULTS
+    r.samples_per_pixel, r.use_denoising = p.samples, p.denoise
+    r.denoising_quality, r.denoising_prefilter = p.denoising_quality, p.denoising_prefilter
+    r.adaptive_sampling = p.adaptive_threshold is not None
+    if p.adaptive_threshold is not None:
+        r.adaptive_threshold = p.adaptive_threshold
+    for name in BLENDER_DEFAULTS:
+        setattr(r, name, getattr(p, name))
+
+
+def measure_settings(r, reference_samples: int, settings=None) -> dict:
+    """The calibration of one scene's middle frame on renderer ``r`` (see the module doc) under
+    ``settings`` (quality profiles; default CALIBRATION_SETTINGS)."""
+    from kubric.recipes.render_quality import ANCHOR, CALIBRATION_SETTINGS
+    settings = CALIBRATION_SETTINGS if settings is None else settings
     frame = (r.scene.frame_start + r.scene.frame_end) // 2
     seg = r.render([frame], ("segmentation",))["segmentation"][0, ..., 0]
     background = [i for i, a in enumerate(r.scene.assets, start=1)
                   if getattr(a, "background", False)]
 
-    def render(p, denoise=True, adaptive=None):
-        r.samples_per_pixel, r.use_denoising = p, denoise
-        r.adaptive_sampling = adaptive is not None
-        if adaptive is not None:
-            r.adaptive_threshold = adaptive
+    def render(p):
+        apply_profile(r, p)
         c0, w0 = time.process_time(), time.perf_counter()
         rgb = r.render([frame], ("rgba",))["rgba"][0]
         return rgb, time.process_time() - c0, time.perf_counter() - w0
 
-    render(1, False)  # warm-up: kernels, textures, persistent data
-    ref, ref_cpu, _ = render(reference_samples, False)
+    render(replace(ANCHOR, samples=1, denoise=False))  # warm-up: kernels, textures, ...
+    ref, ref_cpu, _ = render(replace(ANCHOR, samples=reference_samples, denoise=False))
     edges = edge_pixels(seg)
     masks = {"all": np.ones(seg.shape, bool),
              "objects": (seg > 0) & ~np.isin(seg, background),
              "edges": edges, "textured": textured_pixels(ref, edges)}
     rows = {}
-    for p in CALIBRATION_SETTINGS:
-        r.denoising_quality, r.denoising_prefilter = p.denoising_quality, p.denoising_prefilter
-        rgb, cpu, wall = render(p.samples, p.denoise, p.adaptive_threshold)
+    for p in settings:
+        rgb, cpu, wall = render(p)
         rows[p.label] = {"cpu": cpu, "wall": wall, **errors(rgb, ref, masks)}
         print(f"  {p.label:44s} {cpu:7.2f} CPU-s  RMSE {np.sqrt(rows[p.label]['mse_all']):6.3f}",
               flush=True)
@@ -216,6 +227,40 @@ def _fmt(v, spec=".3f"):
     return "–" if v is None else format(v, spec)
 
 
+def worst(row: dict, anchor: dict) -> float:
+    """The largest error ratio of ``row`` to ``anchor`` over the rule's measures."""
+    from kubric.recipes.render_quality import RULE_MEASURES
+    return max(row[m] / anchor[m] for m in RULE_MEASURES if row[m] is not None and anchor[m])
+
+
+def recipe_table(name: str, rows: dict[str, dict], scenes: list[dict]) -> list[str]:
+    """The markdown lines of one recipe's table: every setting of ``rows`` (pooled over
+    ``scenes``, that recipe's calibration scenes) with its cost, errors and the rule's verdict."""
+    from kubric.recipes.render_quality import ANCHOR, RULE_FACTOR, choose_default
+    anchor, chosen = rows[ANCHOR.label], choose_default(rows)
+    w, h = scenes[0]["resolution"]
+    fr = np.mean([[s["fractions"][c] for c in CLASSES] for s in scenes], axis=0)
+    ref_cpu = np.mean([s["reference_cpu"] for s in scenes])
+    lines = [
+        f"#### {name}", "",
+        f"{w}×{h}, frame/view {scenes[0]['frame']} of seeds "
+        f"{', '.join(str(s) for s in sorted(s['seed'] for s in scenes))}; reference "
+        f"{ref_cpu:.0f} CPU-s per frame; pixels: objects {fr[1]:.1%}, edges {fr[2]:.1%}, "
+        f"textured {fr[3]:.1%}.", "",
+        "| setting | CPU-s / frame (min–max) | × 64 spp | RMSE all | objects | edges | "
+        "textured | 1 − SSIM | worst ratio | rule |",
+        "|---|---|---|---|---|---|---|---|---|---|"]
+    for label, row in rows.items():
+        ratio = worst(row, anchor)
+        mark = "**chosen**" if label == chosen else ("passes" if ratio <= RULE_FACTOR else "")
+        lines.append(
+            f"| {label} | {row['cpu']:.2f} ({row['cpu_min']:.2f}–{row['cpu_max']:.2f}) | "
+            f"{row['cpu'] / anchor['cpu']:.2f} | {_fmt(row['rmse_all'])} | "
+            f"{_fmt(row['rmse_objects'])} | {_fmt(row['rmse_edges'])} | "
+            f"{_fmt(row['rmse_textured'])} | {row['dssim']:.4f} | {ratio:.2f} | {mark} |")
+    return lines + [""]
+
+
 def tables(data: dict) -> str:
     """The markdown of the calibration section: the summary, then one table per recipe."""
     from kubric.recipes.render_quality import (
@@ -245,10 +290,6 @@ def tables(data: dict) -> str:
         "ratio | previous default (16 spp) worst ratio | in code |",
         "|---|---|---|---|---|---|---|---|---|"]
 
-    def worst(row, anchor):
-        return max(row[m] / anchor[m] for m in RULE_MEASURES
-                   if row[m] is not None and anchor[m])
-
     for name, rows in rows_of.items():
         anchor, chosen = rows[ANCHOR.label], choose_default(rows)
         old = rows.get(PROFILES["default"].label)
@@ -261,29 +302,7 @@ def tables(data: dict) -> str:
             f"{'yes' if code is not None and code.label == chosen else 'NO'} |")
     lines.append("")
     for name, rows in rows_of.items():
-        anchor, chosen = rows[ANCHOR.label], choose_default(rows)
-        w, h = meta[name]["resolution"]
-        fr = np.mean([[s["fractions"][c] for c in CLASSES] for s in data["scenes"]
-                      if s["recipe"] == name], axis=0)
-        ref_cpu = np.mean([s["reference_cpu"] for s in data["scenes"] if s["recipe"] == name])
-        lines += [
-            f"#### {name}", "",
-            f"{w}×{h}, frame/view {meta[name]['frame']} of seeds "
-            f"{', '.join(map(str, sorted(seeds[name])))}; reference {ref_cpu:.0f} CPU-s per "
-            f"frame; pixels: objects {fr[1]:.1%}, edges {fr[2]:.1%}, textured {fr[3]:.1%}.", "",
-            "| setting | CPU-s / frame (min–max) | × 64 spp | RMSE all | objects | edges | "
-            "textured | 1 − SSIM | worst ratio | rule |",
-            "|---|---|---|---|---|---|---|---|---|---|"]
-        for label, row in rows.items():
-            ratio = worst(row, anchor)
-            mark = "**chosen**" if label == chosen else ("passes" if ratio <= RULE_FACTOR
-                                                          else "")
-            lines.append(
-                f"| {label} | {row['cpu']:.2f} ({row['cpu_min']:.2f}–{row['cpu_max']:.2f}) | "
-                f"{row['cpu'] / anchor['cpu']:.2f} | {_fmt(row['rmse_all'])} | "
-                f"{_fmt(row['rmse_objects'])} | {_fmt(row['rmse_edges'])} | "
-                f"{_fmt(row['rmse_textured'])} | {row['dssim']:.4f} | {ratio:.2f} | {mark} |")
-        lines.append("")
+        lines += recipe_table(name, rows, [s for s in data["scenes"] if s["recipe"] == name])
     return "\n".join(lines)
 
 
@@ -294,6 +313,24 @@ def write_doc(data: dict, doc: pathlib.Path = DOC) -> None:
     head, rest = text.split(BEGIN, 1)
     tail = rest.split(END, 1)[1]
     doc.write_text(f"{head}{BEGIN}\n{tables(data)}\n{END}{tail}")
+
+
+def run_child(script: str, recipe: str, seed: int, reference_samples: int,
+              assignments: list[str]) -> dict:
+    """Run ``script --child recipe seed OUT`` in a fresh process and return the scene it wrote."""
+    with tempfile.NamedTemporaryFile(suffix=".json", delete=False) as f:
+        out = pathlib.Path(f.name)
+    cmd = [sys.executable, str(pathlib.Path(script).resolve()), "--child", recipe, str(seed),
+           str(out), "--reference-samples", str(reference_samples)]
+    for s in assignments:
+        cmd += ["--set", s]
+    proc = subprocess.run(cmd, cwd=ROOT, stderr=subprocess.PIPE, text=True)
+    if proc.returncode:
+        raise SystemExit(f"{recipe} seed {seed} failed ({proc.returncode}):\n"
+                         f"{proc.stderr[-3000:]}")
+    scene = json.loads(out.read_text())
+    out.unlink()
+    return scene
 
 
 def calibrated_recipes() -> list[str]:
@@ -345,18 +382,8 @@ def main(argv=None) -> int:
     for k, (recipe, seed) in enumerate(todo, 1):
         print(f"[{k}/{len(todo)}] {recipe} seed {seed} ({time.perf_counter() - start:.0f} s "
               "elapsed)", flush=True)
-        with tempfile.NamedTemporaryFile(suffix=".json", delete=False) as f:
-            out = pathlib.Path(f.name)
-        cmd = [sys.executable, str(pathlib.Path(__file__).resolve()), "--child", recipe,
-               str(seed), str(out), "--reference-samples", str(args.reference_samples)]
-        for s in args.set:
-            cmd += ["--set", s]
-        proc = subprocess.run(cmd, cwd=ROOT, stderr=subprocess.PIPE, text=True)
-        if proc.returncode:
-            raise SystemExit(f"{recipe} seed {seed} failed ({proc.returncode}):\n"
-                             f"{proc.stderr[-3000:]}")
-        data["scenes"].append(json.loads(out.read_text()))
-        out.unlink()
+        data["scenes"].append(run_child(__file__, recipe, seed, args.reference_samples,
+                                        args.set))
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps(data, indent=1))
     if not data["scenes"]:

@@ -47,6 +47,9 @@ ROWS = {
                            r"true\}"],
     "bench_placement": [r'^\{"rule": "upstream", "shape_half_size_m": 1\.0, .*"seconds": '],
     "bench_quality_calibration": [r"^tables → .+render-cost\.md; rows → .+render-calibration\.json"],
+    "bench_quality_levers": [r"^\| ≤64 spp adaptive 0\.1 \+ OIDN HIGH/ACCURATE, guiding surface \| "
+                             r"[\d.]+ \| [\d.]+", r"^tables → .+render-cost\.md; rows → "
+                             r".+render-levers\.json"],
     "bench_raycast": [r"^raycast exact layers: [\d.]+ s/frame",
                       r"^ratio Cycles / raycast \(exact layers\): wall [\d.]+×"],
     "bench_render": [r"^RGB +: +[\d.]+ CPU-s/frame", r"^total per frame: [\d.]+ CPU-s"],
@@ -70,7 +73,8 @@ NEEDS = {"bench_codecs": ("tifffile", "cv2"), "bench_scale": ("distributed", "s3
 #: benchmarks that render or import with bpy
 BLENDER = {"bench_assets", "bench_characters", "bench_cloth_engines", "bench_datasets",
            "bench_deformables", "bench_lens", "bench_multiview",
-           "bench_quality_calibration", "bench_raycast", "bench_render", "bench_render_levers",
+           "bench_quality_calibration", "bench_quality_levers", "bench_raycast", "bench_render",
+           "bench_render_levers",
            "bench_scaling", "bench_scene_cost", "bench_shadows", "bench_signals", "bench_stereo",
            "bench_tracks", "bench_viewer"}
 

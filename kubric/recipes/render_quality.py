@@ -40,14 +40,37 @@ class QualityProfile:
     #: reuse freed frame buffers (kubric.renderer.allocator): ~0.5 CPU-s per MOVi-A scene for
     #: 40–100 MiB of peak RSS, so only the cheap profiles, where that is 2 % of a scene, ask for it
     keep_freed_memory: bool = False
+    #: Cycles' noise levers (kubric.renderer.blender_sampling; the defaults are Blender's):
+    path_guiding: str = "off"            # off | surface | volume | all (CPU only)
+    clamp_direct: float = 0.0            # largest direct-light sample value; 0 = no clamp
+    clamp_indirect: float = 10.0         # largest indirect-light sample value; 0 = no clamp
+    filter_glossy: float = 1.0           # blur of glossy after blurry bounces (0–10)
+    adaptive_min_samples: int = 0        # samples before adaptive sampling may stop; 0 = auto
+
+    def levers(self) -> dict:
+        """The noise levers that differ from Blender's defaults ({Blender option: value})."""
+        from kubric.renderer.blender_sampling import BLENDER_DEFAULTS
+        return {name: getattr(self, name) for name, default in BLENDER_DEFAULTS.items()
+                if getattr(self, name) != default}
 
     @property
     def label(self) -> str:
-        """One readable line that names the setting, e.g. ``32 spp + OIDN HIGH/FAST``."""
+        """One readable line that names the setting, e.g. ``32 spp + OIDN HIGH/FAST`` or
+        ``≤64 spp adaptive 0.2 min 16 + OIDN HIGH/ACCURATE, guiding surface, clamp 0/1``."""
         spp = (f"≤{self.samples} spp adaptive {self.adaptive_threshold:g}"
                if self.adaptive_threshold else f"{self.samples} spp")
-        return spp + (f" + OIDN {self.denoising_quality}/{self.denoising_prefilter}"
-                      if self.denoise else ", no denoising")
+        if self.adaptive_threshold and self.adaptive_min_samples:
+            spp += f" min {self.adaptive_min_samples}"
+        out = spp + (f" + OIDN {self.denoising_quality}/{self.denoising_prefilter}"
+                     if self.denoise else ", no denoising")
+        levers = self.levers()
+        if "path_guiding" in levers:
+            out += f", guiding {self.path_guiding}"
+        if "clamp_direct" in levers or "clamp_indirect" in levers:
+            out += f", clamp {self.clamp_direct:g}/{self.clamp_indirect:g}"
+        if "filter_glossy" in levers:
+            out += f", filter glossy {self.filter_glossy:g}"
+        return out
 
 
 def _oidn(samples, quality="HIGH", prefilter="ACCURATE", adaptive=None) -> QualityProfile:
@@ -180,6 +203,7 @@ class RenderQuality:
             out.update(adaptive_sampling=True, adaptive_threshold=p.adaptive_threshold)
         if p.keep_freed_memory:
             out["keep_freed_memory"] = True
+        out.update(p.levers())
         return out
 
     def renderer_requests(self) -> dict[str, str]:

@@ -39,7 +39,9 @@ Options (each checked in one line by :mod:`kubric.renderer.blender_options`):
   settings), keep_freed_memory (bool, default False: raise glibc's malloc thresholds for the rest
   of the process so that the buffers freed after each frame are reused — about 0.5 CPU-s less per
   24-frame 256² scene for 40–100 MiB more peak RSS, worth it at low sample counts;
-  :mod:`kubric.renderer.allocator`).
+  :mod:`kubric.renderer.allocator`), and Cycles' noise levers path_guiding, clamp_direct,
+  clamp_indirect, filter_glossy and adaptive_min_samples (defaults: Blender's;
+  :mod:`kubric.renderer.blender_sampling`; RGB only, recorded in settings() when not the default).
 Render threads: Blender's automatic count (all cores), or exactly N when the environment variable
 KUBRIC_RENDER_THREADS is N ≥ 1 (set by ``kubric generate --threads-per-scene`` on Dask).
 Depth of field comes from the perspective camera's ``use_dof`` / ``focus_distance`` /
@@ -62,6 +64,7 @@ from kubric.renderer import blender_lens as bl
 from kubric.renderer import blender_materials as bm
 from kubric.renderer import blender_passes as bp
 from kubric.renderer import blender_rolling as bl_rolling
+from kubric.renderer import blender_sampling as bsm
 from kubric.renderer import blender_shadows as bs
 from kubric.renderer import blender_tables as bt
 from kubric.renderer.base import CapabilityError, Renderer
@@ -100,6 +103,10 @@ class Blender(TableView, Renderer):
     background_transparency = live_option(
         "background_transparency", as_bool,
         lambda bscene, value: setattr(bscene.render, "film_transparent", value))
+    path_guiding, clamp_direct, clamp_indirect, filter_glossy, adaptive_min_samples = (
+        live_option(name, convert, lambda bscene, value, name=name:
+                    bsm.apply_one(bscene.cycles, name, value))
+        for name, convert in bsm.CONVERTERS.items())
 
     builders = bt.BUILDERS
     setters = bt.SETTERS
@@ -109,7 +116,7 @@ class Blender(TableView, Renderer):
                  samples_per_pixel=128, background_transparency=False, *, motion_blur=False,
                  device=None, max_bounces=None, light_tree=False, verbose=False,
                  denoising_quality="HIGH", denoising_prefilter="ACCURATE", custom_scene=None,
-                 adaptive_threshold=0.01, keep_freed_memory=False):
+                 adaptive_threshold=0.01, keep_freed_memory=False, **levers):
         custom_scene = custom_scene_path(custom_scene)
         if keep_freed_memory:  # per-frame buffers reused, not faulted in again (allocator.py)
             allocator.keep_freed_memory()
@@ -127,6 +134,12 @@ class Blender(TableView, Renderer):
         self.denoising_quality = denoising_quality
         self.denoising_prefilter = denoising_prefilter
         self.background_transparency = background_transparency
+        unknown = sorted(set(levers) - set(bsm.CONVERTERS))
+        if unknown:
+            raise TypeError(f"Blender got unknown options {unknown}; the levers are "
+                            f"{list(bsm.CONVERTERS)}")
+        for name, default in bsm.BLENDER_DEFAULTS.items():
+            setattr(self, name, levers.get(name, default))
         self.motion_blur = shutter(motion_blur)
         self.device = render_device(device)
         self.max_bounces = None if max_bounces is None else as_int("max_bounces",
@@ -281,6 +294,12 @@ class Blender(TableView, Renderer):
         c.adaptive_threshold = self.adaptive_threshold
         c.use_denoising = self.use_denoising
         c.filter_width = 1.5
+        levers = {name: getattr(self, name) for name in bsm.CONVERTERS}
+        if levers["path_guiding"] != "off" and self.device != "CPU":
+            raise ValueError(f"Blender option path_guiding={levers['path_guiding']!r} needs "
+                             f"device 'CPU' (Cycles guides paths on the CPU only), got "
+                             f"{self.device!r}")
+        bsm.apply(c, levers)
         s.render.film_transparent = self.background_transparency
         s.render.use_motion_blur = self.motion_blur > 0
         if self.motion_blur > 0:  # centred: the exact layers mean the shutter's centre
@@ -313,6 +332,7 @@ class Blender(TableView, Renderer):
         c.use_adaptive_sampling = False
         c.use_denoising = False
         c.filter_width = 0.01
+        bsm.apply(c, bsm.BLENDER_DEFAULTS)  # the exact layers never see the RGB levers
         c.max_bounces = c.diffuse_bounces = c.glossy_bounces = 0
         c.transmission_bounces = c.volume_bounces = c.transparent_max_bounces = 0
         s.render.film_transparent = True
@@ -423,8 +443,9 @@ class Blender(TableView, Renderer):
     def settings(self) -> dict:
         """``metadata["renderer"]``: engine, view transform and the RGB quality settings, plus
         every option of motion_blur, max_bounces, background_transparency, adaptive_sampling and
-        light_tree that was given to the constructor (device and verbosity never change pixels
-        beyond float noise and are not recorded)."""
+        light_tree that was given to the constructor, and every noise lever (path_guiding, clamps,
+        filter_glossy, adaptive_min_samples) that is not Blender's default (device and verbosity
+        never change pixels beyond float noise and are not recorded)."""
         out = {"engine": "CYCLES", "view_transform": "Standard",
                "samples_per_pixel": self.samples_per_pixel, "denoising": self.use_denoising,
                "denoising_quality": self.denoising_quality,
@@ -432,6 +453,7 @@ class Blender(TableView, Renderer):
         out.update({name: getattr(self, name) for name in sorted(self._given)})
         if self.adaptive_sampling:
             out["adaptive_threshold"] = self.adaptive_threshold
+        out.update(bsm.recorded({name: getattr(self, name) for name in bsm.CONVERTERS}))
         return out
 
     def render_still(self, frame=None, return_layers=bp.ALL_LAYERS, ignore_missing_textures=False):

@@ -1,0 +1,170 @@
+"""Cycles' noise levers under the calibration's rule: path guiding, clamping, filter glossy and
+adaptive sampling's minimum samples / threshold, alone and combined, on MOVi-A and MOVi-C.
+
+The sibling of ``bench_quality_calibration.py`` with the same scenes, reference, measures, pooling
+and rule (``choose_default``: error on every measure within 1.15× of 64 spp + OIDN HIGH/ACCURATE),
+over :data:`LEVER_SETTINGS` instead of the calibration grid: for each recipe and seed one fresh
+process builds the scene, stops where the recipe would render and renders its middle frame under
+every setting and once at the reference's sample count without denoising (Blender's defaults for
+the levers, as in the calibration). Cost: CPU-s of that one-frame render after a warm-up, and its
+ratio to 64 spp's in the same process. By default at 128² (``--set resolution=128``) to fit a
+small CPU budget: the ratios, not the CPU-s, carry to 256².
+
+Output: the rows in ``docs/data/render-levers.json`` and the tables in ``docs/render-cost.md``
+between its levers markers (date, load average, size printed with them).
+
+Run: ``.venv/bin/python benchmarks/bench_quality_levers.py [--recipes movi_a movi_c]
+[--seeds 1 2 3] [--set resolution=128]``. About 12 CPU-min at 128² for both recipes, 3 seeds.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import pathlib
+import sys
+import tempfile
+import time
+from dataclasses import replace
+
+HERE = pathlib.Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))
+import smoke_mode  # noqa: E402
+from bench_quality_calibration import (  # noqa: E402
+    measure_settings,
+    recipe_options,
+    recipe_rows,
+    recipe_table,
+    run_child,
+    with_renderer,
+    worst,
+)
+
+from kubric.recipes.render_quality import ANCHOR, RULE_FACTOR, choose_default  # noqa: E402
+from kubric.recipes.render_quality import _oidn as oidn  # noqa: E402
+
+ROOT = HERE.parent
+DATA = ROOT / "docs" / "data" / "render-levers.json"
+DOC = ROOT / "docs" / "render-cost.md"
+BEGIN, END = "<!-- levers: begin -->", "<!-- levers: end -->"
+
+TODAY = oidn(64, adaptive=0.1)  # MOVi-A and MOVi-C's calibrated default
+#: the settings measured: the anchor and today's default, sample counts for the curve, then each
+#: lever alone on today's default, then combinations at lower cost
+LEVER_SETTINGS = (
+    ANCHOR, TODAY, oidn(32), oidn(48),
+    # path guiding (surface: MOVi has no volumes)
+    replace(TODAY, path_guiding="surface"), replace(oidn(32), path_guiding="surface"),
+    # clamping (Blender's defaults: direct 0 = off, indirect 10)
+    replace(TODAY, clamp_indirect=3.0), replace(TODAY, clamp_indirect=1.0),
+    replace(TODAY, clamp_direct=4.0, clamp_indirect=1.0), replace(oidn(32), clamp_indirect=1.0),
+    # filter glossy (Blender's default 1)
+    replace(TODAY, filter_glossy=0.0), replace(TODAY, filter_glossy=3.0),
+    # adaptive sampling: threshold and minimum samples
+    oidn(64, adaptive=0.2), oidn(64, adaptive=0.3),
+    replace(TODAY, adaptive_min_samples=4), replace(TODAY, adaptive_min_samples=16),
+    replace(oidn(64, adaptive=0.2), adaptive_min_samples=16),
+    # combinations
+    replace(oidn(64, adaptive=0.2), clamp_indirect=1.0, filter_glossy=3.0),
+    replace(oidn(32), clamp_indirect=1.0, filter_glossy=3.0),
+    replace(oidn(32), clamp_indirect=1.0, filter_glossy=3.0, path_guiding="surface"),
+)
+#: the cost a new default must reach (× 64 spp's) to be proposed (issue 42)
+TARGET_COST = 0.5
+
+
+def child(recipe: str, seed: int, reference_samples: int, assignments: list[str],
+          out: pathlib.Path) -> None:
+    with tempfile.TemporaryDirectory(prefix="bench_levers_") as tmp:
+        tmp = pathlib.Path(tmp)
+        options = [*recipe_options(recipe, tmp / "objects"), *assignments]
+        result = with_renderer(recipe, seed, options, tmp / "scene", lambda r: measure_settings(
+            r, reference_samples, LEVER_SETTINGS))
+    out.write_text(json.dumps({"recipe": recipe, "seed": seed, **result}))
+
+
+def summary(data: dict) -> list[str]:
+    """The header lines and one row per setting: its cost ratio and worst error ratio on each
+    recipe, and whether it meets the rule on every recipe at ≤ TARGET_COST × 64 spp's cost."""
+    rows_of = recipe_rows(data)
+    names = list(rows_of)
+    load = ", ".join(f"{v:.1f}" for v in data["load"])
+    lines = [
+        f"Printed by `benchmarks/bench_quality_levers.py` ({data['date']}, {data['machine']}, "
+        f"load average at start / end {load}; {' '.join(data['set']) or 'recipe defaults'}; "
+        f"{data['reference_samples']}-spp reference). Rule as the calibration's: every error "
+        f"measure within {RULE_FACTOR}× of {ANCHOR.label} in the same run; *pays* = meets the "
+        f"rule on every recipe at ≤ {TARGET_COST}× 64 spp's cost.", "",
+        "| setting | " + " | ".join(f"{n} × 64 spp cost | {n} worst ratio" for n in names)
+        + " | pays |",
+        "|---|" + "---|---|" * len(names) + "---|"]
+    for label in rows_of[names[0]]:
+        cells, pays = [], True
+        for name in names:
+            rows = rows_of[name]
+            cost = rows[label]["cpu"] / rows[ANCHOR.label]["cpu"]
+            ratio = worst(rows[label], rows[ANCHOR.label])
+            pays &= ratio <= RULE_FACTOR and cost <= TARGET_COST
+            cells += [f"{cost:.2f}", f"{ratio:.2f}" + (" ✓" if ratio <= RULE_FACTOR else "")]
+        lines.append(f"| {label} | {' | '.join(cells)} | {'**yes**' if pays else 'no'} |")
+    chosen = {name: choose_default(rows) for name, rows in rows_of.items()}
+    lines += ["", "Cheapest setting within the rule: " + "; ".join(
+        f"{name}: {label} ({rows_of[name][label]['cpu'] / rows_of[name][ANCHOR.label]['cpu']:.2f}"
+        "× 64 spp)" for name, label in chosen.items()) + ".", ""]
+    return lines
+
+
+def write_doc(text: str, doc: pathlib.Path) -> None:
+    page = doc.read_text()
+    if BEGIN not in page or END not in page:
+        raise SystemExit(f"{doc} has no {BEGIN} … {END} section to fill")
+    head, rest = page.split(BEGIN, 1)
+    doc.write_text(f"{head}{BEGIN}\n{text}\n{END}{rest.split(END, 1)[1]}")
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--recipes", nargs="*", default=smoke_mode.size(["movi_a", "movi_c"],
+                                                                         ["movi_a"]))
+    parser.add_argument("--seeds", nargs="*", type=int, default=smoke_mode.size([1, 2, 3], [1]))
+    parser.add_argument("--reference-samples", type=int, default=smoke_mode.size(1024, 4))
+    parser.add_argument("--json", type=pathlib.Path, default=smoke_mode.output(DATA))
+    parser.add_argument("--doc", type=pathlib.Path, default=smoke_mode.output(DOC))
+    parser.add_argument("--set", action="append", metavar="KEY=VALUE", default=None,
+                        help="options for every recipe (default: resolution=128)")
+    parser.add_argument("--child", nargs=3, metavar=("RECIPE", "SEED", "OUT"),
+                        help=argparse.SUPPRESS)
+    args = parser.parse_args(argv)
+    if args.set is None:
+        args.set = smoke_mode.size(["resolution=128"], ["resolution=16"])
+    os.environ.setdefault("KUBRIC_CACHE_DIR", str(ROOT / ".cache" / "kubric"))
+    if args.child:
+        recipe, seed, out = args.child
+        child(recipe, int(seed), args.reference_samples, args.set, pathlib.Path(out))
+        return 0
+    data = {"reference_samples": args.reference_samples, "set": args.set,
+            "settings": [p.label for p in LEVER_SETTINGS], "scenes": [],
+            "date": time.strftime("%Y-%m-%d"), "load": [os.getloadavg()[0]],
+            "machine": f"{len(os.sched_getaffinity(0))} cores"}
+    for seed in args.seeds:  # seed-major: a stopped run still covers every recipe
+        for recipe in args.recipes:
+            print(f"{recipe} seed {seed}", flush=True)
+            data["scenes"].append(run_child(__file__, recipe, seed, args.reference_samples,
+                                            args.set))
+            args.json.parent.mkdir(parents=True, exist_ok=True)
+            args.json.write_text(json.dumps(data, indent=1))  # kept if the run is stopped
+    data["load"].append(os.getloadavg()[0])
+    args.json.parent.mkdir(parents=True, exist_ok=True)
+    args.json.write_text(json.dumps(data, indent=1))
+    lines = summary(data)
+    print("\n".join(lines))
+    for name, rows in recipe_rows(data).items():
+        lines += recipe_table(name, rows, [s for s in data["scenes"] if s["recipe"] == name])
+    write_doc("\n".join(lines), args.doc)
+    print(f"tables → {args.doc}; rows → {args.json}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
