@@ -123,6 +123,17 @@ def write_doc(text: str, doc: pathlib.Path) -> None:
     doc.write_text(f"{head}{BEGIN}\n{text}\n{END}{rest.split(END, 1)[1]}")
 
 
+def write_tables(data: dict, doc: pathlib.Path) -> int:
+    """Print the summary and write it with every recipe's table into ``doc``."""
+    lines = summary(data)
+    print("\n".join(lines))
+    for name, rows in recipe_rows(data).items():
+        lines += recipe_table(name, rows, [s for s in data["scenes"] if s["recipe"] == name])
+    write_doc("\n".join(lines), doc)
+    print(f"tables → {doc}")
+    return 0
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--recipes", nargs="*", default=smoke_mode.size(["movi_a", "movi_c"],
@@ -133,6 +144,8 @@ def main(argv=None) -> int:
     parser.add_argument("--doc", type=pathlib.Path, default=smoke_mode.output(DOC))
     parser.add_argument("--set", action="append", metavar="KEY=VALUE", default=None,
                         help="options for every recipe (default: resolution=128)")
+    parser.add_argument("--tables-only", action="store_true",
+                        help="print and write the tables of the scenes already in --json")
     parser.add_argument("--child", nargs=3, metavar=("RECIPE", "SEED", "OUT"),
                         help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
@@ -143,6 +156,10 @@ def main(argv=None) -> int:
         recipe, seed, out = args.child
         child(recipe, int(seed), args.reference_samples, args.set, pathlib.Path(out))
         return 0
+    if args.tables_only:  # e.g. a run stopped after some seeds
+        data = json.loads(args.json.read_text())
+        data["load"] = data["load"][:1] + [os.getloadavg()[0]]
+        return write_tables(data, args.doc)
     data = {"reference_samples": args.reference_samples, "set": args.set,
             "settings": [p.label for p in LEVER_SETTINGS], "scenes": [],
             "date": time.strftime("%Y-%m-%d"), "load": [os.getloadavg()[0]],
@@ -157,13 +174,8 @@ def main(argv=None) -> int:
     data["load"].append(os.getloadavg()[0])
     args.json.parent.mkdir(parents=True, exist_ok=True)
     args.json.write_text(json.dumps(data, indent=1))
-    lines = summary(data)
-    print("\n".join(lines))
-    for name, rows in recipe_rows(data).items():
-        lines += recipe_table(name, rows, [s for s in data["scenes"] if s["recipe"] == name])
-    write_doc("\n".join(lines), args.doc)
-    print(f"tables → {args.doc}; rows → {args.json}")
-    return 0
+    print(f"rows → {args.json}")
+    return write_tables(data, args.doc)
 
 
 if __name__ == "__main__":

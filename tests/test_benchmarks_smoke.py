@@ -48,8 +48,8 @@ ROWS = {
     "bench_placement": [r'^\{"rule": "upstream", "shape_half_size_m": 1\.0, .*"seconds": '],
     "bench_quality_calibration": [r"^tables → .+render-cost\.md; rows → .+render-calibration\.json"],
     "bench_quality_levers": [r"^\| ≤64 spp adaptive 0\.1 \+ OIDN HIGH/ACCURATE, guiding surface \| "
-                             r"[\d.]+ \| [\d.]+", r"^tables → .+render-cost\.md; rows → "
-                             r".+render-levers\.json"],
+                             r"[\d.]+ \| [\d.]+", r"^rows → .+render-levers\.json",
+                             r"^tables → .+render-cost\.md"],
     "bench_raycast": [r"^raycast exact layers: [\d.]+ s/frame",
                       r"^ratio Cycles / raycast \(exact layers\): wall [\d.]+×"],
     "bench_render": [r"^RGB +: +[\d.]+ CPU-s/frame", r"^total per frame: [\d.]+ CPU-s"],
