@@ -14,7 +14,8 @@ Output: the rows in ``docs/data/render-levers.json`` and the tables in ``docs/re
 between its levers markers (date, load average, size printed with them).
 
 Run: ``.venv/bin/python benchmarks/bench_quality_levers.py [--recipes movi_a movi_c]
-[--seeds 1 2 3] [--set resolution=128]``. About 12 CPU-min at 128² for both recipes, 3 seeds.
+[--seeds 1 2 3] [--set resolution=128]``. About 10 CPU-min of renders at 128² for both recipes,
+3 seeds (28 min wall on the shared 2-core machine).
 """
 
 from __future__ import annotations
