@@ -7,7 +7,10 @@ dropped from 1–3 m, ``--cloths`` checker-textured sheets (``kubric.recipes.def
 16² vertices, edge 1.5–3 m) above them; ``--frames`` frames at 12 frames/s, 240 steps/s, ``--size``², RGB at
 ``--samples`` spp (OIDN on) plus the exact annotation pass. Measured (CPU seconds, the least of 3
 runs for the simulations): the simulation with the sheets minus the same simulation without them,
-and the render of the scene with the sheets.
+and the render of the scene with the sheets (``--render-frames K``: only K frames spread evenly
+over the range are rendered and their cost is scaled by (frames + 1) / K, printed as such: the
+render's cost per frame is about constant, so this estimates the full render on a machine where
+rendering every frame does not fit).
 Run: ``.venv/bin/python benchmarks/bench_deformables.py [--samples 64] [--frames 24]``.
 """
 
@@ -52,6 +55,8 @@ def main(argv=None) -> int:
     parser.add_argument("--frames", type=int, default=smoke_mode.size(24, 2))
     parser.add_argument("--size", type=int, default=smoke_mode.size(256, 16))
     parser.add_argument("--cloths", type=int, default=smoke_mode.size(2, 1))
+    parser.add_argument("--render-frames", type=int, default=None,
+                        help="render only this many frames, evenly spread (default: all)")
     args = parser.parse_args(argv)
     repeats = smoke_mode.size(3, 1)
     folder = pathlib.Path(tempfile.mkdtemp(prefix="kubric-bench-cloth-"))
@@ -69,11 +74,22 @@ def main(argv=None) -> int:
     scene, cloth_cpu = best(args.cloths)
     extra = max(0.0, cloth_cpu - bare_cpu)
     renderer = kb.renderer.Blender(scene, samples_per_pixel=args.samples, use_denoising=True)
-    _, render_cpu, render_wall = timed(renderer.render)
+    all_frames = args.frames + 1
+    k = all_frames if args.render_frames is None else args.render_frames
+    if not 1 <= k <= all_frames:
+        raise SystemExit(f"--render-frames {k}: allowed 1..{all_frames}")
+    frames = sorted({int(round(x)) for x in np.linspace(0, args.frames, k)})
+    _, render_cpu, render_wall = timed(lambda: renderer.render(frames=frames))
+    scale = all_frames / len(frames)
+    if scale != 1:
+        print(f"rendered frames {frames}: {render_cpu:.3f} CPU-s ({render_wall:.2f} s wall), "
+              f"scaled by {all_frames}/{len(frames)} to the {all_frames} frames")
+        render_cpu, render_wall = render_cpu * scale, render_wall * scale
     print(f"scene: {args.frames + 1} frames {args.size}², floor + 10 falling objects + "
           f"{args.cloths} cloth sheets (16² vertices); RGB {args.samples} spp + OIDN + "
           "annotation pass")
-    print(f"render (RGB + layers)     : {render_cpu:8.3f} CPU-s ({render_wall:.2f} s wall)")
+    print(f"render (RGB + layers)     : {render_cpu:8.3f} CPU-s ({render_wall:.2f} s wall)"
+          + (" (scaled)" if scale != 1 else ""))
     print(f"simulation without cloth  : {bare_cpu:8.3f} CPU-s")
     print(f"cloth simulation (extra)  : {extra:8.3f} CPU-s")
     print(f"cloth simulation / render : {100 * extra / render_cpu:.2f}% (goal ≤ 25%)")

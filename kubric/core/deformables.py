@@ -143,6 +143,17 @@ class Deformable(PhysicalObject):
         return cls(vertices=vertices, faces=faces, uv=uv, tetrahedra=tets, kind="soft",
                    **kwargs)
 
+    @classmethod
+    def soft_mesh(cls, vertices, faces, uv=None, spacing=None, cells: int = 4,
+                  **kwargs) -> Deformable:
+        """A soft solid of a closed triangle mesh (model frame, m), tetrahedralised by
+        :func:`kubric.core.tetrahedralize.tetrahedralize` (``spacing`` / ``cells``: its interior
+        lattice); the mesh's faces (and ``uv`` (F, 3, 2)) are the rendered surface unchanged;
+        ``kwargs`` go to the constructor."""
+        from kubric.core.tetrahedralize import tetrahedralize
+        nodes, tets = tetrahedralize(vertices, faces, spacing=spacing, cells=cells)
+        return cls(vertices=nodes, faces=faces, uv=uv, tetrahedra=tets, kind="soft", **kwargs)
+
     @staticmethod
     def _check_tetrahedra(where, kind, tetrahedra, vertices):
         if kind == "cloth":
