@@ -68,16 +68,36 @@ def _digest(cloth) -> str:
 namespace: dict = {}
 exec(SCENE_CODE, namespace)
 cloth_scene, soft_scene = namespace["cloth_scene"], namespace["soft_scene"]
+MESH_RADIUS = 0.3
 
 
-@pytest.fixture(scope="module", params=["cloth", "soft"])
+def mesh_scene():
+    """A soft ball tetrahedralised from a closed mesh (an icosphere) falls onto a cube."""
+    from kubric.simulator.pybullet import PyBullet
+    scene = kb.Scene(resolution=(32, 32), frame_start=0, frame_end=6, frame_rate=12,
+                     step_rate=240)
+    scene += kb.Cube(name="floor", scale=(3, 3, 0.1), position=(0, 0, -0.1), static=True)
+    cube = kb.Cube(name="cube", scale=0.15, position=(0.05, 0, 0.15), mass=1.0)
+    scene += cube
+    ball = trimesh.creation.icosphere(2, radius=MESH_RADIUS)
+    toy = kb.Deformable.soft_mesh(ball.vertices, ball.faces, position=(0, 0, 0.7), mass=0.5,
+                                  name="mesh_toy")
+    scene += toy
+    scene += kb.DirectionalLight(position=(1, -1, 3), look_at=(0, 0, 0), intensity=1.5)
+    scene.camera = kb.PerspectiveCamera(position=(0, -2.0, 1.2), look_at=(0, 0, 0.3))
+    PyBullet(scene).run(0, 6)
+    return scene, cube, toy
+
+
+@pytest.fixture(scope="module", params=["cloth", "soft", "mesh"])
 def rendered(request):
     """(scene, the rigid object, the deformable, raycast layers, tracks) of the cloth scene and
-    of the soft-box scene (a squishy box falls onto a cube)."""
+    of the soft-box scene (a squishy box falls onto a cube) and of the soft-mesh scene."""
     pytest.importorskip("embreex")
     from kubric.annotations.tracks import scene_tracks
     from kubric.renderer.raycast import Raycast
-    scene, rigid, deformable = (cloth_scene if request.param == "cloth" else soft_scene)()
+    make = {"cloth": cloth_scene, "soft": soft_scene, "mesh": mesh_scene}[request.param]
+    scene, rigid, deformable = make()
     layers = Raycast(scene).render()
     tracks = scene_tracks(scene, layers, [rigid, deformable], np.random.RandomState(0),
                           num_tracks=64, stride=2)
@@ -269,6 +289,13 @@ def test_object_coordinates_are_rest_state_points(rendered):
     _, _, deformable, layers, _ = rendered
     on = layers["segmentation"][..., 0] == 3
     objc, uv = layers["object_coordinates"][on], layers["uv"][on]
+    if deformable.name == "mesh_toy":
+        # the rest icosphere's surface (its flat triangles sag at most 2 % inside the sphere)
+        assert on.sum() > 100
+        lo, hi = deformable.rest_bounds
+        radius = np.linalg.norm(objc * (hi - lo) + lo, axis=1)
+        assert radius.max() < MESH_RADIUS + 1e-5 and radius.min() > 0.98 * MESH_RADIUS
+        return
     if deformable.kind == "soft":
         # the rest box's surface: one coordinate of every point is 0 or 1, however squashed
         assert on.sum() > 300
