@@ -338,3 +338,18 @@ def test_cloth_lands_on_a_walking_person():
     # in free fall it would be 0.5 · 9.81 · 0.5² = 1.23 m lower by frame 6
     assert cloth.deformed_vertices(6)[:, 2].max() > top - 0.2
     assert cloth.deformed_vertices(6)[:, 2].min() < top - 0.05  # it drapes
+
+
+def test_instance_metadata_follows_the_simulated_mesh():
+    # the cloth falls freely for the first frames (it starts 0.55 m above the ball's top):
+    # its centroid's velocity is then −g·t (a parabola: the central difference is exact)
+    from kubric.annotations.metadata import get_instance_info
+    scene, ball, cloth = cloth_scene()
+    info = get_instance_info(scene, [cloth], frames=list(range(FRAMES)))[0]
+    for f in range(FRAMES):
+        assert np.allclose(info["positions"][f], cloth.deformed_vertices(f).mean(axis=0),
+                           atol=1e-6)
+    assert np.ptp(info["positions"][:, 2]) > 0.3  # no longer the constant rest placement
+    for f in (1, 2):
+        assert abs(info["velocities"][f, 2] + 9.81 * f / 12) < 0.05 * 9.81 * f / 12, f
+    assert np.allclose(info["velocities"][:3, :2], 0, atol=1e-3)

@@ -15,6 +15,7 @@ import numpy as np
 
 from kubric.core import camera_geometry as geo
 from kubric.core.color import Color
+from kubric.core.deformables import Deformable
 from kubric.core.materials import Texture
 from kubric.core.objects import PhysicalObject
 
@@ -157,7 +158,9 @@ def get_instance_info(scene, assets_subset: Sequence | None = None,
     ``color_label`` and the ``visibility`` / ``bboxes`` / ``bbox_frames`` set by the
     segmentation annotations) and adds ``asset_id`` (or the uid when the asset has none),
     ``mass``, ``friction``, ``restitution``, ``positions`` (T,3), ``quaternions`` (T,4 WXYZ),
-    ``velocities`` (T,3), ``angular_velocities`` (T,3), ``image_positions`` (T,2 normalised
+    ``velocities`` (T,3) (a deformable's: those of its simulated nodes' centroid,
+    :meth:`~kubric.core.deformables.Deformable.centroid_motion`; its quaternions and angular
+    velocities stay its rest pose's), ``angular_velocities`` (T,3), ``image_positions`` (T,2 normalised
     (x, y), y down, projected at each frame's camera pose) and ``bboxes_3d`` (T,8,3).
     """
     if assets_subset is None:
@@ -180,6 +183,11 @@ def get_instance_info(scene, assets_subset: Sequence | None = None,
         info["positions"] = positions
         info["quaternions"] = asset.get_values_over_time("quaternion", frames)
         info["velocities"] = asset.get_values_over_time("velocity", frames)
+        if isinstance(asset, Deformable):  # its simulated mesh's centroid, not its rest pose
+            centroids, velocities = asset.centroid_motion(frames, scene.frame_rate)
+            positions = centroids.astype(positions.dtype)
+            info["positions"] = positions
+            info["velocities"] = velocities.astype(info["velocities"].dtype)
         info["angular_velocities"] = asset.get_values_over_time("angular_velocity", frames)
         info["image_positions"] = np.array(
             [geo.project_points(camera, p, f, scene.resolution)[:2]

@@ -250,6 +250,25 @@ class Deformable(PhysicalObject):
         b = self.aabb()
         return np.array(list(itertools.product(b[:, 0], b[:, 1], b[:, 2])))
 
+    def centroid_motion(self, frames, frame_rate: float):
+        """((T, 3) centroids, (T, 3) velocities) of the simulated nodes (the unweighted mean of
+        all vertices, world, m) at ``frames``; velocity (m/s) is the central difference of the
+        centroid over ±1 frame (one-sided at the ends of the keyed range, where the vertices
+        hold), × ``frame_rate``. Unkeyed: the pose's placed rest mesh, velocity 0."""
+        keys = sorted(self.keyframes.get("simulated_vertices", {}))
+        lo, hi = (keys[0], keys[-1]) if keys else (0, 0)
+
+        def centroid(frame):
+            return self.deformed_vertices(frame).mean(axis=0)
+
+        positions, velocities = [], []
+        for f in frames:
+            a, b = max(f - 1, lo), min(f + 1, hi)
+            positions.append(centroid(f))
+            velocities.append((centroid(b) - centroid(a)) * frame_rate / (b - a) if b > a
+                              else np.zeros(3))
+        return np.asarray(positions), np.asarray(velocities)
+
     def record(self, frame: int, vertices) -> None:
         """Set ``simulated_vertices`` to ``vertices`` (V, 3) world and key them at ``frame``."""
         self.simulated_vertices = vertices
