@@ -1,6 +1,7 @@
-"""MOVi-C with a cloth sheet and a soft toy (``cloths=1``, ``soft_objects=1``, raycast backend,
-tiny): each is an instance, their tracks stay on them where visible and move with the written
-flow; at 0 nothing changes."""
+"""MOVi-C with a cloth sheet and a soft toy (``cloths=1``, ``soft_objects=1``, the toy a
+tetrahedralised KuBasic cone: ``soft_shapes=cone``; raycast backend, tiny): each is an
+instance, their tracks stay on them where visible and move with the written flow; at 0 nothing
+changes."""
 
 from __future__ import annotations
 
@@ -13,7 +14,9 @@ from collection_fixtures import run_worker
 from kubric.pipeline import get_recipe
 
 OPTIONS = ("resolution=48", "frame_end=14", "renderer=raycast", "min_num_objects=2",
-           "max_num_objects=2", "collection_limit=8", "cloths=1", "soft_objects=1", "tracks=256",
+           "max_num_objects=2", "collection_limit=8", "cloths=1", "soft_objects=1",
+           "soft_shapes=cone",
+           "tracks=256",
            "track_stride=2",
            "track_max_fraction=0.5")
 
@@ -37,7 +40,11 @@ def test_each_deformable_is_an_instance_with_tracks_that_stay_on_it(scene, kind)
     assert len(cloths) == 1
     label = cloths[0]
     assert meta["instances"][label - 1]["is_dynamic"]
-    assert max(meta["instances"][label - 1]["visibility"]) > 20
+    if kind == "soft":
+        assert meta["instances"][label - 1]["shape"] == "cone"
+        assert meta["flags"]["soft_shapes"] == ["cone"]
+    # (the cone, about 0.5 m, shows fewer pixels at 48² than the sheet)
+    assert max(meta["instances"][label - 1]["visibility"]) > (20 if kind == "cloth" else 10)
     tracks = np.load(scene / "tracks.npz")
     on = np.flatnonzero(tracks["instance_id"] == label)
     assert len(on) >= 5
@@ -62,3 +69,6 @@ def test_zero_deformables_leave_flags_unchanged():
     assert not {"cloths", "soft_objects"} & set(movi_c(collection_limit=8).flags(0))
     assert movi_c(cloths=2).flags(0)["cloths"] == 2
     assert movi_c(soft_objects=1).flags(0)["soft_objects"] == 1
+    assert "soft_shapes" not in movi_c(soft_objects=1).flags(0)  # the boxes: as before
+    assert movi_c(soft_objects=1, soft_shapes="box,sphere").flags(0)["soft_shapes"] == (
+        "box", "sphere")

@@ -11,6 +11,12 @@ at the start, so it falls onto the objects (two-way: it pushes them too), and te
 checkerboard of two random hues (``SQUARES``² squares over its UVs, a PNG in the scene's scratch
 folder) so that its motion is visible. Instance metadata: ``scale`` (the edge, m),
 ``is_dynamic`` True, ``cloth`` or ``soft`` True.
+
+Soft toys from KuBasic (``soft_shapes`` other than ``("box",)``): each toy's shape is drawn from
+``soft_shapes`` (after its other draws): "box" as above, or a KuBasic shape whose visual mesh is
+closed and measured stable (:data:`SOFT_SHAPES`), its vertices merged by position, centred and
+scaled so that its longest side is the drawn size, tetrahedralised by
+:meth:`kubric.Deformable.soft_mesh` (``cells=4``), box-mapped UVs; metadata ``shape`` its name.
 """
 
 from __future__ import annotations
@@ -32,6 +38,32 @@ SOFT_MASS = 0.5
 DROP_REGION = (-1.0, 1.0)
 DROP_CLEARANCE = (0.3, 1.0)
 SQUARES = 8
+#: soft toy shapes: the procedural box and the KuBasic shapes whose visual mesh is closed and
+#: whose soft body was measured stable (docs/deformables.md)
+SOFT_SHAPES = ("box", "cube", "cone", "cylinder", "sphere")
+
+
+def soft_shape_list(value) -> tuple[str, ...]:
+    """Option converter: ``"box,sphere"`` or a sequence of names → a tuple of shape names."""
+    items = value.split(",") if isinstance(value, str) else list(value)
+    names = tuple(str(v).strip() for v in items if str(v).strip())
+    if not names or any(n not in SOFT_SHAPES for n in names):
+        raise ValueError(f"expected names of {', '.join(SOFT_SHAPES)} separated by commas")
+    return names
+
+
+soft_shape_list.allowed = f"shape names separated by commas, from {', '.join(SOFT_SHAPES)}"
+
+
+def closed_mesh(path) -> tuple[np.ndarray, np.ndarray]:
+    """(vertices (V, 3), faces (F, 3)) of an OBJ with its vertices merged by position (to 1e-7
+    m: an OBJ splits them at texture seams), centred on its box, longest side 1."""
+    import trimesh
+    mesh = trimesh.load(str(path), process=False, force="mesh")
+    v, f = np.asarray(mesh.vertices, np.float64), np.asarray(mesh.faces, np.int64)
+    merged, inverse = np.unique(np.round(v, 7), axis=0, return_inverse=True)
+    lo, hi = merged.min(axis=0), merged.max(axis=0)
+    return (merged - (lo + hi) / 2) / float((hi - lo).max()), inverse.reshape(-1)[f]
 
 
 def _hue_pair(rng) -> np.ndarray:
@@ -48,7 +80,8 @@ def _top(scene) -> float:
     return max(tops, default=0.0)
 
 
-def _drop(scene, rng, kind: str, k: int, folder: pathlib.Path, top: float):
+def _drop(scene, rng, kind: str, k: int, folder: pathlib.Path, top: float,
+          soft_shapes=("box",), kubasic=None):
     """One deformable of ``kind`` (module doc) added to ``scene``."""
     from PIL import Image
     size = float(rng.uniform(*(CLOTH_SIZE if kind == "cloth" else SOFT_SIZE)))
@@ -67,17 +100,28 @@ def _drop(scene, rng, kind: str, k: int, folder: pathlib.Path, top: float):
         obj = kb.Deformable.cloth(size=(size, size), resolution=(CLOTH_RESOLUTION,) * 2,
                                   mass=CLOTH_MASS, **common)
     else:
-        obj = kb.Deformable.soft_box(size=(size,) * 3, resolution=(SOFT_RESOLUTION,) * 3,
-                                     mass=SOFT_MASS, **common)
+        shape = "box" if soft_shapes == ("box",) else soft_shapes[rng.randint(len(soft_shapes))]
+        if shape == "box":
+            obj = kb.Deformable.soft_box(size=(size,) * 3, resolution=(SOFT_RESOLUTION,) * 3,
+                                         mass=SOFT_MASS, **common)
+        else:
+            from kubric.core.tet_meshes import box_uv
+            v, f = closed_mesh(kubasic.fetch(shape) / "visual_geometry.obj")
+            obj = kb.Deformable.soft_mesh(v * size, f, uv=box_uv(v, f), cells=4, mass=SOFT_MASS,
+                                          **common)
     obj.metadata = {"scale": size, "is_dynamic": True, kind: True}
+    if kind == "soft" and soft_shapes != ("box",):
+        obj.metadata["shape"] = shape
     scene += obj
     return obj
 
 
-def add_deformables(scene, rng, cloths: int, soft_objects: int, folder: pathlib.Path) -> list:
+def add_deformables(scene, rng, cloths: int, soft_objects: int, folder: pathlib.Path,
+                    soft_shapes=("box",), kubasic=None) -> list:
     """``cloths`` sheets then ``soft_objects`` toys (module doc) added to ``scene``, all above
-    the objects present now; their textures go to ``folder``."""
+    the objects present now; their textures go to ``folder``; ``kubasic``: the KuBasic source
+    (needed when ``soft_shapes`` names a KuBasic shape)."""
     top = _top(scene)
-    return [_drop(scene, rng, kind, k, folder, top)
+    return [_drop(scene, rng, kind, k, folder, top, tuple(soft_shapes), kubasic)
             for kind, count in (("cloth", cloths), ("soft", soft_objects))
             for k in range(count)]

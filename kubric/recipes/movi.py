@@ -31,7 +31,8 @@
 * C–F, ``cloths=N`` / ``soft_objects=N`` (default 0): N checker-textured cloth sheets / soft
   toys (:mod:`kubric.recipes.deformable_objects`) fall from above onto the objects, simulated by
   PyBullet's soft bodies, two-way with them; each is an instance whose tracks follow material
-  points of the simulated mesh (docs/deformables.md). At 0 the scene is byte for byte what it was
+  points of the simulated mesh (docs/deformables.md); ``soft_shapes`` (default ``box``) lists
+  the toys' shapes (the box, closed KuBasic shapes). At 0 the scene is byte for byte what it was
   without the options.
 
 Materials (A, B): CLEVR's metal and rubber (BSDF, friction μ, restitution e, density); mass =
@@ -54,7 +55,7 @@ from kubric.pipeline import Option, OptionError, float_range
 from kubric.recipes import movi_schema
 from kubric.recipes.articulated_models import MODELS, add_model, model_list
 from kubric.recipes.common import open_existing_source, source_location
-from kubric.recipes.deformable_objects import add_deformables
+from kubric.recipes.deformable_objects import add_deformables, soft_shape_list
 from kubric.recipes.exposure_schema import EXPOSURE_VARIANTS
 from kubric.recipes.material_options import MaterialOptions
 from kubric.recipes.movi_base import (
@@ -223,6 +224,9 @@ class MoviC(MaterialOptions, MoviBase, name="movi_c"):
     soft_objects = Option(0, "soft toys (squishy boxes, PyBullet NeoHookean bodies) that fall "
                           "onto the objects (0 = none: the scene is as without this option)",
                           low=0, high=5)
+    soft_shapes = Option(("box",), "the soft toys' shapes, drawn per toy: the procedural box "
+                         "and closed KuBasic shapes tetrahedralised (comma-separated)",
+                         type=soft_shape_list)
 
     #: left out of ``flags`` while ``articulated_objects`` is 0, so that a scene made without
     #: articulated objects is byte for byte the scene made before these options existed
@@ -245,6 +249,8 @@ class MoviC(MaterialOptions, MoviBase, name="movi_c"):
         for name in ("cloths", "soft_objects"):
             if not getattr(self, name):
                 out.pop(name)
+        if not self.soft_objects or tuple(self.soft_shapes) == ("box",):
+            out.pop("soft_shapes")
         return out
 
     def renderer_requests(self) -> dict[str, str]:
@@ -319,7 +325,7 @@ class MoviC(MaterialOptions, MoviBase, name="movi_c"):
         for _ in range(rng.randint(self.min_num_objects, self.max_num_objects + 1)):
             self.new_object(scene, simulator, rng, sources, DYNAMIC_SPAWN_REGION, True)
         self.add_articulated_objects(scene, simulator, rng)
-        self.drop_deformables(scene, simulator, rng)
+        self.drop_deformables(scene, simulator, rng, sources)
 
     def add_characters(self, scene, rng, sources) -> list:
         """``characters`` people (no random draw when 0), added before the objects so that the
@@ -370,12 +376,13 @@ class MoviC(MaterialOptions, MoviBase, name="movi_c"):
         return super().write_outputs(scene, layers, collisions, seed, out_dir, background,
                                      render_settings, files)
 
-    def drop_deformables(self, scene, simulator, rng) -> None:
+    def drop_deformables(self, scene, simulator, rng, sources) -> None:
         """``cloths`` sheets and ``soft_objects`` toys above everything (no random draw when
         both are 0; module doc)."""
         if self.cloths or self.soft_objects:
             add_deformables(scene, rng, self.cloths, self.soft_objects,
-                            simulator.scratch_dir / "deformables")
+                            simulator.scratch_dir / "deformables", self.soft_shapes,
+                            sources["kubasic"])
 
     def add_articulated_objects(self, scene, simulator, rng) -> None:
         """``articulated_objects`` dynamic multi-link models (no random draw when 0): model,
@@ -428,7 +435,7 @@ class MoviD(MoviC, name="movi_d"):
         for _ in range(rng.randint(self.min_num_dynamic, self.max_num_dynamic + 1)):
             self.new_object(scene, simulator, rng, sources, DYNAMIC_SPAWN_REGION, True)
         self.add_articulated_objects(scene, simulator, rng)
-        self.drop_deformables(scene, simulator, rng)
+        self.drop_deformables(scene, simulator, rng, sources)
 
 
 def linear_camera_path(rng, inner: float, outer: float, max_length: float):
