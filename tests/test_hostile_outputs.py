@@ -192,7 +192,13 @@ def test_bop_leaves_people_out_instead_of_failing_the_folder(copy, tmp_path):
     proc = kubric("export", "bop", copy, "--out", tmp_path / "people", "--no-progress")
     assert proc.returncode == 0, proc.stderr[-2000:]
     assert "1 person instance(s) left out (BOP models are rigid)" in proc.stdout
-    assert digest(tmp_path / "plain") == digest(tmp_path / "people")
+    plain_files, people_files = digest(tmp_path / "plain"), digest(tmp_path / "people")
+    licences = "train_pbr/000001/licenses.json"  # the images show the person: its licence is listed
+    assert {k: v for k, v in plain_files.items() if k != licences} == \
+        {k: v for k, v in people_files.items() if k != licences}
+    listed = json.loads((tmp_path / "people" / licences).read_text())
+    extra = [e for e in listed if e not in json.loads((tmp_path / "plain" / licences).read_text())]
+    assert [(e["kind"], e["asset"]) for e in extra] == [("character", "tube_person")]
 
 
 def test_coco_of_svr_scenes_keeps_the_asset_categories(tmp_path):
