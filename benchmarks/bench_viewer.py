@@ -140,7 +140,11 @@ def browser_numbers(port: int, frames: int, rows: int) -> dict | None:
                     "i.naturalWidth > 0"):
                 time.sleep(0.005)
             for layer in ("depth", "forward_flow"):  # frames nobody requested yet: cold
+                # back to frame 0 first: each switch below then asks for a new picture (the
+                # viewer does not reload the picture it already shows, so no load event)
                 browser.execute_script(
+                    "const f = document.getElementById('frame-slider'); f.value = 0;"
+                    "f.dispatchEvent(new Event('input'));"
                     "const s = document.getElementById('layer-select'); s.value = arguments[0];"
                     "s.dispatchEvent(new Event('change'));", layer)
                 while not browser.execute_script(

@@ -136,7 +136,10 @@ def test_a_ctrl_c_during_a_swallowing_import_is_not_lost(tmp_path):
     import sys
     (tmp_path / "swallow_a.py").write_text(SWALLOWER)
     (tmp_path / "swallow_b.py").write_text(SWALLOWER)
-    code = ("import importlib, sys\n"
+    code = ("import importlib, signal, sys\n"
+            # Ctrl-C as in a terminal: a test run started as a background job (CI, `make test &`)
+            # hands its children SIGINT ignored, and an ignored Ctrl-C is rightly not raised
+            "signal.signal(signal.SIGINT, signal.default_int_handler)\n"
             "from kubric.core.imports import uninterrupted_import\n"
             "importlib.import_module('swallow_a')\n"
             "print('plain import: the interrupt was lost', flush=True)\n"
