@@ -16,8 +16,8 @@ from kubric.assets import AssetSource
 pytestmark = [pytest.mark.blender, pytest.mark.slow]
 
 
-def test_movi_c_on_gso_and_polyhaven_with_a_category(tmp_path, monkeypatch):
-    monkeypatch.setenv("KUBRIC_CACHE_DIR", str(tmp_path / "cache"))
+def test_movi_c_on_gso_and_polyhaven_with_a_category(tmp_path):
+    # the suite's shared asset cache (conftest): KuBasic is built once, not once per test
     zips = tmp_path / "gso_zips"
     zips.mkdir()
     for name, cat in (("Toy_1", "Toys"), ("Toy_2", "Toys"), ("Shoe_1", "Shoe")):
@@ -44,10 +44,9 @@ def test_movi_c_on_gso_and_polyhaven_with_a_category(tmp_path, monkeypatch):
     assert {inst["category"] for inst in meta["instances"]} == {"Toys"}
 
 
-def test_unknown_category_is_an_option_error(tmp_path, monkeypatch):
+def test_unknown_category_is_an_option_error(tmp_path):
     from kubric.pipeline import OptionError, get_recipe
 
-    monkeypatch.setenv("KUBRIC_CACHE_DIR", str(tmp_path / "cache"))
     zips = tmp_path / "z"
     zips.mkdir()
     write_zip(zips / "Toy_1.zip", gso_files("Toy_1", category="Toys"))
