@@ -30,6 +30,7 @@ import json
 import zipfile
 from pathlib import Path
 
+from kubric.asset_tools.polyhaven import write_report
 from kubric.asset_tools.writer import dumps
 from kubric.assets.download import DownloadError, fetch_file, get_json, md5_of
 from kubric.assets.material_source import MANIFEST
@@ -167,10 +168,4 @@ def build_materials(service: str, out_dir, resolution: str = "1k", limit: int | 
     name = name or {"polyhaven": "PolyHavenMaterials", "ambientcg": "AmbientCGMaterials"}[service]
     (out / MANIFEST).write_text(dumps({"name": name, "version": "1.0", "service": service,
                                        "resolution": resolution, "materials": entries}))
-    report = {"name": name, "total": len(entries) + len(skipped),
-              "converted": len(entries) - reused, "reused": reused,
-              "skipped": sorted(skipped, key=lambda s: s["id"])}
-    (out / "conversion_report.json").write_text(dumps(report))
-    if not any(downloads.iterdir()):
-        downloads.rmdir()
-    return report
+    return write_report(out, name, entries, skipped, reused, downloads)

@@ -100,6 +100,14 @@ def build_polyhaven(out_dir: str | os.PathLike, resolution: str = "2k", fmt: str
             skipped.append({"id": safe, "source": f"{base}/files/{asset_id}",
                             "reason": f"{type(err).__name__}: {err}"})
     write_manifest(out / "manifest.json", name, VERSION, entries)
+    return write_report(out, name, entries, skipped, reused, downloads)
+
+
+def write_report(out: Path, name: str, entries: dict, skipped: list, reused: int,
+                 downloads: Path) -> dict:
+    """Write and return a download builder's ``conversion_report.json`` ({name, total,
+    converted, reused, skipped (by id)}); remove ``downloads`` when nothing is left in it (a
+    part file stays for the next run to resume)."""
     report = {"name": name, "total": len(entries) + len(skipped),
               "converted": len(entries) - reused, "reused": reused,
               "skipped": sorted(skipped, key=lambda s: s["id"])}

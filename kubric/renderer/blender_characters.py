@@ -40,9 +40,13 @@ def rig_of(obj):
     raise RuntimeError(f"character {obj.name!r} has no armature child")
 
 
-def _mesh(asset):
+def deforming_mesh(asset, vertices=None, smooth: bool = True):
+    """A Blender mesh of ``asset``'s triangles at ``vertices`` (default: its rest vertices) with
+    its UVs and the two point attributes the annotation pass reads (module doc); shared with
+    :mod:`kubric.renderer.blender_deformables`."""
     mesh = bpy.data.meshes.new(asset.uid)
-    mesh.from_pydata(asset.vertices.tolist(), [], asset.faces.tolist())
+    points = asset.vertices if vertices is None else vertices
+    mesh.from_pydata(np.asarray(points).tolist(), [], asset.faces.tolist())
     if asset.uv is not None:
         layer = mesh.uv_layers.new(name="UVMap")
         layer.data.foreach_set("uv", np.asarray(asset.uv, np.float32).reshape(-1))
@@ -51,7 +55,10 @@ def _mesh(asset):
     flag = mesh.attributes.new(SKINNED_ATTRIBUTE, "FLOAT", "POINT")
     flag.data.foreach_set("value", np.ones(len(asset.vertices), np.float32))
     mesh.update()
-    mesh.shade_smooth()
+    if smooth:
+        mesh.shade_smooth()
+    else:
+        mesh.shade_flat()
     return mesh
 
 
@@ -99,7 +106,7 @@ def _weights(obj, asset):
 
 
 def build_character(view, asset):
-    obj = bpy.data.objects.new(asset.uid, _mesh(asset))
+    obj = bpy.data.objects.new(asset.uid, deforming_mesh(asset))
     name_and_link(obj, asset, view.bpy_scene.collection)
     rig = _armature(view, asset, obj)
     _weights(obj, asset)

@@ -20,24 +20,14 @@ from __future__ import annotations
 import bpy
 import numpy as np
 
-from kubric.renderer.blender_characters import REST_ATTRIBUTE, SKINNED_ATTRIBUTE
+from kubric.renderer.blender_characters import deforming_mesh
 from kubric.renderer.blender_utils import name_and_link
 
 _PREFIX = "kubric_frame_"
 
 
 def build_deformable(view, asset):
-    mesh = bpy.data.meshes.new(asset.uid)
-    mesh.from_pydata(asset.rest_world_vertices().tolist(), [], asset.faces.tolist())
-    if asset.uv is not None:
-        layer = mesh.uv_layers.new(name="UVMap")
-        layer.data.foreach_set("uv", np.asarray(asset.uv, np.float32).reshape(-1))
-    rest = mesh.attributes.new(REST_ATTRIBUTE, "FLOAT_VECTOR", "POINT")
-    rest.data.foreach_set("vector", np.asarray(asset.vertices, np.float32).reshape(-1))
-    flag = mesh.attributes.new(SKINNED_ATTRIBUTE, "FLOAT", "POINT")
-    flag.data.foreach_set("value", np.ones(len(asset.vertices), np.float32))
-    mesh.update()
-    mesh.shade_flat()
+    mesh = deforming_mesh(asset, asset.rest_world_vertices(), smooth=False)  # flat, as raycast
     obj = bpy.data.objects.new(asset.uid, mesh)
     name_and_link(obj, asset, view.bpy_scene.collection)
     obj.shape_key_add(name="Basis", from_mix=False)
