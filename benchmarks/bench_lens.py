@@ -9,12 +9,14 @@ Reported: CPU seconds per frame (the stable measure on a shared machine) and the
 pinhole; the first frame (which pays for the rays and the mesh files) is timed separately.
 
 Run: ``.venv/bin/python benchmarks/bench_lens.py [--size 256] [--frames 8] [--seed 3]
-[--blender] [--samples 16]``.
+[--blender] [--samples 16] [--repeat 3]``. Frames 2.. are rendered ``--repeat`` times, the
+lenses interleaved, and the median is reported.
 """
 
 from __future__ import annotations
 
 import argparse
+import statistics
 import tempfile
 
 import smoke_mode
@@ -36,6 +38,7 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=3)
     ap.add_argument("--blender", action="store_true")
     ap.add_argument("--samples", type=int, default=smoke_mode.size(16, 1))
+    ap.add_argument("--repeat", type=int, default=smoke_mode.size(3, 1))
     args = ap.parse_args()
     scene = simulated_scene("movi_a", args.size, args.frames, args.seed, "renderer=raycast")
     rest = list(range(2, args.frames + 1))
@@ -43,25 +46,28 @@ def main() -> None:
     if args.blender:
         backends["blender"] = {"samples_per_pixel": args.samples, "use_denoising": False}
     for backend, settings in backends.items():
-        results = {}
         scratch = tempfile.TemporaryDirectory()
         renderer = create(backend, scene, scratch.name, **settings)  # one per scene (Blender)
-        for name, lens in LENSES.items():
+        first, per_frame = {}, {name: [] for name in LENSES}
+        for name, lens in LENSES.items():  # the first frame pays for rays, meshes, kernels
             scene.camera.lens = lens
             start = cpu_seconds()
             renderer.render(frames=[1], return_layers=ALL_LAYERS)
-            first = cpu_seconds() - start
-            start = cpu_seconds()
-            renderer.render(frames=rest, return_layers=ALL_LAYERS)
-            results[name] = ((cpu_seconds() - start) / len(rest), first)
+            first[name] = cpu_seconds() - start
+        for _ in range(args.repeat):  # interleaved, so a load change hits every lens alike
+            for name, lens in LENSES.items():
+                scene.camera.lens = lens
+                start = cpu_seconds()
+                renderer.render(frames=rest, return_layers=ALL_LAYERS)
+                per_frame[name].append((cpu_seconds() - start) / len(rest))
         scratch.cleanup()
-        print(f"movi_a seed {args.seed}, {args.size}², frames 2..{args.frames} (all layers, "
-              f"{backend} {settings or ''})")
-        base = results["pinhole"][0]
-        for name, (per_frame, first) in results.items():
-            print(f"  {name:8s} {per_frame:.3f} CPU-s/frame ({per_frame / base:.2f}× pinhole); "
-                  f"first frame {first:.2f} CPU-s")
-
+        print(f"movi_a seed {args.seed}, {args.size}², frames 2..{args.frames}, median of "
+              f"{args.repeat} interleaved runs (all layers, {backend} {settings or ''})")
+        base = statistics.median(per_frame["pinhole"])
+        for name, runs in per_frame.items():
+            median = statistics.median(runs)
+            print(f"  {name:8s} {median:.3f} CPU-s/frame ({median / base:.2f}× pinhole; runs "
+                  f"{', '.join(f'{r:.3f}' for r in runs)}); first frame {first[name]:.2f} CPU-s")
 
 if __name__ == "__main__":
     main()

@@ -41,7 +41,7 @@ ROWS = {
     "bench_hub": [r"^hf +4 +[\d.]+ +\d+ +-?[\d.]+$", r"^webdataset +4 +[\d.]+",
                   r"^webdataset: added peak"],
     "bench_import": [r'^\{"import_numpy_s": [\d.]+, "import_kubric_s": [\d.]+'],
-    "bench_lens": [r"^  pinhole +[\d.]+ CPU-s/frame \(1\.00× pinhole\)"],
+    "bench_lens": [r"^  pinhole +[\d.]+ CPU-s/frame \(1\.00× pinhole;"],
     "bench_multiview": [r"^baseline movi_a .+: [\d.]+ s", r"^toybox +\d+ +[\d.]+ +[\d.]+"],
     "bench_pack_signals": [r'^\{"workers": 2, "signal": "SIGINT", "runs": 1, .*"guarantees_held": '
                            r"true\}"],
