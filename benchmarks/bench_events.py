@@ -4,9 +4,11 @@ One simulated MOVi-A scene (raycast backend: RGB, exact flow and depth; no bpy).
 is the event stream of K_REF raycast sub-frames per frame. Each source of intensity is run
 through the same sensor (one set of per-pixel thresholds, no refractory period, no noise):
 
-* ``frames``: the rendered frames only (log intensity linear between frame times; the default);
-* ``raycast K``: K sub-frame renders per frame (what ``event_subframes=K`` does; with Cycles each
-  extra sub-frame is one more path-traced render);
+* ``frames``: the rendered frames only (log intensity linear between frame times;
+  ``event_subframes=0``);
+* ``raycast K``: K sub-frame renders per frame (what ``event_subframes=K`` does; the default is
+  K=8; with the raycast backend the anchoring at the rendered frames changes nothing, with
+  Cycles it shifts the raycast sub-frames to the path-traced frames at every frame time);
 * ``flow K``: K − 1 images per frame interval warped from the two rendered frames along the exact
   flow with its occlusions (:mod:`kubric.annotations.flow_interpolation`; what
   ``event_interpolation=flow`` does with ``event_subframes=K``) — no extra render.
@@ -28,12 +30,14 @@ from bench_raycast import simulated_scene
 
 from kubric.annotations import event_camera as ev
 from kubric.annotations.flow_interpolation import interpolate_sequence
+from kubric.recipes.exposure_options import ExposureOptions
 from kubric.renderer.raycast_subframes import subframe_layers
 
 SIZE = smoke_mode.size(96, 16)
 FRAMES = smoke_mode.size(6, 2)
 K_REF = smoke_mode.size(32, 4)
 KS = smoke_mode.size((2, 4, 8), (2,))
+DEFAULT_K = ExposureOptions.event_subframes.default  # the recipes' default
 BINS_PER_FRAME = 8
 
 
@@ -88,12 +92,12 @@ def main() -> None:
         timing = np.abs(got - ref).sum() / total
         rows.append((name, int(got.sum()), count, timing, cost, cost / frame_cost))
 
-    add("frames (default)", layers["rgba"][..., :3], np.asarray(frames, float), 0.0)
+    add("frames (event_subframes=0)", layers["rgba"][..., :3], np.asarray(frames, float), 0.0)
     for k in KS:
         start = _cpu()
         rgb, times = _sub(scene, frames, k)
         cost = (_cpu() - start - frame_cost * len(frames)) / (len(frames) - 1)
-        add(f"raycast K={k}", rgb, times, max(cost, 0.0))
+        add(f"raycast K={k}" + (" (default)" if k == DEFAULT_K else ""), rgb, times, max(cost, 0.0))
         start = _cpu()
         warped = interpolate_sequence(layers["rgba"][..., :3], layers["forward_flow"],
                                       layers["backward_flow"], layers["depth"], k)

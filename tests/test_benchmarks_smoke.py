@@ -33,7 +33,7 @@ ROWS = {
                        r"dataset [\d.]+ examples/s"],
     "bench_deformables": [r"^cloth simulation \(extra\) +: +[\d.]+ CPU-s",
                           r"^cloth simulation / render : [\d.]+% \(goal ≤ 25%\)"],
-    "bench_events": [r"^\| frames \(default\) \| \d+ \| [\d.]+ \| [\d.]+ \|",
+    "bench_events": [r"^\| frames \(event_subframes=0\) \| \d+ \| [\d.]+ \| [\d.]+ \|",
                      r"^\| flow K=2 \| \d+ \| [\d.]+ \| [\d.]+ \|"],
     "bench_extra_layers": [r"^\| extra_layers \| CPU-s \| × default scene \|",
                            r"^\| raw bits \(T·N·H·W / 8\) \| \d+ \| — \|"],

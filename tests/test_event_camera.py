@@ -155,18 +155,48 @@ def test_recipe_event_files_from_raycast_subframes_keep_frame_times(tmp_path):
 
     scene = _scene()
     scene.frame_start, scene.frame_end = 1, 3
+    frames_rgba = kb.renderer.create("raycast", scene).render(
+        frames=[1, 2, 3], return_layers=("rgba",))["rgba"]
     files = Stub(events=True, event_subframes=4, event_refractory_us=0.0).event_files(
-        scene, {}, seed=5)
+        scene, {"rgba": frames_rgba}, seed=5)
     (tmp_path / EVENTS_H5_FILE).write_bytes(files[EVENTS_H5_FILE])
     out = read_events(tmp_path)
     sensor = scene.metadata["event_camera"]
-    assert sensor["source"] == "raycast sub-frames K=4" and sensor["num_events"] == len(out["t"])
+    assert sensor["source"] == "raycast sub-frames K=4, anchored at the rendered frames"
+    assert sensor["num_events"] == len(out["t"])
     # t = 0 at frame_start; the stream spans frames 1 → 3
     assert out["t"].min() >= 0 and out["t"].max() <= round(2 / RATE * 1e6)
-    frames_rgb = kb.renderer.create("raycast", scene).render(
-        frames=[1, 2, 3], return_layers=("rgba",))["rgba"][..., :3]
-    log_i = srgb_to_log_intensity(frames_rgb, SensorModel().eps)
+    log_i = srgb_to_log_intensity(frames_rgba[..., :3], SensorModel().eps)
     _sums_match_frames(out, log_i)
+
+
+def test_raycast_subframe_events_sum_to_another_renderer_s_frames(tmp_path):
+    """The raycast sub-frames are anchored at the delivered frames: with frames a different
+    renderer made (here the raycast frames darkened, tinted and noised, as a path tracer's
+    differ from Lambert shading), the events between two frame times still sum to *those*
+    frames' log-intensity change, and edges crossing inside the interval still fire there."""
+    from kubric.io.event_h5 import EVENTS_H5_FILE, read_events
+
+    scene = _scene()
+    scene.frame_start, scene.frame_end = 1, 3
+    rgba = kb.renderer.create("raycast", scene).render(
+        frames=[1, 2, 3], return_layers=("rgba",))["rgba"].astype(np.float64)
+    noise = np.random.RandomState(0).normal(0, 2, rgba.shape[:3] + (3,))
+    rgba[..., :3] = np.clip(rgba[..., :3] * [0.6, 0.75, 0.9] + 20 + noise, 0, 255)
+    other = rgba.round().astype(np.uint8)
+    files = Stub(events=True, event_subframes=4, event_refractory_us=0.0).event_files(
+        scene, {"rgba": other}, seed=5)
+    (tmp_path / EVENTS_H5_FILE).write_bytes(files[EVENTS_H5_FILE])
+    out = read_events(tmp_path)
+    log_i = srgb_to_log_intensity(other[..., :3], SensorModel().eps)
+    for sel, a in _sums_match_frames(out, log_i):
+        phase = (out["t"][sel] - a / RATE * 1e6) / (1e6 / RATE)
+        assert ((phase > 0.05) & (phase < 0.7)).sum() > 10
+    unanchored = srgb_to_log_intensity(
+        kb.renderer.create("raycast", scene).render(frames=[1, 2, 3], return_layers=("rgba",))
+        ["rgba"][..., :3], SensorModel().eps)
+    with pytest.raises(AssertionError):  # the raycast frames' own change is not what summed
+        _sums_match_frames(out, unanchored)
 
 
 

@@ -68,11 +68,13 @@ def test_movi_f_with_dof_and_coverage_packs_and_loads(tmp_path):
     unpacked = example["exposure_flow"] / 65535 * (hi - lo) + lo
     np.testing.assert_allclose(unpacked, read_layer(scene, "exposure_flow"),
                                atol=(hi - lo) / 65535 + 1e-6)
-    # events.h5 from the rendered frames: between frames, polarity × threshold sums to the
-    # change of log luminance of the RGB files (decoded here) within one threshold
+    # events.h5 from raycast sub-frames anchored at the Cycles frames (the default): between
+    # frames, polarity × threshold sums to the change of log luminance of the RGB files
+    # (decoded here) within one threshold
     from kubric.io.event_h5 import read_events
     events, sensor = read_events(scene), meta["metadata"]["event_camera"]
-    assert sensor["source"] == "rendered frames" and sensor["num_events"] == len(events["t"])
+    assert sensor["source"] == "raycast sub-frames K=8, anchored at the rendered frames"
+    assert sensor["num_events"] == len(events["t"])
     rgb = read_layer(scene, "rgba")[..., :3].astype(np.float64) / 255
     linear = np.where(rgb <= 0.04045, rgb / 12.92, ((rgb + 0.055) / 1.055) ** 2.4)
     log_i = np.log(linear @ [0.2126, 0.7152, 0.0722] + sensor["eps"])

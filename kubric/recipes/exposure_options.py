@@ -20,13 +20,16 @@ motion blur (``coverage_samples``); the ground truth is :mod:`kubric.annotations
 * ``events=True``: ``events.h5`` (DSEC's layout, :mod:`kubric.io.event_h5`), the event stream of
   the sensor model of :mod:`kubric.annotations.event_camera` (``event_threshold`` ±
   ``event_threshold_spread`` per pixel, drawn from an rng derived from the seed;
-  ``event_refractory_us``, ``event_noise_rate``), t = 0 µs at frame_start; intensity from the
-  rendered RGB frames (``event_subframes=0``: log intensity linear between frame times) or K
-  samples per frame (``event_subframes=K``): raycast sub-frame renders (``event_interpolation=
-  raycast``: exact motion, the raycast backend's Lambert shading, not photoreal) or the rendered
-  frames warped along the exact flow with its occlusions (``event_interpolation=flow``,
-  :mod:`kubric.annotations.flow_interpolation`: the renderer's own shading, no extra render);
-  recorded in ``metadata.event_camera``.
+  ``event_refractory_us``, ``event_noise_rate``), t = 0 µs at frame_start; intensity from K
+  samples per frame (``event_subframes=K``, default 8: the cheapest setting within the error
+  stated in docs/render-cost.md): raycast sub-frame renders anchored at the rendered frames
+  (``event_interpolation=raycast``: exact motion inside each frame interval, shifted per pixel
+  so that every frame time has the delivered RGB's intensity —
+  :func:`anchored_subframe_log_intensity`) or the rendered frames warped along the exact flow
+  with its occlusions (``event_interpolation=flow``,
+  :mod:`kubric.annotations.flow_interpolation`: the renderer's own shading, no extra render),
+  or the rendered frames alone (``event_subframes=0``: log intensity linear between frame
+  times); recorded in ``metadata.event_camera``.
 """
 
 from __future__ import annotations
@@ -64,12 +67,15 @@ class ExposureOptions:
                              "its bottom edge (frames; 0 = global shutter; not with motion "
                              "blur or dof)", low=0.0, high=10.0)
     events = Option(False, "write events.h5: an event-camera stream (DSEC layout)")
-    event_subframes = Option(0, "event intensity samples per frame: 0 = the rendered frames, "
-                             "log intensity linear between them; K = K raycast sub-frames",
+    event_subframes = Option(8, "event intensity samples per frame: 0 = the rendered frames, "
+                             "log intensity linear between them; K = K sub-frames (see "
+                             "event_interpolation); 8 is the cheapest within the stated error "
+                             "(docs/render-cost.md)",
                              low=0, high=64)
     event_interpolation = Option("raycast", "how event_subframes=K makes the samples between "
                                  "two frames: raycast = sub-frame renders by the raycast backend "
-                                 "(exact motion, its Lambert shading); flow = the rendered "
+                                 "(exact motion, its Lambert shading) anchored at the rendered "
+                                 "frames; flow = the rendered "
                                  "frames warped along the exact flow with its occlusions (the "
                                  "renderer's own shading, no extra render)",
                                  choices=("raycast", "flow"))
@@ -153,33 +159,27 @@ class ExposureOptions:
                                refractory_us=self.event_refractory_us,
                                noise_rate_hz=self.event_noise_rate)
         frames = list(scene.frames)
-        flow = self.event_subframes and self.event_interpolation == "flow"
-        if flow and len(frames) > 1:
+        k = self.event_subframes if len(frames) > 1 else 0  # (one frame: no events either way)
+        times = frames[0] + np.arange((len(frames) - 1) * k + 1) / max(k, 1)
+        if k and self.event_interpolation == "flow":
             from kubric.annotations.flow_interpolation import interpolate_sequence
-            k = self.event_subframes
-            rgb = interpolate_sequence(layers["rgba"][..., :3], layers["forward_flow"],
-                                       layers["backward_flow"], layers["depth"], k)
-            times = frames[0] + np.arange(len(rgb)) / k
-        elif self.event_subframes and len(frames) > 1:  # (one frame: no events either way)
-            from kubric.renderer.raycast_subframes import subframe_layers
-            k = self.event_subframes
-            rgb = subframe_layers(scene, frames[:-1], np.arange(k) / k, ("rgba",))["rgba"]
-            rgb = np.concatenate([rgb.reshape((-1,) + rgb.shape[2:]),
-                                  subframe_layers(scene, frames[-1:], [0.0], ("rgba",))["rgba"][0]])
-            times = frames[0] + np.arange(len(rgb)) / k
+            log_i = ev.srgb_to_log_intensity(np.clip(interpolate_sequence(
+                layers["rgba"][..., :3], layers["forward_flow"], layers["backward_flow"],
+                layers["depth"], k), 0, 255), model.eps)
+        elif k:
+            log_i = anchored_subframe_log_intensity(scene, frames, k, layers["rgba"], model.eps)
         else:
-            rgb, times = layers["rgba"], np.asarray(frames, np.float64)
-        h, w = rgb.shape[1:3]
+            log_i = ev.srgb_to_log_intensity(np.clip(layers["rgba"][..., :3], 0, 255),
+                                             model.eps)
+        h, w = log_i.shape[1:3]
         rng = np.random.RandomState([int(seed), EVENTS_RNG_TAG])
         thresholds = model.thresholds(h, w, rng)
         times_us = ev.frame_times_us(times, scene.frame_start, scene.frame_rate)
-        events = ev.simulate(ev.srgb_to_log_intensity(np.clip(rgb[..., :3], 0, 255), model.eps),
-                             times_us,
-                             thresholds, model)
+        events = ev.simulate(log_i, times_us, thresholds, model)
         events = ev.add_noise(events, h, w, times_us[0], times_us[-1], model, rng)
         sensor = {**dataclasses.asdict(model), "file": EVENTS_H5_FILE,
-                  "source": f"{self.event_interpolation} sub-frames K={self.event_subframes}"
-                  if self.event_subframes else "rendered frames", "num_events": len(events["t"])}
+                  "source": EVENT_SOURCES[self.event_interpolation].format(k=k)
+                  if k else "rendered frames", "num_events": len(events["t"])}
         scene.metadata["event_camera"] = sensor
         attrs = {k: v for k, v in sensor.items() if k != "num_events"}
         return {EVENTS_H5_FILE: encode_events(events, thresholds, attrs)}
@@ -193,3 +193,29 @@ class ExposureOptions:
         relabelled = adjust_segmentation_idxs(labels.reshape(t * k, h, w), scene.assets,
                                               instances).reshape(t, k, h, w)
         return {COVERAGE_FILE: coverage_archive(relabelled, shutter)}
+
+
+#: metadata.event_camera.source per event_interpolation (k: samples per frame)
+EVENT_SOURCES = {"raycast": "raycast sub-frames K={k}, anchored at the rendered frames",
+                 "flow": "flow sub-frames K={k}"}
+
+
+def anchored_subframe_log_intensity(scene, frames: list, k: int, rgba, eps: float):
+    """Log intensity ((T − 1)·k + 1, H, W) at ``frames[0] + i / k``: the raycast backend's
+    sub-frame renders, shifted per pixel by a correction linear in time between frame times
+    that makes them equal the rendered ``rgba`` frames (T, H, W, ≥3) at every frame time. So the
+    motion inside a frame interval (edges crossing, shadows moving) is the raycast render's and
+    the change from frame to frame is exactly the delivered RGB's (with the raycast backend the
+    correction is zero: its frames are those sub-frames)."""
+    from kubric.annotations.event_camera import srgb_to_log_intensity
+    from kubric.renderer.raycast_subframes import subframe_layers
+    sub = subframe_layers(scene, frames[:-1], np.arange(k) / k, ("rgba",))["rgba"]
+    sub = np.concatenate([sub.reshape((-1,) + sub.shape[2:]),
+                          subframe_layers(scene, frames[-1:], [0.0], ("rgba",))["rgba"][0]])
+    log_sub = srgb_to_log_intensity(np.clip(sub[..., :3], 0, 255), eps)
+    log_frames = srgb_to_log_intensity(np.clip(rgba[..., :3], 0, 255), eps)
+    offset = log_frames - log_sub[::k]  # (T, H, W): the frames minus the raycast at frame times
+    s = (np.arange(len(log_sub)) % k / k)[:, None, None]
+    a = np.arange(len(log_sub)) // k
+    upper = np.minimum(a + 1, len(offset) - 1)
+    return log_sub + (1 - s) * offset[a] + s * offset[upper]
