@@ -197,16 +197,20 @@ def test_klevr_with_raycast_and_its_nerf_export(tmp_path):
 
 
 def test_vbr_with_raycast_writes_its_lasr_sequence(tmp_path):
-    """A video recipe without bpy; not a multi-view scene, so the NeRF export refuses it in one
-    line naming the missing file."""
+    """A video recipe without bpy; not a multi-view scene, so the NeRF export writes one
+    ``transforms.json`` of its frames (tests/test_rig_nerf_lasr.py checks its geometry)."""
     scene, meta = _worker("vbr", tmp_path, "resolution=24", "num_frames=3")
     lasr = json.loads((scene / "lasr" / "export.json").read_text())
     assert lasr["num_frames"] == 3 and lasr["sequence"] == meta["metadata"]["lasr_sequence"]
-    refused = kubric("export", "nerf", scene, "--out", tmp_path / "nerf")
-    # not a multi-view scene: bad input (docs/exit-codes.md)
-    assert refused.returncode == 1 and refused.stderr.count("\n") == 1
-    assert "transforms_train.json does not exist (not a multi-view scene" in refused.stderr
-    assert not (tmp_path / "nerf").exists()
+    proc = kubric("export", "nerf", scene, "--out", tmp_path / "nerf")
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    data = json.loads((tmp_path / "nerf" / scene.name / "transforms.json").read_text())
+    assert [(f["camera"], f["frame"], f["time"]) for f in data["frames"]] == \
+        [(0, 0, 0.0), (0, 1, 0.5), (0, 2, 1.0)]
+    assert [f["file_path"] for f in data["frames"]] == [f"./rgba_{t:05d}.png" for t in range(3)]
+    assert sorted(p.name for p in (tmp_path / "nerf" / scene.name).iterdir()) == sorted(
+        ["transforms.json"] + [f"{layer}_{t:05d}.{ext}" for t in range(3) for layer, ext in
+                               (("rgba", "png"), ("depth", "tiff"), ("segmentation", "png"))])
 
 
 def test_svr_with_raycast_has_a_transparent_film(tmp_path):

@@ -50,17 +50,18 @@ FORMATS = {
         "output file (.pkl)"),
     "nerf": ExportFormat(
         "kubric.datasets.exports.nerf:export_nerf",
-        "multi-view scenes as NeRF / instant-ngp / nerfstudio folders",
-        "OUT/SCENE/ with transforms_{train,val,test}.json (with every asset's licence: "
-        "licenses) and the files their views name (RGBA PNGs, depth, segmentation, ...), nothing "
-        "else.",
+        "scenes as NeRF / instant-ngp / nerfstudio folders (multi-view, video, camera rigs)",
+        "OUT/SCENE/ with a multi-view scene's transforms_{train,val,test}.json, or a video "
+        "scene's transforms.json (nerfstudio's fields, D-NeRF's time; every camera and frame of "
+        "a camera rig), each with every asset's licence (licenses), and the files their frames "
+        "name (RGBA PNGs, depth, segmentation, ...), nothing else.",
         "output folder (must not exist)"),
     "lasr": ExportFormat(
         "kubric.datasets.exports.lasr:export_lasr",
         "one scene as a LASR / ViSER video sequence (DAVIS layout)",
         "OUT/DAVIS/{JPEGImages,Annotations,FlowFW,FlowBW,Cameras,CamerasWorld}/"
         "Full-Resolution/SEQ/, OUT/configs/SEQ.config and OUT/export.json (with every asset's "
-        "licence: licenses) for one scene directory.",
+        "licence: licenses) for one scene directory (a camera rig's one camera: --camera).",
         "the LASR folder to create"),
     "hf": ExportFormat(
         "kubric.datasets.exports.hub.hf:export_hf",

@@ -74,10 +74,12 @@ def cmd_lasr(args) -> int:
     except ValueError:
         return _error("lasr", f"--instances {args.instances!r}: expected comma-separated "
                       "instance indices (0-based), e.g. 0,3")
-    summary, code = _run("lasr", args, sequence=args.sequence, instances=chosen, root=args.root)
+    summary, code = _run("lasr", args, sequence=args.sequence, instances=chosen, root=args.root,
+                         camera=args.camera)
     if summary:
-        print(f"wrote LASR sequence {summary['sequence']} ({summary['num_frames']} frames) to "
-              f"{args.out}")
+        seen = f", camera {summary['camera_name']}" if "camera_name" in summary else ""
+        print(f"wrote LASR sequence {summary['sequence']} ({summary['num_frames']} frames"
+              f"{seen}) to {args.out}")
     return code
 
 
@@ -164,6 +166,8 @@ def add_parser(subparsers) -> None:
                       "(0-based) forming the object (default: every instance)")
     lasr.add_argument("--root", type=int, default=None, help="instance of the Cameras frame")
     lasr.add_argument("--sequence", default=None, help="sequence name (default RECIPE_SEED)")
+    lasr.add_argument("--camera", type=int, default=0, metavar="C", help="a camera-rig scene's "
+                      "camera to export, by index (default 0: the reference camera)")
 
     tracks = subparsers.add_parser("tracks", help="(removed: use `kubric export tapvid`)")
     tracks.add_argument("rest", nargs=argparse.REMAINDER, help=argparse.SUPPRESS)

@@ -19,6 +19,13 @@ and ``metadata.json``::
                                                              and ``licenses``: every asset the
                                                              images show and its licence
 
+Camera rigs (``cameras=stereo|ring|random``): LASR reads one monocular video, so the export
+takes one camera of the rig, ``camera=C`` (``--camera C``; default 0, the reference camera): its
+RGB, segmentation, depth and flow layers (``NAME_*``), its intrinsics and its per-frame
+extrinsics (``metadata.camera.rig.views[NAME]``); ``export.json`` records ``camera`` (the index)
+and ``camera_name``. An index outside ``0 .. number of cameras − 1`` is one line naming it and
+that range (exit status 2).
+
 Conventions (what LASR's loaders expect; ours are in docs/conventions.md):
 
 * **Flow** ``flo-*.pfm``: 3-channel PFM ``(Δx, Δy, valid)`` in pixels, x to the right (columns),
@@ -56,7 +63,8 @@ from kubric.core import camera_geometry as geo
 from kubric.core.lenses import pinhole_refusal
 from kubric.core.quaternion import Quaternion
 from kubric.datasets.exports import licences
-from kubric.errors import InputError
+from kubric.datasets.exports.scenes import Scene, camera_views
+from kubric.errors import InputError, UsageError
 from kubric.io import json_io, png_io
 from kubric.io.paths import atomic_write_bytes
 from kubric.io.pfm_io import encode_pfm
@@ -175,8 +183,23 @@ def _savetxt(matrix: np.ndarray) -> bytes:
     return "".join(" ".join(f"{v:.10g}" for v in row) + "\n" for row in matrix).encode()
 
 
+def camera_view(scene_dir: pathlib.Path, camera) -> Scene:
+    """Camera ``camera`` (an index, 0 = the reference) of the scene as a
+    :class:`~kubric.datasets.exports.scenes.Scene` reading that camera's layers and records;
+    one line naming the index and the allowed range when the scene has no such camera."""
+    scene = Scene(scene_dir, "", json_io.read_json(scene_dir / METADATA_FILE))
+    rig = scene.metadata["camera"].get("rig") or {}
+    names = rig.get("cameras") or ["the scene's camera"]
+    if isinstance(camera, bool) or not isinstance(camera, (int, np.integer)) \
+            or not 0 <= camera < len(names):
+        raise UsageError(f"export_lasr: camera {camera!r} is not a camera of this scene; "
+                         f"allowed: 0..{len(names) - 1} ({', '.join(names)})")
+    return camera_views(scene)[int(camera)] if rig else scene
+
+
 def export_lasr(scene_dir, out_dir, sequence: str | None = None,
-                instances: list[int] | None = None, root: int | None = None) -> dict:
+                instances: list[int] | None = None, root: int | None = None,
+                camera: int = 0) -> dict:
     """Write the LASR tree (module doc) for the scene directory ``scene_dir`` into ``out_dir``.
 
     Args:
@@ -188,15 +211,17 @@ def export_lasr(scene_dir, out_dir, sequence: str | None = None,
       instances: indices (0-based) into ``metadata.json["instances"]`` that make the object
         (silhouette); default: every instance.
       root: the instance whose frame ``Cameras`` uses (default :func:`default_root`).
+      camera: the camera of a camera-rig scene whose images, layers and cameras are exported
+        (its index in ``metadata.camera.rig.cameras``; 0 = the reference camera, the one
+        camera of a one-camera scene).
 
     Returns the content of ``export.json``.
     """
-    from kubric.io import layers as layer_io
-
     scene_dir, out_dir = pathlib.Path(scene_dir), pathlib.Path(out_dir)
     if out_dir.exists():
         raise FileExistsError(f"export_lasr: {str(out_dir)!r} already exists")
-    meta = json_io.read_json(scene_dir / METADATA_FILE)
+    view = camera_view(scene_dir, camera)
+    meta = view.metadata
     refusal = pinhole_refusal(meta["camera"], "export_lasr: LASR's [fx, fy, px, py] camera")
     if refusal:
         raise InputError(refusal)
@@ -214,8 +239,8 @@ def export_lasr(scene_dir, out_dir, sequence: str | None = None,
             else scene_dir.name
     if not sequence or any(c in sequence for c in "/\\\0") or sequence in (".", ".."):
         raise InputError(f"export_lasr: sequence name {sequence!r} is not a folder name")
-    data = layer_io.read_image_dict(scene_dir, ["rgba", "depth", "segmentation",
-                                                "forward_flow", "backward_flow"])
+    data = {name: view.read_layer(name) for name in ("rgba", "depth", "segmentation",
+                                                     "forward_flow", "backward_flow")}
     labels = data["segmentation"][..., 0].astype(np.int64)
     hit = data["depth"][..., 0] < geo.BACKGROUND_DEPTH
     fw, bw = data["forward_flow"], data["backward_flow"]
@@ -252,7 +277,8 @@ def export_lasr(scene_dir, out_dir, sequence: str | None = None,
         summary = {
             "sequence": sequence, "num_frames": int(count),
             "resolution": [int(labels.shape[2]), int(labels.shape[1])],
-            "instances": chosen, "root_instance": root,
+            "instances": chosen, "root_instance": root, "camera": int(camera),
+            **({"camera_name": view.camera_name} if view.camera_name else {}),
             "silhouette_value": SILHOUETTE_VALUE, "jpeg_quality": JPEG_QUALITY,
             "occluded_pixels": {"FlowFW": [occluded[("FlowFW", i)] for i in range(count - 1)],
                                 "FlowBW": [occluded[("FlowBW", i)] for i in range(1, count)]},

@@ -1,5 +1,7 @@
 """The NeRF export: "blender" ``transforms_{split}.json`` files, written by the multi-view recipes
-into every scene and copied with the views they name by ``kubric export nerf`` (:func:`export_nerf`).
+into every scene and copied with the views they name by ``kubric export nerf`` (:func:`export_nerf`);
+for a video scene (one camera or a camera rig), one nerfstudio / D-NeRF ``transforms.json`` of
+every (camera, frame) image (:func:`video_transforms`, "Video scenes" below).
 
 Every multi-view scene is one render whose frames are the views (view ``i`` = frame
 ``frame_start + i`` = the files ``*_{i:05d}.*``). The views are split into ``train`` / ``val`` /
@@ -29,6 +31,29 @@ Reading a pixel's ray from the JSON alone (what the tests do): for pixel (row i,
 comes from undistorting the pixel with the recorded coefficients, as ``cv2.undistortPoints``);
 the surface point is ``origin + depth[i, j] · d`` (depth is the Euclidean distance to the camera centre).
 :func:`iter_views` does exactly this for every view of a split (rays, RGB and depth per view).
+
+Video scenes (MOVi, ``pose_estimation``, ``vbr``, ...; ``cameras=mono|stereo|ring|random``):
+``kubric export nerf`` writes ``OUT/SCENE/transforms.json`` as nerfstudio's ``nerfstudio-data``
+parser reads it, with D-NeRF's ``time``, and copies the files it names:
+
+* ``frames``: every (camera, frame) image, camera by camera in rig order (``cameras``, the
+  reference first), each with ``file_path`` **with** its extension (``./cam1_rgba_00003.png``,
+  as nerfstudio opens it), ``transform_matrix`` (camera → world, NeRF / OpenGL axes as above:
+  ``metadata.json``'s ``matrices_world`` of that camera at that frame), ``time`` =
+  ``frame / (T − 1)`` in [0, 1] (D-NeRF; 0 for one frame), our ``camera`` (index in
+  ``cameras``; 0 for a one-camera scene), ``camera_name`` (rigs only) and ``frame`` (0-based, the
+  files' index), and ``depth_file`` / ``segmentation_file`` (our float TIFF of the Euclidean
+  distance in metres along the pixel's ray — not nerfstudio's ``depth_file_path``, which holds
+  z-depth in millimetres — and our label PNG);
+* the camera fields above (``fl_x`` … ``h``, ``camera_angle_x/y``, ``k1`` … ``p2``) from each
+  camera's ``intrinsics_pixels``, ``distortion_model`` and ``distortion_coefficients``, grouped
+  as nerfstudio reads them (:data:`FIELD_GROUPS`): a group every camera shares is written once at
+  the top level, a group where cameras differ goes into every frame (nerfstudio takes a frame's
+  value only when the top level lacks the field); ``camera_model`` is top-level only in
+  nerfstudio, so a rig whose cameras have different models is refused in one line, as is a
+  Brown–Conrady lens with k4–k6 (no nerfstudio model: one line naming the coefficients);
+* top level also: ``cameras`` (the rig's camera names; ``[]`` for one camera), ``num_frames``,
+  ``frame_rate``, ``conventions`` and ``licenses``.
 """
 
 from __future__ import annotations
@@ -45,12 +70,31 @@ import numpy as np
 from kubric.core import camera_geometry as geo
 from kubric.core import lenses
 from kubric.datasets.exports import licences
+from kubric.datasets.exports.scenes import ExportError, camera_views, load_scene
 from kubric.errors import InputError
+from kubric.io import layers as layer_io
 from kubric.io import png_io, tiff_io
 from kubric.io import scene_dir as scene_dirs
 from kubric.io.schema import VIEW_SPLITS
+from kubric.io.stored_schema import stored_schema
 
 SPLITS = VIEW_SPLITS  # declared with the schema conversion that indexes them
+#: the transforms file of an exported video scene (nerfstudio's name)
+VIDEO_TRANSFORMS = "transforms.json"
+#: the layers whose files a video scene's frame entries name (``depth_file``, ...) when present
+VIDEO_LAYERS = ("depth", "segmentation")
+#: the camera fields of a video transforms file, grouped as nerfstudio reads them: a group goes
+#: to the top level when every camera has the same values, else into every frame (nerfstudio
+#: takes a field from the frames only when the top level lacks it; any one of the distortion
+#: fields at the top level fixes them all)
+FIELD_GROUPS = (("fl_x", "camera_angle_x"), ("fl_y", "camera_angle_y"), ("cx",), ("cy",),
+                ("w",), ("h",), ("k1", "k2", "k3", "k4", "p1", "p2"))
+VIDEO_CONVENTIONS = ("transform_matrix: camera -> world, NeRF / OpenGL camera axes (x right, y "
+                     "up, looking down -z), metres; fl_x, fl_y, cx, cy pixels, pixel centres at "
+                     "+0.5; k1..k4, p1, p2: OpenCV's order (camera_model OPENCV or "
+                     "OPENCV_FISHEYE); time = frame / (num_frames - 1); depth_file: float "
+                     "TIFF, metres along the pixel's ray (not z); camera: index in cameras "
+                     "(0 = the reference)")
 
 
 def split_ratio(value) -> tuple[int, int, int]:
@@ -103,13 +147,20 @@ def check_views(recipe: str, num_views: int, ratio: Sequence[int]) -> str | None
 def intrinsics_entry(camera, resolution) -> dict:
     """The shared camera fields of a transforms file (see module doc)."""
     w, h = (int(v) for v in resolution)
-    k = geo.pixel_intrinsics(camera, (w, h))
+    return pixel_fields(geo.pixel_intrinsics(camera, (w, h)), w, h, geo.lens_of(camera))
+
+
+def pixel_fields(intrinsics_pixels, w: int, h: int, lens) -> dict:
+    """The camera fields of a transforms file (see module doc) from numbers: OpenCV pixel
+    intrinsics (3, 3; pixel centres at +0.5), the image size ``w`` × ``h`` (pixels) and ``lens``
+    (:mod:`kubric.core.lenses`)."""
+    k = np.asarray(intrinsics_pixels, np.float64)
     fl_x, fl_y, cx, cy = float(k[0, 0]), float(k[1, 1]), float(k[0, 2]), float(k[1, 2])
     return {
         "camera_angle_x": 2.0 * math.atan(0.5 * w / fl_x),
         "camera_angle_y": 2.0 * math.atan(0.5 * h / fl_y),
-        "fl_x": fl_x, "fl_y": fl_y, "cx": cx, "cy": cy, "w": w, "h": h,
-        **lens_entry(geo.lens_of(camera)),
+        "fl_x": fl_x, "fl_y": fl_y, "cx": cx, "cy": cy, "w": int(w), "h": int(h),
+        **lens_entry(lens),
     }
 
 
@@ -207,17 +258,95 @@ def view_files(data: Mapping) -> list[str]:
     """The files a transforms dict names: each view's RGBA PNG and its ``*_file`` layers."""
     out = []
     for entry in data["frames"]:
-        out.append(entry["file_path"].removeprefix("./") + ".png")
+        image = entry["file_path"].removeprefix("./")
+        out.append(image if image.endswith(".png") else image + ".png")  # video: with .png
         out += [v for k, v in sorted(entry.items()) if k.endswith("_file")]
     return out
 
 
+def video_transforms(scene_path) -> dict:
+    """The ``transforms.json`` dict of a video scene (one camera, or a camera rig): every
+    (camera, frame) image of the scene, camera by camera in rig order (module doc, "Video
+    scenes"). One-line :class:`~kubric.datasets.exports.scenes.ExportError` for a camera
+    without pinhole intrinsics, a lens nerfstudio cannot express, or a rig whose cameras have
+    different lens models."""
+    scene_path = pathlib.Path(scene_path)
+    scene = load_scene(scene_path, scene_path)
+    views, count = camera_views(scene), scene.num_frames
+    formats = views[0].formats
+    if formats is None:
+        stored = stored_schema(scene_path)
+        formats = None if stored is None else stored.layers
+    table = layer_io.layer_table(formats)
+    rig = len(views) > 1
+    fields = []
+    for view in views:
+        record, label = view.metadata["camera"], view.camera_name or "camera"
+        if "intrinsics_pixels" not in record:
+            raise ExportError(f"{scene_path.name}: {label} has no intrinsics_pixels in "
+                              "metadata.json (NeRF transforms need a perspective camera)")
+        w, h = record.get("resolution", scene.resolution)
+        try:
+            fields.append(pixel_fields(record["intrinsics_pixels"], w, h,
+                                       lenses.from_camera_record(record)))
+        except InputError as err:
+            raise ExportError(f"{scene_path.name}: {label}: {err}") from None
+    models = sorted({f["camera_model"] for f in fields})
+    if len(models) > 1:
+        raise ExportError(f"{scene_path.name}: the rig's cameras have the lens models {models}; "
+                          "nerfstudio reads one camera_model per transforms file")
+    shared, own = {"camera_model": models[0]}, [{} for _ in views]
+    for group in FIELD_GROUPS:
+        values = [{k: f[k] for k in group if k in f} for f in fields]
+        if all(v == values[0] for v in values):
+            shared.update(values[0])
+        else:
+            for mine, value in zip(own, values, strict=True):
+                mine.update(value)
+    frames = []
+    for c, view in enumerate(views):
+        matrices = np.asarray(view.metadata["camera"]["matrices_world"], np.float64)
+        if matrices.shape != (count, 4, 4):
+            raise ExportError(f"{scene_path.name}: camera {c} has matrices_world of shape "
+                              f"{list(matrices.shape)}, expected [{count}, 4, 4]")
+        for t in range(count):
+            entry = {"file_path": "./" + _frame_file(table, view, "rgba", t, required=True),
+                     "transform_matrix": matrices[t].tolist(),
+                     "time": t / (count - 1) if count > 1 else 0.0,
+                     "camera": c, **({"camera_name": view.camera_name} if rig else {}),
+                     "frame": t, **own[c]}
+            for layer in VIDEO_LAYERS:
+                name = _frame_file(table, view, layer, t)
+                if name:
+                    entry[f"{layer}_file"] = name
+            frames.append(entry)
+    names = [v.camera_name for v in views] if rig else []
+    return {**shared, "cameras": names, "num_frames": count,
+            "frame_rate": scene.metadata["metadata"].get("frame_rate"),
+            "conventions": VIDEO_CONVENTIONS, "frames": frames}
+
+
+def _frame_file(table, view, layer: str, frame: int, required: bool = False) -> str | None:
+    """The file name of ``frame`` of ``view``'s ``layer`` when the scene has it (else None, or a
+    one-line error when ``required``)."""
+    name = view.prefix + layer
+    if name in table:
+        file = layer_io.frame_filename(table[name].template, frame)
+        if (view.path / file).is_file():
+            return file
+    if required:
+        raise ExportError(f"{view.path.name}: no {layer} file of frame {frame}"
+                          + (f" of camera {view.camera_name!r}" if view.camera_name else ""))
+    return None
+
+
 def export_nerf(root, out) -> tuple[pathlib.Path, int]:
-    """Copy every complete multi-view scene under ``root`` (or ``root`` itself) into
-    ``out/<scene name>/``: its ``transforms_{train,val,test}.json``, each with the field
-    ``licenses`` added (every asset the views show and its licence:
-    :mod:`kubric.datasets.exports.licences`), and the files their views name, nothing else (a
-    folder NeRF, instant-ngp and nerfstudio read as it is). ``out`` must
+    """Copy every complete scene under ``root`` (or ``root`` itself) into ``out/<scene name>/``:
+    a multi-view scene's ``transforms_{train,val,test}.json``, a video scene's
+    ``transforms.json`` (:func:`video_transforms`), each with the field ``licenses`` added
+    (every asset the images show and its licence: :mod:`kubric.datasets.exports.licences`),
+    and the files their frames name, nothing else (a folder NeRF, instant-ngp and nerfstudio
+    read as it is). ``out`` must
     not exist; it is written through a temporary sibling and appears complete or not at all.
     Returns (out, number of scenes)."""
     scenes = scene_dirs.scenes_under(root)
@@ -230,9 +359,12 @@ def export_nerf(root, out) -> tuple[pathlib.Path, int]:
             (tmp / scene.name).mkdir(parents=True)
             assets = licences.as_json(licences.scene_licences(
                 json.loads((scene / scene_dirs.METADATA_FILE).read_text())))
-            for split in SPLITS:
-                data = read_transforms(scene, split, scene.name)
-                (tmp / scene.name / f"transforms_{split}.json").write_text(
+            multi_view = any((scene / f"transforms_{s}.json").exists() for s in SPLITS)
+            files = {f"transforms_{split}.json": read_transforms(scene, split, scene.name)
+                     for split in SPLITS} if multi_view else \
+                {VIDEO_TRANSFORMS: video_transforms(scene)}
+            for file, data in files.items():
+                (tmp / scene.name / file).write_text(
                     json.dumps({**data, licences.KEY: assets}, indent=1) + "\n")
                 for name in view_files(data):
                     shutil.copy2(scene / name, tmp / scene.name / name)
