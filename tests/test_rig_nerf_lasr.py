@@ -12,9 +12,10 @@ command, and read back without kubric's geometry:
   and 2 with ``cv2.projectPoints`` / ``cv2.fisheye.projectPoints``, lands where those cameras'
   own depth puts the same point: on the floor, the other camera's ray through the projected
   position meets the floor plane fitted to its own depth at the point (< 1e-4 m), and the point
-  its depth gives there (interpolated between pixel centres) is the same point (< 1 % of the
-  distance); object points seen at their distance carry their own instance label — for a
-  pinhole random rig and a fisheye ring rig; through each lens the floor's points are flat;
+  its depth gives there (interpolated between pixel centres) is the same point (< 2e-3 of the
+  distance for 98 % of them; a camera half a pixel off fails); object points seen at their
+  distance carry their own instance label — for a pinhole random rig and a fisheye ring rig;
+  through each lens the floor's points are flat;
 * cameras that differ go into the frames (nerfstudio's per-frame fields), lenses nerfstudio
   cannot express are refused in one line;
 * ``kubric export lasr --camera 1``: the camera files are camera 1's recorded extrinsics and
@@ -218,12 +219,14 @@ def test_camera_0_depth_reprojects_into_the_other_cameras(exported, name):
         interpolated = (at_b[r0, c0] * (1 - fu) * (1 - fv) + at_b[r0, c0 + 1] * fu * (1 - fv)
                         + at_b[r0 + 1, c0] * (1 - fu) * fv + at_b[r0 + 1, c0 + 1] * fu * fv)
         distance = np.linalg.norm(pts - B["c2w"][:3, 3], axis=1)
-        agree = np.linalg.norm(interpolated - pts, axis=1) < 0.01 * distance  # not hidden from B
+        # B's depth-derived point there is the point (bilinear between pixel centres: measured
+        # ≤ 1.1e-3 of the distance on the floor; half a pixel off would be ~7e-3)
+        agree = np.linalg.norm(interpolated - pts, axis=1) < 2e-3 * distance
 
         on_floor = (labels == 0) & np.all(around == 0, axis=1) & \
             (np.hypot(pts[:, 0], pts[:, 1]) < 20)
-        # the floor points B's depth agrees with are most of those B sees: none is far off
-        assert agree[on_floor].mean() > 0.97, (name, a, b, agree[on_floor].mean())
+        # all but the few floor points an object hides from B (at its edge)
+        assert agree[on_floor].mean() > 0.98, (name, a, b, agree[on_floor].mean())
         sel = on_floor & agree
         origin = B["c2w"][:3, 3]
         _, rays = _world_points(B, xy[sel], np.ones(sel.sum()))
@@ -276,11 +279,14 @@ def test_cameras_that_differ_carry_their_own_fields_per_frame(exported, tmp_path
         {fl, fl + 6.0}
 
 
-@pytest.mark.parametrize("case", ["rational", "mixed"])
+@pytest.mark.parametrize("case", ["rational", "mixed", "no_intrinsics"])
 def test_lenses_nerfstudio_cannot_express_are_refused_in_one_line(exported, tmp_path, case):
     _, scenes = exported
 
     def edit(meta):
+        if case == "no_intrinsics":
+            del meta["camera"]["rig"]["views"]["cam2"]["intrinsics_pixels"]
+            return
         for record in _records(meta)[: 1 if case == "mixed" else 3]:
             record["distortion_model"] = "fisheye" if case == "mixed" else "opencv"
             record["distortion_coefficients"] = [0.1, 0.01, 0, 0, 0, 0.02, 0, 0] if \
@@ -288,8 +294,10 @@ def test_lenses_nerfstudio_cannot_express_are_refused_in_one_line(exported, tmp_
     scene, _ = _edited_copy(scenes, tmp_path, edit)
     proc = kubric("export", "nerf", scene, "--out", tmp_path / "nerf")
     assert proc.returncode == 1 and proc.stderr.count("\n") == 1, proc.stderr
-    needle = "has no k4..k6, got [0.02, 0.0, 0.0]" if case == "rational" else \
-        "lens models ['OPENCV', 'OPENCV_FISHEYE']"
+    needle = {"rational": "cam0: NeRF transforms: nerfstudio's OPENCV model has no k4..k6, got "
+                          "[0.02, 0.0, 0.0]",
+              "mixed": "lens models ['OPENCV', 'OPENCV_FISHEYE']",
+              "no_intrinsics": "cam2 has no intrinsics_pixels"}[case]
     assert needle in proc.stderr and scene.name in proc.stderr
     assert not (tmp_path / "nerf").exists()
 
