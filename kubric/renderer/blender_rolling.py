@@ -87,13 +87,6 @@ def check(scene, motion_blur) -> None:
         raise CapabilityError(f"renderer=blender cannot render depth of field (use_dof=True) "
                               f"with a rolling shutter (rolling_shutter_duration={duration!r}); "
                               "allowed: one of the two")
-    from kubric.core.characters import Character
-    for asset in scene.assets:
-        if isinstance(asset, Character):
-            raise CapabilityError(f"renderer=blender cannot render character {asset.uid!r} under "
-                                  f"a rolling shutter (rolling_shutter_duration={duration!r}): "
-                                  "its exact layers come from the raycast backend, which casts "
-                                  "rigid objects and Deformables only")
 
 
 def exact_layers(scene, frames, layers) -> dict:
