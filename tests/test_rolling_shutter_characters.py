@@ -11,13 +11,15 @@ skinned at that row's time. On real output, against independent derivations:
 * the global-shutter frames themselves: the raycast backend's character layers (smooth normals
   of the skinned mesh, rest-pose object coordinates, the material point's flow) equal Cycles'
   exact layers to float precision away from silhouettes (blender);
-* ``pose_estimation`` with ``rolling_shutter`` on the raycast backend runs through the worker
-  and records the readout; each keypoint's pixel is the cv2 projection of its recorded 3D
-  keypoint (the static camera's recorded extrinsics), < 1e-3 px.
+* ``pose_estimation`` with ``rolling_shutter`` runs through the worker on the raycast and the
+  Blender backend and records the readout; each keypoint's pixel is the cv2 projection of its
+  recorded 3D keypoint (the static camera's recorded extrinsics), < 1e-3 px.
 """
 
 import json
 import pathlib
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -136,15 +138,26 @@ def test_character_track_pixels_are_material_points_at_their_row_time(rolling):
     assert checked > 20 and moved > 0.5
 
 
-def test_pose_estimation_with_rolling_shutter_on_raycast(tmp_path):
+@pytest.mark.parametrize("renderer", ["raycast", pytest.param("blender",
+                                                            marks=pytest.mark.blender)])
+def test_pose_estimation_with_rolling_shutter(tmp_path, renderer):
     import cv2
 
-    from tests.test_rolling_shutter_movi import _kubric
-    _kubric("worker", "pose_estimation", "--seed", 2, "--out", tmp_path, "--set",
-            "renderer=raycast", "--set", "resolution=24", "--set", "frame_end=2", "--set",
-            "max_num_people=1", "--set", "min_num_clutter=0", "--set", "max_num_clutter=1",
-            "--set", "character_source=procedural", "--set", "motion_source=procedural",
-            "--set", "rolling_shutter=0.8")
+    from tests.test_rolling_shutter_movi import ROOT, _kubric
+    options = ["resolution=24", "frame_end=2", "max_num_people=1", "min_num_clutter=0",
+               "max_num_clutter=1", "character_source=procedural", "motion_source=procedural",
+               "rolling_shutter=0.8", f"renderer={renderer}"]
+    if renderer == "blender":
+        options += ["samples=2", "denoise=false"]
+    args = ["worker", "pose_estimation", "--seed", 2, "--out", tmp_path]
+    for o in options:
+        args += ["--set", o]
+    if renderer == "raycast":
+        _kubric(*args)  # bpy blocked
+    else:
+        proc = subprocess.run([sys.executable, "-m", "kubric", *map(str, args)], cwd=ROOT,
+                              capture_output=True, text=True, timeout=600)
+        assert proc.returncode == 0, proc.stderr[-3000:]
     meta = json.loads((pathlib.Path(tmp_path) / "scene_00000002" / "metadata.json").read_text())
     assert meta["metadata"]["rolling_shutter"]["duration"] == 0.8
     (person,) = meta["instances"]
