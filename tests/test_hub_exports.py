@@ -78,7 +78,7 @@ def klevr(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def pose_estimation(tmp_path_factory):
-    """Skinned procedural characters (Blender: the raycast backend has no skinning)."""
+    """Skinned procedural characters, rendered by Blender."""
     return _generate(tmp_path_factory.mktemp("hub_pose"), "pose_estimation", [
         "samples=1", "denoise=false", "resolution=24", "frame_end=2", "max_num_people=1",
         "min_num_clutter=0", "max_num_clutter=1", "character_source=procedural",

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from collection_fixtures import run_worker
 
-from kubric.pipeline import OptionError, get_recipe
+from kubric.pipeline import get_recipe
 
 OPTIONS = ("resolution=64", "frame_end=8", "samples=2", "denoise=false", "min_num_objects=2",
            "max_num_objects=3", "collection_limit=8", "characters=1",
@@ -57,11 +57,10 @@ def test_zero_characters_leaves_flags_unchanged():
     assert flags["characters"] == 2 and flags["character_source"] == "procedural"
 
 
-def test_characters_need_the_blender_renderer():
-    with pytest.raises(OptionError, match="renderer=raycast cannot render skinned characters"):
-        get_recipe("movi_c")(characters=1, renderer="raycast").check()
-    with pytest.raises(OptionError, match="renderer=raycast cannot render skinned characters"):
-        get_recipe("pose_estimation")(renderer="raycast").check()
+def test_characters_render_on_both_backends():
+    for renderer in ("blender", "raycast"):  # raycast: the skinned mesh, Lambert RGB
+        get_recipe("movi_c")(characters=1, renderer=renderer).check()
+        get_recipe("pose_estimation")(renderer=renderer).check()
 
 
 @pytest.mark.blender

@@ -122,9 +122,6 @@ def test_a_backend_refuses_what_it_lacks_in_one_line(tmp_path):
      "denoising) (samples=4, quality=fast)"),
     ("movi_a", ["save_state=true"], "save its state as a scene file (save_state=True)"),
     ("movi_f", [], "render motion blur (max_motion_blur=2.0)"),
-    ("movi_e", ["characters=1"], "render skinned characters (characters=1)"),
-    ("pose_estimation", [], "render skinned characters (the pose_estimation recipe)"),
-    ("vbr", ["object_type=character"], "render skinned characters (object_type=character)"),
     ("complex_brdf", [], "render photoreal RGB (the complex_brdf recipe)"),
 ])
 def test_a_recipe_asks_its_backend_and_refuses_in_one_line(recipe, options, request_):

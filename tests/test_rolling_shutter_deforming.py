@@ -127,8 +127,8 @@ def test_keypoints_are_seen_at_their_row_time():
     scene, person = walking_scene(frames=3)
     scene.camera.rolling_shutter_duration = D
     frames = [1, 2, 3]
-    # no character renderer under a rolling shutter: background layers (the positions under
-    # test do not depend on them, only the occlusion flags do)
+    # background layers: the positions under test do not depend on them, only the occlusion
+    # flags do
     depth = np.full((3, H, W), 1e4, np.float32)
     seg = np.zeros((3, H, W), np.uint32)
     got = character_keypoints(scene.camera, frames, depth, seg, scene.assets, person)

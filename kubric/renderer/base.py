@@ -148,7 +148,7 @@ BACKENDS = {
         state_file_suffix=".blend",
         characters=True, quality_profiles=True, lenses=True, procedural_patterns=PATTERNS)),
     "raycast": Backend("kubric.renderer.raycast:Raycast", Capabilities(
-        photoreal=False, lenses=True, effects={"rolling_shutter"},
+        photoreal=False, lenses=True, effects={"rolling_shutter"}, characters=True,
         procedural_patterns=("checker", "brick", "wave"))),
 }
 

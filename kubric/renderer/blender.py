@@ -373,6 +373,10 @@ class Blender(TableView, Renderer):
         what = "Blender RGB" if suffix == ".png" else "Blender exact layers"
         try:
             with frame_bar(what, len(frames)), self.quiet():
+                if suffix == ".png" and rolling_shutter.duration_of(self.scene.camera) > 0:
+                    runs = []  # each frame a still at its sub-frame (blender_rolling)
+                    bl_rolling.render_stills(s, self.scene, frames,
+                                             lambda f: _frame_file(prefix, f, suffix))
                 for a, b in runs:
                     s.frame_end = 1048574
                     s.frame_start, s.frame_end = a, b

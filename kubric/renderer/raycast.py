@@ -28,6 +28,11 @@ Blender backend's exact annotation render (:mod:`kubric.renderer.blender_passes`
 
 Geometry (:mod:`kubric.renderer.raycast_meshes`): ``Cube`` and ``Sphere`` are rebuilt exactly as
 the Blender backend builds them; a ``FileBasedObject``'s ``render_filename`` is read with trimesh.
+A ``Deformable`` is its simulated mesh and a skinned ``Character`` its mesh skinned by the model
+(``deformed_vertices``) at the frame's (or, under a rolling shutter, the row's) time; their
+object coordinates and UVs are those of the material point on the rest mesh (as Blender's
+``kubric_rest_position``); a character is smooth shaded, with the angle-weighted vertex normals
+of the skinned mesh (as Blender recomputes them after the armature), a Deformable flat.
 """
 
 from __future__ import annotations
@@ -37,8 +42,9 @@ import numpy as np
 from kubric.core import camera_geometry as geo
 from kubric.core import lights, materials, objects, rolling_shutter
 from kubric.core import pbr_materials as pbr
+from kubric.core.characters import Character
 from kubric.core.color import Color, linear_to_srgb, srgb_to_linear
-from kubric.core.deformables import Deformable
+from kubric.core.deformables import DEFORMING
 from kubric.core.imports import uninterrupted_import
 from kubric.renderer import procedural_patterns
 from kubric.renderer.base import ALL_LAYERS, PATTERN_NEED, Renderer
@@ -92,10 +98,14 @@ class _Geometry:
                               for m in meshes], (0, 3))
         self.corner_uv = _join([np.zeros((len(m.faces), 3, 2)) if m.corner_uv is None
                                 else m.corner_uv for m in meshes], (0, 3, 2))
-        # deformables: (k, asset, first vertex, end) — their vertices come from the model per
-        # frame; their local points are rest-state model-frame points (docs/deformables.md)
+        # deforming surfaces (Deformables, skinned characters): (k, asset, first vertex, end) —
+        # their vertices come from the model per frame; their local points are rest-state
+        # model-frame points (docs/deformables.md, docs/characters.md)
         self.deforming = [(k, e[1], starts[k], starts[k] + counts[k])
-                          for k, e in enumerate(entries) if isinstance(e[1], Deformable)]
+                          for k, e in enumerate(entries) if isinstance(e[1], DEFORMING)]
+        # characters are smooth shaded (as Blender builds them): normals of the skinned mesh
+        self.skinned = [d for d in self.deforming if isinstance(d[1], Character)]
+        self.smooth[[k for k, *_ in self.skinned]] = True
 
     def poses(self, frame):
         """(K, 3, 3) rotations, (K, 3) translations and (K, 3) scales of the objects at
@@ -152,6 +162,12 @@ class _PosedScene:
         self.mesh = trimesh.Trimesh(world, geometry.faces, process=False)
         self.triangles = world[geometry.faces]
         self._ray = None
+        # (V, 3) world vertex normals of the skinned characters' meshes at this frame
+        # (angle-weighted, as Blender computes them; 0 elsewhere)
+        self.skinned_normals = np.zeros_like(world) if geometry.skinned else None
+        for _, asset, start, end in geometry.skinned:
+            mesh = trimesh.Trimesh(world[start:end], asset.faces, process=False)
+            self.skinned_normals[start:end] = mesh.vertex_normals
 
     def first_hits(self, origins, dirs):
         """Index of the first triangle hit by each ray (−1: none)."""
@@ -199,14 +215,14 @@ class Raycast(Renderer):
                 mesh = sphere_mesh()
             elif isinstance(asset, objects.FileBasedObject):
                 mesh = file_mesh(asset)
-            elif isinstance(asset, Deformable):  # the rest mesh; posed per frame by the model
+            elif isinstance(asset, DEFORMING):  # the rest mesh; posed per frame by the model
                 mesh = Mesh(np.asarray(asset.vertices, np.float64),
                             np.asarray(asset.faces, np.int64), None,
                             None if asset.uv is None else np.asarray(asset.uv, np.float64))
             else:
                 raise ValueError(f"{asset.uid}: the raycast renderer has no geometry for "
                                  f"{type(asset).__name__} (Cube, Sphere, FileBasedObject, "
-                                 "Deformable)")
+                                 "Deformable, Character)")
             self._meshes[asset] = mesh
         return self._meshes[asset]
 
@@ -326,6 +342,10 @@ class Raycast(Renderer):
         smooth_local = np.einsum("nk,nkj->nj", bary, geometry.normals[geometry.faces[tid]])
         # normals transform with the inverse scale
         smooth = np.einsum("nij,nj->ni", rot[owner], smooth_local / scale[owner])
+        if posed.skinned_normals is not None:  # skinned: the posed mesh's own vertex normals
+            sk = np.flatnonzero(np.isin(owner, [k for k, *_ in geometry.skinned]))
+            smooth[sk] = np.einsum("nk,nkj->nj", bary[sk],
+                                   posed.skinned_normals[geometry.faces[tid[sk]]])
         normals = np.where(geometry.smooth[owner][:, None], smooth, geometric)
         normals /= np.linalg.norm(normals, axis=1, keepdims=True)
         back = np.einsum("ij,ij->i", geometric, dirs) > 0

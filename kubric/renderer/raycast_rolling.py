@@ -11,8 +11,10 @@ point seen through pixel centre (r, c) at ``t_r`` is followed on its object to f
 its image position is the rolling-shutter fixed point (the point and the camera at the time of
 the row it lands on, :func:`kubric.core.rolling_shutter.rolling_points`); flow = that
 position − the pixel centre; 0 on background and where the point has no image position.
-On a Deformable every row's mesh is the simulated mesh at ``t_r`` (linear between keyed frames)
-and the followed point is the material point (triangle, barycentric) of that mesh.
+On a Deformable every row's mesh is the simulated mesh at ``t_r`` (linear between keyed frames),
+on a skinned character the mesh skinned at ``t_r`` (``Character.deformed_vertices``: its bone
+rotations nlerped, pose and root offset interpolated at ``t_r``), and the followed point is the
+material point (triangle, barycentric) of that mesh.
 """
 
 from __future__ import annotations
