@@ -136,3 +136,55 @@ def test_pose_estimation_keypoints_through_a_lens_are_opencvs(tmp_path):
             assert np.abs(np.asarray(person["keypoints_2d"][t]) - xy).max() < 1e-3
             checked += 1
     assert checked >= 3
+
+
+def _original_osl_source():
+    from kubric.renderer import blender_lens as bl
+    return bl.osl_source
+
+
+_OSL_SOURCE = _original_osl_source()
+
+
+def _wireframe_brightness(lens, tmp_path, monkeypatch, **source_options):
+    """Mean brightness (H, W) of a grid seen through ``lens``, drawn with Cycles' Wireframe node
+    in *pixel size* mode: its wire width comes from the camera rays' differentials."""
+    import bpy
+
+    from kubric.renderer import blender_lens as bl
+    monkeypatch.setattr(bl, "osl_source", lambda *a: _OSL_SOURCE(*a, **source_options))
+    scene = kb.Scene(resolution=(W, H), frame_start=1, frame_end=1)
+    scene += kb.PerspectiveCamera(name="camera", position=(1, -8, 3), look_at=(0, 0, 0.5),
+                                  lens=lens)
+    renderer = base.create("blender", scene, tmp_path, samples_per_pixel=8,
+                           use_denoising=False)
+    bpy.ops.mesh.primitive_grid_add(x_subdivisions=24, y_subdivisions=24, size=12)
+    material = bpy.data.materials.new("wire")
+    nodes, links = material.node_tree.nodes, material.node_tree.links
+    nodes.clear()
+    wire, emission = nodes.new("ShaderNodeWireframe"), nodes.new("ShaderNodeEmission")
+    wire.use_pixel_size = True
+    wire.inputs[0].default_value = 2.0
+    links.new(wire.outputs[0], emission.inputs["Strength"])
+    links.new(emission.outputs[0], nodes.new("ShaderNodeOutputMaterial").inputs[0])
+    bpy.context.active_object.data.materials.append(material)
+    rgba = renderer.render(frames=[1], return_layers=("rgba",))["rgba"][0]
+    return rgba[..., :3].astype(np.float64).mean(-1)
+
+
+@pytest.mark.parametrize("model", ["fisheye", "opencv"])
+def test_the_lens_shader_s_ray_derivatives_equal_osl_s_automatic_ones(model, tmp_path,
+                                                                     monkeypatch):
+    """The shader writes the ray's derivatives out (so OSL does not differentiate its Newton
+    iterations: ~15 % of a frame); a wireframe drawn at a fixed width in pixels — a width Cycles
+    takes from those derivatives — comes out as with OSL's own automatic derivatives, and
+    visibly wider with derivatives 4× too large."""
+    from kubric.renderer import blender_lens as bl
+    lens = LENSES[model]
+    auto = _wireframe_brightness(lens, tmp_path / "a", monkeypatch, derivatives=False)
+    ours = _wireframe_brightness(lens, tmp_path / "b", monkeypatch)
+    monkeypatch.setattr(bl, "PIXEL_STEP", (4.0, -4.0))
+    wide = _wireframe_brightness(lens, tmp_path / "c", monkeypatch)
+    assert 20 < auto.mean() < 200  # wires and gaps both on screen
+    assert np.abs(ours - auto).mean() < 0.5, np.abs(ours - auto).mean()
+    assert np.abs(wide - auto).mean() > 10 and wide.mean() > auto.mean() + 10
