@@ -154,9 +154,12 @@ def apply_profile(r, p) -> None:
         setattr(r, name, getattr(p, name))
 
 
-def measure_settings(r, reference_samples: int, settings=None) -> dict:
+def measure_settings(r, reference_samples: int, settings=None, variants=()) -> dict:
     """The calibration of one scene's middle frame on renderer ``r`` (see the module doc) under
-    ``settings`` (quality profiles; default CALIBRATION_SETTINGS)."""
+    ``settings`` (quality profiles; default CALIBRATION_SETTINGS), then under each of
+    ``variants``: (label, profile, change) with ``change(r, on)`` changing the scene (on) and
+    back (off) around the variant's render (after a 1-sample warm-up), measured against the
+    same reference."""
     from kubric.recipes.render_quality import ANCHOR, CALIBRATION_SETTINGS
     settings = CALIBRATION_SETTINGS if settings is None else settings
     frame = (r.scene.frame_start + r.scene.frame_end) // 2
@@ -177,10 +180,15 @@ def measure_settings(r, reference_samples: int, settings=None) -> dict:
              "objects": (seg > 0) & ~np.isin(seg, background),
              "edges": edges, "textured": textured_pixels(ref, edges)}
     rows = {}
-    for p in settings:
+    for label, p, change in [(p.label, p, None) for p in settings] + list(variants):
+        if change is not None:
+            change(r, True)
+            render(replace(p, samples=1, denoise=False))  # warm-up: the changed shaders
         rgb, cpu, wall = render(p)
-        rows[p.label] = {"cpu": cpu, "wall": wall, **errors(rgb, ref, masks)}
-        print(f"  {p.label:44s} {cpu:7.2f} CPU-s  RMSE {np.sqrt(rows[p.label]['mse_all']):6.3f}",
+        if change is not None:
+            change(r, False)
+        rows[label] = {"cpu": cpu, "wall": wall, **errors(rgb, ref, masks)}
+        print(f"  {label:44s} {cpu:7.2f} CPU-s  RMSE {np.sqrt(rows[label]['mse_all']):6.3f}",
               flush=True)
     h, w = seg.shape
     return {"frame": frame, "resolution": [w, h], "reference_cpu": ref_cpu,
@@ -200,8 +208,10 @@ def child(recipe: str, seed: int, reference_samples: int, assignments: list[str]
 # -- pooling, the rule, the tables -----------------------------------------------------------------
 
 def pooled(scenes: list[dict]) -> dict[str, dict]:
-    """{label: {"cpu", "rmse_<class>", "dssim", "cpu_min", "cpu_max"}} over the recipe's seeds."""
-    labels = list(scenes[0]["settings"])
+    """{label: {"cpu", "rmse_<class>", "dssim", "cpu_min", "cpu_max"}} over the recipe's seeds
+    (the labels of every seed)."""
+    labels = [label for label in scenes[0]["settings"]
+              if all(label in s["settings"] for s in scenes)]
     out = {}
     for label in labels:
         rows = [s["settings"][label] for s in scenes]

@@ -1,5 +1,8 @@
-"""Cycles' noise levers under the calibration's rule: path guiding, clamping, filter glossy and
-adaptive sampling's minimum samples / threshold, alone and combined, on MOVi-A and MOVi-C.
+"""Cycles' levers under the calibration's rule, alone and combined, on MOVi-A and MOVi-C: noise
+levers (path guiding, clamping, filter glossy, adaptive sampling's minimum samples / threshold),
+OIDN's guide passes / network / prefilter at 16–32 spp, the per-sample cost levers (bounces, fast
+GI, light threshold, caustics, minimum light bounces, tile size, scrambling distance), and the
+floor shadow catcher of MOVi-C (rendered unlit against the same reference).
 
 The sibling of ``bench_quality_calibration.py`` with the same scenes, reference, measures, pooling
 and rule (``choose_default``: error on every measure within 1.15× of 64 spp + OIDN HIGH/ACCURATE),
@@ -70,7 +73,31 @@ LEVER_SETTINGS = (
     replace(oidn(64, adaptive=0.2), clamp_indirect=1.0, filter_glossy=3.0),
     replace(oidn(32), clamp_indirect=1.0, filter_glossy=3.0),
     replace(oidn(32), clamp_indirect=1.0, filter_glossy=3.0, path_guiding="surface"),
+    # OIDN at low sample counts: guide passes, network, prefilter (the calibration has 16 spp
+    # with the FAST / NONE prefilters and 32 spp with FAST)
+    oidn(16), replace(oidn(16), denoising_input_passes="RGB_ALBEDO"),
+    replace(oidn(32), denoising_input_passes="RGB_ALBEDO"),
+    replace(oidn(32), denoising_input_passes="RGB"), oidn(32, "BALANCED"),
+    oidn(32, prefilter="NONE"),
+    # per-sample cost levers that change bias, alone on today's default
+    replace(TODAY, total_bounces=4, diffuse_bounces=2, glossy_bounces=2, transmission_bounces=4),
+    replace(TODAY, total_bounces=2, diffuse_bounces=1, glossy_bounces=1, transmission_bounces=2),
+    replace(TODAY, fast_gi=1), replace(TODAY, light_threshold=0.1),
+    replace(TODAY, caustics=False), replace(TODAY, min_light_bounces=2),
+    # ... and those that only reorder the work (scrambling: fixed samples, Cycles ignores it
+    # under adaptive sampling)
+    replace(TODAY, tile_size=64), replace(oidn(32), scrambling_distance="auto"),
+    replace(oidn(32), scrambling_distance=0.2),
+    # combinations of the cost levers
+    replace(oidn(32), total_bounces=4, diffuse_bounces=2, glossy_bounces=2,
+            transmission_bounces=4, fast_gi=1, caustics=False),
+    replace(TODAY, total_bounces=4, diffuse_bounces=2, glossy_bounces=2, transmission_bounces=4,
+            fast_gi=1, caustics=False),
 )
+#: the floor shadow catcher (MOVi-C–F: a FlatMaterial with catch_shadows): where a scene has one,
+#: these settings are also rendered with it turned off (the unlit floor, ``floor_shadows=false``)
+#: and measured against the same reference (the shadowed floor)
+UNLIT_FLOOR = (ANCHOR, TODAY)
 #: the cost a new default must reach (× 64 spp's) to be proposed (issue 42)
 TARGET_COST = 0.5
 
@@ -81,8 +108,23 @@ def child(recipe: str, seed: int, reference_samples: int, assignments: list[str]
         tmp = pathlib.Path(tmp)
         options = [*recipe_options(recipe, tmp / "objects"), *assignments]
         result = with_renderer(recipe, seed, options, tmp / "scene", lambda r: measure_settings(
-            r, reference_samples, LEVER_SETTINGS))
+            r, reference_samples, LEVER_SETTINGS, floor_variants(r)))
     out.write_text(json.dumps({"recipe": recipe, "seed": seed, **result}))
+
+
+def floor_variants(r) -> list:
+    """(label, profile, change) of :data:`UNLIT_FLOOR` with the scene's shadow catchers turned
+    off, for ``measure_settings``; none where the scene has no shadow catcher."""
+    from kubric.core.materials import FlatMaterial
+    catchers = [a for a in r.scene.assets if isinstance(a, FlatMaterial) and a.catch_shadows]
+    if not catchers:
+        return []
+
+    def change(renderer, on: bool) -> None:
+        for material in catchers:
+            material.catch_shadows = not on
+
+    return [(f"{p.label}, floor unlit", p, change) for p in UNLIT_FLOOR]
 
 
 def summary(data: dict) -> list[str]:
@@ -100,10 +142,15 @@ def summary(data: dict) -> list[str]:
         "| setting | " + " | ".join(f"{n} × 64 spp cost | {n} worst ratio" for n in names)
         + " | pays |",
         "|---|" + "---|---|" * len(names) + "---|"]
-    for label in rows_of[names[0]]:
+    labels = list(dict.fromkeys(label for rows in rows_of.values() for label in rows))
+    for label in labels:
         cells, pays = [], True
         for name in names:
             rows = rows_of[name]
+            if label not in rows:  # e.g. the unlit floor of a recipe without a shadow catcher
+                cells += ["–", "–"]
+                pays = False
+                continue
             cost = rows[label]["cpu"] / rows[ANCHOR.label]["cpu"]
             ratio = worst(rows[label], rows[ANCHOR.label])
             pays &= ratio <= RULE_FACTOR and cost <= TARGET_COST

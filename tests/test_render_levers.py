@@ -10,7 +10,11 @@ from kubric.recipes.render_quality import _oidn
 from kubric.renderer.base import ALL_LAYERS
 
 LEVERS_ON = {"path_guiding": "all", "clamp_direct": 0.05, "clamp_indirect": 0.02,
-             "filter_glossy": 3.0, "adaptive_min_samples": 2}
+             "filter_glossy": 3.0, "adaptive_min_samples": 2,
+             "denoising_input_passes": "RGB_ALBEDO", "total_bounces": 3, "diffuse_bounces": 1,
+             "glossy_bounces": 2, "transmission_bounces": 3, "fast_gi": 1,
+             "light_threshold": 0.1, "caustics": False, "min_light_bounces": 2,
+             "scrambling_distance": 0.5, "tile_size": 16}
 
 
 def _scene():
@@ -45,7 +49,14 @@ def renders():
     on = r.render(return_layers=ALL_LAYERS)
     c = r.bpy_scene.cycles
     after = {"use_guiding": c.use_guiding, "clamp_indirect": c.sample_clamp_indirect,
-             "blur_glossy": c.blur_glossy}
+             "blur_glossy": c.blur_glossy, "bounces": (c.max_bounces, c.diffuse_bounces,
+                                                       c.glossy_bounces, c.transmission_bounces),
+             "fast_gi": (c.use_fast_gi, c.fast_gi_method, c.ao_bounces_render),
+             "caustics": (c.caustics_reflective, c.caustics_refractive),
+             "guides": c.denoising_input_passes, "tile": (c.use_auto_tile, c.tile_size),
+             "scrambling": (c.auto_scrambling_distance, c.scrambling_distance),
+             "light_threshold": c.light_sampling_threshold,
+             "min_light_bounces": c.min_light_bounces}
     return off, on, settings_off, r.settings(), after
 
 
@@ -72,7 +83,11 @@ def test_the_levers_reach_the_rgb_render_and_the_metadata(renders):
     assert {k: settings_on[k] for k in LEVERS_ON} == LEVERS_ON
     # the renderer leaves Blender in its RGB configuration: the levers are Cycles' settings
     assert after == {"use_guiding": True, "clamp_indirect": pytest.approx(0.02),
-                     "blur_glossy": 3.0}
+                     "blur_glossy": 3.0, "bounces": (3, 1, 2, 3),
+                     "fast_gi": (True, "REPLACE", 1), "caustics": (False, False),
+                     "guides": "RGB_ALBEDO", "tile": (True, 16),
+                     "scrambling": (False, 0.5), "light_threshold": pytest.approx(0.1),
+                     "min_light_bounces": 2}
 
 
 @pytest.mark.blender
@@ -81,6 +96,13 @@ def test_the_levers_reach_the_rgb_render_and_the_metadata(renders):
     ("clamp_indirect", -1, "a number in [0, 1e+08]"),
     ("filter_glossy", 11, "a number in [0, 10]"),
     ("adaptive_min_samples", 2.5, "an integer in [0, 4096]"),
+    ("denoising_input_passes", "NORMAL", "one of ['RGB', 'RGB_ALBEDO', 'RGB_ALBEDO_NORMAL']"),
+    ("diffuse_bounces", -1, "an integer in [0, 1024]"),
+    ("fast_gi", True, "an integer in [0, 1024]"),
+    ("light_threshold", 2, "a number in [0, 1]"),
+    ("caustics", "no", "True or False"),
+    ("scrambling_distance", "fast", "'auto' or a number in [0, 1]"),
+    ("tile_size", 4, "an integer in [8, 16384]"),
 ])
 def test_a_bad_lever_is_one_line_naming_the_value_and_what_is_allowed(name, value, allowed):
     from kubric.renderer.blender import Blender
@@ -118,3 +140,51 @@ def test_the_quality_label_and_renderer_arguments_name_each_lever():
     kw = recipe.renderer_quality()
     assert kw["adaptive_threshold"] == 0.2 and kw["clamp_indirect"] == 1.0
     assert kw["path_guiding"] == "surface" and "clamp_direct" not in kw
+
+
+@pytest.mark.blender
+def test_a_lever_set_as_a_recipe_option_reaches_the_renderer_and_the_metadata():
+    """``--set`` levers override the profile's fields, become renderer arguments (Blender's
+    constructor validates them again) and are recorded in metadata; unset, nothing is recorded."""
+    from kubric.pipeline import get_recipe
+    from kubric.renderer.blender import Blender
+    from kubric.renderer.blender_sampling import BLENDER_DEFAULTS
+    recipe = get_recipe("movi_c").from_assignments(
+        ["fast_gi=1", "total_bounces=4", "caustics=false", "scrambling_distance=auto",
+         "denoising_input_passes=RGB_ALBEDO", "clamp_indirect=1"])
+    kw = recipe.renderer_settings()
+    assert {k: kw[k] for k in ("fast_gi", "total_bounces", "caustics", "scrambling_distance",
+                               "denoising_input_passes", "clamp_indirect")} == {
+        "fast_gi": 1, "total_bounces": 4, "caustics": False, "scrambling_distance": "auto",
+        "denoising_input_passes": "RGB_ALBEDO", "clamp_indirect": 1.0}
+    assert kw["adaptive_threshold"] == 0.1  # the calibrated default's other fields stay
+    meta = recipe.render_metadata(Blender(kb.Scene(resolution=(8, 8)), **kw))
+    assert meta["fast_gi"] == 1 and meta["caustics"] is False and meta["total_bounces"] == 4
+    assert meta["quality_setting"] == (
+        "≤64 spp adaptive 0.1 + OIDN HIGH/ACCURATE, clamp 0/1, OIDN guides albedo, bounces "
+        "4/4/4/12, fast GI 1, no caustics, scrambling auto")
+    plain = get_recipe("movi_c").from_assignments([])
+    meta = plain.render_metadata(Blender(kb.Scene(resolution=(8, 8)),
+                                         **plain.renderer_settings()))
+    assert not set(BLENDER_DEFAULTS) & set(meta)
+    assert meta["quality_setting"] == "≤64 spp adaptive 0.1 + OIDN HIGH/ACCURATE"
+
+
+@pytest.mark.parametrize("assignment, allowed", [
+    ("fast_gi=-1", "int ≥ 0 ≤ 1024"),
+    ("scrambling_distance=2", "'auto' or a number in [0, 1]"),
+    ("denoising_input_passes=NORMAL", "one of RGB, RGB_ALBEDO, RGB_ALBEDO_NORMAL"),
+    ("caustics=maybe", "bool"),
+])
+def test_a_bad_lever_option_is_one_line(assignment, allowed):
+    from kubric.pipeline import OptionError, get_recipe
+    with pytest.raises(OptionError) as err:
+        get_recipe("movi_a").from_assignments([assignment])
+    message = str(err.value)
+    assert "\n" not in message and assignment.split("=")[0] in message and allowed in message
+
+
+def test_a_lever_option_needs_a_backend_with_quality_profiles():
+    from kubric.pipeline import OptionError, get_recipe
+    with pytest.raises(OptionError, match=r"renderer=raycast cannot .*\(fast_gi=1\)"):
+        get_recipe("movi_a").from_assignments(["renderer=raycast", "fast_gi=1"])

@@ -26,6 +26,7 @@ from dataclasses import dataclass, replace
 from typing import ClassVar
 
 from kubric.pipeline import Option, OptionError
+from kubric.recipes.render_levers import RenderLevers
 from kubric.renderer.base import BACKENDS, capabilities, refusal
 
 
@@ -46,6 +47,18 @@ class QualityProfile:
     clamp_indirect: float = 10.0         # largest indirect-light sample value; 0 = no clamp
     filter_glossy: float = 1.0           # blur of glossy after blurry bounces (0–10)
     adaptive_min_samples: int = 0        # samples before adaptive sampling may stop; 0 = auto
+    #: OIDN's guides and the per-sample cost levers (blender_sampling; defaults Blender's)
+    denoising_input_passes: str = "RGB_ALBEDO_NORMAL"  # RGB | RGB_ALBEDO | RGB_ALBEDO_NORMAL
+    total_bounces: int = 12
+    diffuse_bounces: int = 4
+    glossy_bounces: int = 4
+    transmission_bounces: int = 12
+    fast_gi: int = 0                     # 0 = off; N = AO replaces light after N bounces
+    light_threshold: float = 0.01        # lights estimated below it are not sampled
+    caustics: bool = True                # reflective and refractive caustics
+    min_light_bounces: int = 0           # bounces before Russian roulette
+    scrambling_distance: float | str = 1.0  # [0, 1] or "auto"
+    tile_size: int = 2048                # render tile side, px
 
     def levers(self) -> dict:
         """The noise levers that differ from Blender's defaults ({Blender option: value})."""
@@ -70,6 +83,31 @@ class QualityProfile:
             out += f", clamp {self.clamp_direct:g}/{self.clamp_indirect:g}"
         if "filter_glossy" in levers:
             out += f", filter glossy {self.filter_glossy:g}"
+        return out + self._cost_label(levers)
+
+    def _cost_label(self, levers: dict) -> str:
+        """The label's part for OIDN's guides and the per-sample cost levers."""
+        out = ""
+        if "denoising_input_passes" in levers:
+            out += ", OIDN guides " + {"RGB": "none", "RGB_ALBEDO": "albedo"}.get(
+                self.denoising_input_passes, "albedo+normal")
+        if {"total_bounces", "diffuse_bounces", "glossy_bounces", "transmission_bounces"} & \
+                set(levers):
+            out += (f", bounces {self.total_bounces}/{self.diffuse_bounces}/"
+                    f"{self.glossy_bounces}/{self.transmission_bounces}")
+        if "fast_gi" in levers:
+            out += f", fast GI {self.fast_gi}"
+        if "light_threshold" in levers:
+            out += f", light threshold {self.light_threshold:g}"
+        if "caustics" in levers:
+            out += ", no caustics"
+        if "min_light_bounces" in levers:
+            out += f", min light bounces {self.min_light_bounces}"
+        if "scrambling_distance" in levers:
+            d = self.scrambling_distance
+            out += f", scrambling {d if d == 'auto' else format(d, 'g')}"
+        if "tile_size" in levers:
+            out += f", tile {self.tile_size}"
         return out
 
 
@@ -152,10 +190,12 @@ def _backends_help() -> str:
     return "; ".join(rows)
 
 
-class RenderQuality:
+class RenderQuality(RenderLevers):
     """Mixin of every recipe that renders: the ``renderer`` option (a backend of
-    :data:`kubric.renderer.base.BACKENDS`), the ``quality`` / ``samples`` / ``denoise`` options and
-    their resolution into renderer keyword arguments and ``metadata["renderer"]`` fields.
+    :data:`kubric.renderer.base.BACKENDS`), the ``quality`` / ``samples`` / ``denoise`` options,
+    Cycles' levers (:class:`~kubric.recipes.render_levers.RenderLevers`: ``clamp_indirect``,
+    ``fast_gi``, ...) and their resolution into renderer keyword arguments and
+    ``metadata["renderer"]`` fields.
 
     A recipe asks its backend for capabilities, never for a name: :attr:`renderer_needs` (what
     it always needs, e.g. ``("photoreal",)``) and :meth:`renderer_requests` (what its options
@@ -184,9 +224,10 @@ class RenderQuality:
         return PROFILES[self.quality]
 
     def quality_profile(self) -> QualityProfile:
-        """The chosen profile with ``samples`` / ``denoise`` overrides applied: ``samples=N`` is
-        exactly N samples per pixel (a profile's adaptive sampling is turned off with it)."""
-        p = self.base_profile()
+        """The chosen profile with ``samples`` / ``denoise`` and lever overrides applied:
+        ``samples=N`` is exactly N samples per pixel (a profile's adaptive sampling is turned off
+        with it)."""
+        p = replace(self.base_profile(), **self.lever_overrides())
         if self.denoise is not None:
             p = replace(p, denoise=self.denoise)
         if self.samples is not None:
@@ -212,6 +253,7 @@ class RenderQuality:
         out = {need: f"the {self.name} recipe" for need in self.renderer_needs}
         given = [f"{name}={getattr(self, name)}" for name in ("samples", "denoise")
                  if getattr(self, name) is not None]
+        given += [f"{name}={value}" for name, value in self.lever_overrides().items()]
         if self.quality != "default":
             given.append(f"quality={self.quality}")
         if given:

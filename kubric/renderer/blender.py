@@ -39,8 +39,10 @@ Options (each checked in one line by :mod:`kubric.renderer.blender_options`):
   settings), keep_freed_memory (bool, default False: raise glibc's malloc thresholds for the rest
   of the process so that the buffers freed after each frame are reused — about 0.5 CPU-s less per
   24-frame 256² scene for 40–100 MiB more peak RSS, worth it at low sample counts;
-  :mod:`kubric.renderer.allocator`), and Cycles' noise levers path_guiding, clamp_direct,
-  clamp_indirect, filter_glossy and adaptive_min_samples (defaults: Blender's;
+  :mod:`kubric.renderer.allocator`), and Cycles' levers path_guiding, clamp_direct,
+  clamp_indirect, filter_glossy, adaptive_min_samples, denoising_input_passes, total_bounces,
+  diffuse_bounces, glossy_bounces, transmission_bounces, fast_gi, light_threshold, caustics,
+  min_light_bounces, scrambling_distance and tile_size (defaults: Blender's;
   :mod:`kubric.renderer.blender_sampling`; RGB only, recorded in settings() when not the default).
 Render threads: Blender's automatic count (all cores), or exactly N when the environment variable
 KUBRIC_RENDER_THREADS is N ≥ 1 (set by ``kubric generate --threads-per-scene`` on Dask).
@@ -103,10 +105,8 @@ class Blender(TableView, Renderer):
     background_transparency = live_option(
         "background_transparency", as_bool,
         lambda bscene, value: setattr(bscene.render, "film_transparent", value))
-    path_guiding, clamp_direct, clamp_indirect, filter_glossy, adaptive_min_samples = (
-        live_option(name, convert, lambda bscene, value, name=name:
-                    bsm.apply_one(bscene.cycles, name, value))
-        for name, convert in bsm.CONVERTERS.items())
+    # Cycles' levers (blender_sampling.CONVERTERS: path_guiding, clamps, bounces, ...) are
+    # live options too, added after the class body
 
     builders = bt.BUILDERS
     setters = bt.SETTERS
@@ -310,9 +310,8 @@ class Blender(TableView, Renderer):
         layer = s.view_layers[0]
         layer.material_override = None
         self._passes(layer, False)
-        if self.max_bounces is None:
-            c.max_bounces, c.diffuse_bounces, c.glossy_bounces = 12, 4, 4
-            c.transmission_bounces, c.volume_bounces, c.transparent_max_bounces = 12, 0, 8
+        if self.max_bounces is None:  # total/diffuse/glossy/transmission: the levers (above)
+            c.volume_bounces, c.transparent_max_bounces = 0, 8
         else:
             c.max_bounces = c.diffuse_bounces = c.glossy_bounces = self.max_bounces
             c.transmission_bounces = c.volume_bounces = c.transparent_max_bounces = \
@@ -506,6 +505,11 @@ class Blender(TableView, Renderer):
     # upstream workers called these private names
     _set_ambient_light_hdri = set_ambient_light_hdri
     _set_background_hdri = set_background_hdri
+
+
+for _name, _convert in bsm.CONVERTERS.items():
+    setattr(Blender, _name, live_option(_name, _convert, lambda bscene, value, name=_name:
+                                        bsm.apply_one(bscene.cycles, name, value)))
 
 
 class _FrameStack:
