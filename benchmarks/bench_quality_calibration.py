@@ -326,12 +326,13 @@ def write_doc(data: dict, doc: pathlib.Path = DOC) -> None:
 
 
 def run_child(script: str, recipe: str, seed: int, reference_samples: int,
-              assignments: list[str]) -> dict:
-    """Run ``script --child recipe seed OUT`` in a fresh process and return the scene it wrote."""
+              assignments: list[str], extra: tuple[str, ...] = ()) -> dict:
+    """Run ``script --child recipe seed OUT`` (with ``extra`` arguments) in a fresh process and
+    return the scene it wrote."""
     with tempfile.NamedTemporaryFile(suffix=".json", delete=False) as f:
         out = pathlib.Path(f.name)
     cmd = [sys.executable, str(pathlib.Path(script).resolve()), "--child", recipe, str(seed),
-           str(out), "--reference-samples", str(reference_samples)]
+           str(out), "--reference-samples", str(reference_samples), *extra]
     for s in assignments:
         cmd += ["--set", s]
     proc = subprocess.run(cmd, cwd=ROOT, stderr=subprocess.PIPE, text=True)

@@ -6,19 +6,23 @@ floor shadow catcher of MOVi-C (rendered unlit against the same reference).
 
 The sibling of ``bench_quality_calibration.py`` with the same scenes, reference, measures, pooling
 and rule (``choose_default``: error on every measure within 1.15× of 64 spp + OIDN HIGH/ACCURATE),
-over :data:`LEVER_SETTINGS` instead of the calibration grid: for each recipe and seed one fresh
+over :data:`LEVER_SETTINGS` (``--group levers``) or :data:`COMBINED_SETTINGS` (``--group
+combined``: the cheap levers combined) instead of the calibration grid: for each recipe and seed
+one fresh
 process builds the scene, stops where the recipe would render and renders its middle frame under
 every setting and once at the reference's sample count without denoising (Blender's defaults for
 the levers, as in the calibration). Cost: CPU-s of that one-frame render after a warm-up, and its
 ratio to 64 spp's in the same process. By default at 128² (``--set resolution=128``) to fit a
 small CPU budget: the ratios, not the CPU-s, carry to 256².
 
-Output: the rows in ``docs/data/render-levers.json`` and the tables in ``docs/render-cost.md``
-between its levers markers (date, load average, size printed with them).
+Output: the rows in ``docs/data/render-levers.json`` (``render-levers-combined.json``) and the
+tables in ``docs/render-cost.md`` between its levers (levers-combined) markers (date, load
+average, size printed with them).
 
-Run: ``.venv/bin/python benchmarks/bench_quality_levers.py [--recipes movi_a movi_c]
-[--seeds 1 2 3] [--set resolution=128]``. About 10 CPU-min of renders at 128² for both recipes,
-3 seeds (28 min wall on the shared 2-core machine).
+Run: ``.venv/bin/python benchmarks/bench_quality_levers.py [--group levers|combined]
+[--recipes movi_a movi_c] [--seeds 1 2 3] [--set resolution=128]``. The levers group: about 30
+min wall for both recipes and 3 seeds at 128² on the shared, loaded 2-core machine (a third of
+it the 1024-spp references); the combined group about 15 min.
 """
 
 from __future__ import annotations
@@ -98,17 +102,33 @@ LEVER_SETTINGS = (
 #: these settings are also rendered with it turned off (the unlit floor, ``floor_shadows=false``)
 #: and measured against the same reference (the shadowed floor)
 UNLIT_FLOOR = (ANCHOR, TODAY)
+#: the levers that cost no error alone on both recipes, or little (light threshold 0.1; OIDN's
+#: NONE prefilter at 32 spp), combined on today's default and at fewer samples
+#: (``--group combined``); 64 spp with the light threshold shows its per-sample saving
+_CHEAP = {"denoising_prefilter": "NONE", "light_threshold": 0.1}
+COMBINED_SETTINGS = (
+    ANCHOR, TODAY, replace(ANCHOR, light_threshold=0.1), replace(TODAY, light_threshold=0.1),
+    oidn(64, prefilter="NONE", adaptive=0.1), replace(TODAY, **_CHEAP),
+    replace(oidn(64, adaptive=0.15), **_CHEAP), replace(oidn(48, adaptive=0.1), **_CHEAP),
+)
+#: --group → (settings, rows file, docs markers, whether the floor is also rendered unlit)
+GROUPS = {
+    "levers": (LEVER_SETTINGS, DATA, (BEGIN, END), True),
+    "combined": (COMBINED_SETTINGS, DATA.with_name("render-levers-combined.json"),
+                 ("<!-- levers-combined: begin -->", "<!-- levers-combined: end -->"), False),
+}
 #: the cost a new default must reach (× 64 spp's) to be proposed (issue 42)
 TARGET_COST = 0.5
 
 
 def child(recipe: str, seed: int, reference_samples: int, assignments: list[str],
-          out: pathlib.Path) -> None:
+          out: pathlib.Path, group: str = "levers") -> None:
+    settings, _, _, floor = GROUPS[group]
     with tempfile.TemporaryDirectory(prefix="bench_levers_") as tmp:
         tmp = pathlib.Path(tmp)
         options = [*recipe_options(recipe, tmp / "objects"), *assignments]
         result = with_renderer(recipe, seed, options, tmp / "scene", lambda r: measure_settings(
-            r, reference_samples, LEVER_SETTINGS, floor_variants(r)))
+            r, reference_samples, settings, floor_variants(r) if floor else ()))
     out.write_text(json.dumps({"recipe": recipe, "seed": seed, **result}))
 
 
@@ -163,21 +183,23 @@ def summary(data: dict) -> list[str]:
     return lines
 
 
-def write_doc(text: str, doc: pathlib.Path) -> None:
+def write_doc(text: str, doc: pathlib.Path, markers=(BEGIN, END)) -> None:
+    begin, end = markers
     page = doc.read_text()
-    if BEGIN not in page or END not in page:
-        raise SystemExit(f"{doc} has no {BEGIN} … {END} section to fill")
-    head, rest = page.split(BEGIN, 1)
-    doc.write_text(f"{head}{BEGIN}\n{text}\n{END}{rest.split(END, 1)[1]}")
+    if begin not in page or end not in page:
+        raise SystemExit(f"{doc} has no {begin} … {end} section to fill")
+    head, rest = page.split(begin, 1)
+    doc.write_text(f"{head}{begin}\n{text}\n{end}{rest.split(end, 1)[1]}")
 
 
-def write_tables(data: dict, doc: pathlib.Path) -> int:
-    """Print the summary and write it with every recipe's table into ``doc``."""
+def write_tables(data: dict, doc: pathlib.Path, markers=(BEGIN, END)) -> int:
+    """Print the summary and write it with every recipe's table into ``doc`` between
+    ``markers``."""
     lines = summary(data)
     print("\n".join(lines))
     for name, rows in recipe_rows(data).items():
         lines += recipe_table(name, rows, [s for s in data["scenes"] if s["recipe"] == name])
-    write_doc("\n".join(lines), doc)
+    write_doc("\n".join(lines), doc, markers)
     print(f"tables → {doc}")
     return 0
 
@@ -188,7 +210,11 @@ def main(argv=None) -> int:
                                                                          ["movi_a"]))
     parser.add_argument("--seeds", nargs="*", type=int, default=smoke_mode.size([1, 2, 3], [1]))
     parser.add_argument("--reference-samples", type=int, default=smoke_mode.size(1024, 4))
-    parser.add_argument("--json", type=pathlib.Path, default=smoke_mode.output(DATA))
+    parser.add_argument("--group", choices=tuple(GROUPS), default="levers",
+                        help="levers: every lever alone and the first combinations (default); "
+                        "combined: the levers that cost little or no error, combined")
+    parser.add_argument("--json", type=pathlib.Path, default=None,
+                        help="default: docs/data/render-levers.json (…-combined.json)")
     parser.add_argument("--doc", type=pathlib.Path, default=smoke_mode.output(DOC))
     parser.add_argument("--set", action="append", metavar="KEY=VALUE", default=None,
                         help="options for every recipe (default: resolution=128)")
@@ -199,31 +225,33 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     if args.set is None:
         args.set = smoke_mode.size(["resolution=128"], ["resolution=16"])
+    settings, default_json, markers, _ = GROUPS[args.group]
+    args.json = args.json or smoke_mode.output(default_json)
     os.environ.setdefault("KUBRIC_CACHE_DIR", str(ROOT / ".cache" / "kubric"))
     if args.child:
         recipe, seed, out = args.child
-        child(recipe, int(seed), args.reference_samples, args.set, pathlib.Path(out))
+        child(recipe, int(seed), args.reference_samples, args.set, pathlib.Path(out), args.group)
         return 0
     if args.tables_only:  # e.g. a run stopped after some seeds
         data = json.loads(args.json.read_text())
         data["load"] = data["load"][:1] + [os.getloadavg()[0]]
-        return write_tables(data, args.doc)
-    data = {"reference_samples": args.reference_samples, "set": args.set,
-            "settings": [p.label for p in LEVER_SETTINGS], "scenes": [],
+        return write_tables(data, args.doc, markers)
+    data = {"reference_samples": args.reference_samples, "set": args.set, "group": args.group,
+            "settings": [p.label for p in settings], "scenes": [],
             "date": time.strftime("%Y-%m-%d"), "load": [os.getloadavg()[0]],
             "machine": f"{len(os.sched_getaffinity(0))} cores"}
     for seed in args.seeds:  # seed-major: a stopped run still covers every recipe
         for recipe in args.recipes:
             print(f"{recipe} seed {seed}", flush=True)
             data["scenes"].append(run_child(__file__, recipe, seed, args.reference_samples,
-                                            args.set))
+                                            args.set, ("--group", args.group)))
             args.json.parent.mkdir(parents=True, exist_ok=True)
             args.json.write_text(json.dumps(data, indent=1))  # kept if the run is stopped
     data["load"].append(os.getloadavg()[0])
     args.json.parent.mkdir(parents=True, exist_ok=True)
     args.json.write_text(json.dumps(data, indent=1))
     print(f"rows → {args.json}")
-    return write_tables(data, args.doc)
+    return write_tables(data, args.doc, markers)
 
 
 if __name__ == "__main__":
