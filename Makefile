@@ -28,8 +28,15 @@ $(STAMP): pyproject.toml | $(BIN)/python
 
 install: $(STAMP)
 
+# Two pytest-xdist workers (CI has 2 cores). loadgroup, not loadfile: a module whose tests share a
+# module-scoped fixture (a render) stays on one worker (tests/conftest.py marks it), every other
+# test is handed out alone, so a file of heavy independent tests (the benchmarks' smoke runs) is
+# split across both workers instead of making the run's tail. PYTEST_WORKERS=0 runs serially.
+PYTEST_WORKERS ?= 2
+XDIST := -n $(PYTEST_WORKERS) --dist loadgroup
+
 test: $(STAMP) browser testmodels
-	$(BIN)/python -m pytest -q --durations=40
+	$(BIN)/python -m pytest -q $(XDIST) --durations=40
 
 browser:  # Debian's chromium + chromedriver for the `kubric view` browser tests (skipped when present)
 	@if ! command -v chromium >/dev/null || ! command -v chromedriver >/dev/null; then \
@@ -46,7 +53,7 @@ testmodels:  # Debian's assimp-testmodels: CMU BVH clips + skinned FBX/glTF file
 # Everything but the tests marked `blender` (renders) or `slow` (servers, clusters, fault runs);
 # bpy is blocked so a render test without the marker fails. `make test` runs them all.
 test-fast: $(STAMP)
-	@start=$$(date +%s); $(BIN)/python -m pytest -q --no-blender -m "not slow"; rc=$$?; \
+	@start=$$(date +%s); $(BIN)/python -m pytest -q $(XDIST) --no-blender -m "not slow"; rc=$$?; \
 	echo "make test-fast: $$(( $$(date +%s) - start )) s wall"; exit $$rc
 
 # The demo needs the core dependencies only (bpy, pybullet, numpy, ...): no torch, jax, Dask or

@@ -6,6 +6,13 @@
   environment said. ``.cache/`` is gitignored and kept between runs, so KuBasic and the other
   generated sources are built on the first run only; delete it to start afresh. Set
   ``KUBRIC_TEST_CACHE_DIR`` to put that folder elsewhere (e.g. a CI cache).
+* **Two workers** (``make test`` runs ``pytest -n 2 --dist loadgroup``, pytest-xdist): a test
+  that uses a module- or class-scoped fixture (a shared render, a served folder), or whose module
+  memoises with ``functools.cache``, runs on the worker that runs the rest of its module
+  (``xdist_group`` = the module, so that the shared work is done once); every other test is
+  handed out on its own. A test's own ``xdist_group`` mark wins. Serial runs are unaffected.
+  Workers share ``.cache/``: asset sources are built under a lock, once
+  (``kubric.assets.asset_source.build_lock``).
 * **``--no-blender``** (``make test-fast``): deselects the tests marked ``blender`` and makes
   ``import bpy`` raise in the others and in their subprocesses, so a test that renders without the
   marker fails loudly instead of making the fast run slow. KuBasic is made sure of first (one of
@@ -16,6 +23,8 @@ import os
 import pathlib
 import runpy
 import sys
+
+import pytest
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 NO_BPY = pathlib.Path(__file__).resolve().parent / "no_bpy"  # its sitecustomize forbids bpy
@@ -58,3 +67,25 @@ def pytest_unconfigure(config):
         else:
             os.environ[name] = value
 
+
+
+def _shares_module_state(item) -> bool:
+    """Whether ``item`` uses a fixture of this suite scoped wider than a function, or its module
+    memoises with ``functools.cache`` / ``lru_cache`` (work its module's other tests reuse)."""
+    info = getattr(item, "_fixtureinfo", None)
+    for defs in (info.name2fixturedefs.values() if info is not None else ()):
+        for fixturedef in defs:
+            module = getattr(fixturedef.func, "__module__", "") or ""
+            if fixturedef.scope != "function" and not module.startswith(("_pytest", "pytest")):
+                return True
+    module = getattr(item, "module", None)
+    return module is not None and any(hasattr(v, "cache_info") for v in vars(module).values())
+
+
+@pytest.hookimpl(tryfirst=True)  # before pytest-xdist turns xdist_group marks into node ids
+def pytest_collection_modifyitems(config, items):
+    if config.getoption("dist", "no") != "loadgroup":
+        return
+    for item in items:
+        if item.get_closest_marker("xdist_group") is None and _shares_module_state(item):
+            item.add_marker(pytest.mark.xdist_group(item.nodeid.split("::", 1)[0]))

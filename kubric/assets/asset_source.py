@@ -14,6 +14,7 @@ per-source folder of the cache (see :func:`cache_dir`).
 
 from __future__ import annotations
 
+import contextlib
 import difflib
 import json
 import os
@@ -344,19 +345,39 @@ def _flock(fd: int, shared: bool, wait: bool = True) -> bool:
     return True
 
 
+@contextlib.contextmanager
+def build_lock(target: str | os.PathLike):
+    """Hold an exclusive ``flock`` on ``<parent>/.<name>.build.lock`` while building ``target``,
+    so that concurrent builders of one asset (test workers, ``generate --workers``) build it once:
+    the others wait, then find it built. The kernel drops the lock when its holder dies."""
+    target = Path(target)
+    target.parent.mkdir(parents=True, exist_ok=True)
+    fd = os.open(target.parent / f".{target.name}.build.lock", os.O_RDWR | os.O_CREAT, 0o644)
+    try:
+        _flock(fd, shared=False)
+        yield
+    finally:
+        os.close(fd)  # releases the lock
+
+
 def build_once(target: str | os.PathLike, build) -> Path:
     """Run ``build(tmp_dir)`` unless ``target/manifest.json`` exists, then rename tmp → target.
 
     The build happens in a temporary sibling folder, so a crash never leaves a half-built source
-    and concurrent builders never see one; if another process finished first, its copy is kept.
-    A build (seconds to minutes) says so on stderr when it starts and ends.
+    and concurrent builders never see one; they also wait for each other (:func:`build_lock`)
+    rather than build it twice. A build (seconds to minutes) says so on stderr when it starts
+    and ends.
     """
     target = Path(target)
     if (target / "manifest.json").is_file():
         return target
-    start = time.monotonic()
-    print(f"building the asset source {target.name} into {target.parent} (first use only)",
-          file=sys.stderr, flush=True)
-    built = build_staged(target, build, complete=lambda t: (t / "manifest.json").is_file())
-    print(f"built {target.name} in {time.monotonic() - start:.0f} s", file=sys.stderr, flush=True)
+    with build_lock(target):
+        if (target / "manifest.json").is_file():  # another process built it while we waited
+            return target
+        start = time.monotonic()
+        print(f"building the asset source {target.name} into {target.parent} (first use only)",
+              file=sys.stderr, flush=True)
+        built = build_staged(target, build, complete=lambda t: (t / "manifest.json").is_file())
+        print(f"built {target.name} in {time.monotonic() - start:.0f} s", file=sys.stderr,
+              flush=True)
     return built
