@@ -16,17 +16,31 @@ from pathlib import Path
 import numpy as np
 import smoke_mode
 
+#: a smoke run's subsets (a full run takes all): KuBasic shapes built, pybullet_data objects
+#: converted, textured models and KuBasic shapes whose convex decomposition is timed
+KUBASIC_SHAPES = smoke_mode.size(None, ["cube", "sphere"])
+CONVERTED = smoke_mode.size(None, ["jenga", "textured_cube"])
+DECOMPOSED_MODELS = smoke_mode.size(None, ["concave_box"])
+DECOMPOSED_SHAPES = smoke_mode.size(("gear", "sponge", "teapot", "torus", "torus_knot", "spot"), ())
+
 
 def bench_kubasic(out: Path, workers: int) -> dict:
     """A fresh KuBasic build through ``ensure_kubasic`` and then the cached path (what every later
     use costs), with the ratio of the two."""
-    from kubric.asset_tools.kubasic import ensure_kubasic
+    from kubric.asset_tools.kubasic import NAME, build_kubasic, ensure_kubasic
+    from kubric.assets.asset_source import build_once
+
+    def ensure():
+        if KUBASIC_SHAPES is None:
+            return ensure_kubasic(cache=out, workers=workers)
+        return build_once(out / NAME, lambda tmp: build_kubasic(tmp, workers=workers,
+                                                                 shapes=KUBASIC_SHAPES))
 
     t0 = time.perf_counter()
-    ensure_kubasic(cache=out, workers=workers)
+    ensure()
     built = time.perf_counter() - t0
     t0 = time.perf_counter()
-    ensure_kubasic(cache=out, workers=workers)
+    ensure()
     cached = time.perf_counter() - t0
     return {"kubasic_seconds": round(built, 1), "kubasic_cached_seconds": round(cached, 4),
             "cached_over_build": round(cached / built, 5), "workers": workers}
@@ -36,7 +50,8 @@ def bench_full_conversion(out: Path, workers: int, limit: int | None) -> dict:
     from kubric.asset_tools.pybullet_collection import build_pybullet_collection
 
     t0 = time.perf_counter()
-    report = build_pybullet_collection(out / "PybulletObjects", limit=limit, workers=workers)
+    report = build_pybullet_collection(out / "PybulletObjects", limit=limit, workers=workers,
+                                       only=CONVERTED)
     seconds = time.perf_counter() - t0
     manifest = json.loads((out / "PybulletObjects" / "manifest.json").read_text())
     methods: dict[str, int] = {}
@@ -92,12 +107,12 @@ def bench_decomposition() -> list[dict]:
 
     meshes = {}
     for job in pybullet_jobs(limit=0):
-        if job.asset_id in TEXTURED_MODELS:
+        if job.asset_id in TEXTURED_MODELS and job.asset_id in (DECOMPOSED_MODELS or TEXTURED_MODELS):
             mesh = load_mesh(job.mesh_path, job.up, job.scale)
             closed, ok = physics.make_watertight(mesh)
             if physics.convex_parts_if_any(closed if ok else mesh) is None:
                 meshes[job.asset_id] = (closed if ok else mesh, ok)
-    for name in ("gear", "sponge", "teapot", "torus", "torus_knot", "spot"):
+    for name in DECOMPOSED_SHAPES:
         m = getattr(shapes, name)()
         meshes[f"kubasic/{name}"] = (m, bool(m.is_watertight))
     try:

