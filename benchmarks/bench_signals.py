@@ -37,7 +37,8 @@ TINY = ["--set", "resolution=16", "--set", "frame_end=3", "--set", "samples=1"]
 def command(target: str, out: pathlib.Path) -> list[str]:
     if target == "worker":
         return ["worker", "movi_a", "--seed", "0", *TINY, "--out", str(out)]
-    return ["generate", "movi_a", "--scenes", "2", "--workers", "1", "--no-progress", *TINY,
+    return ["generate", "movi_a", "--scenes", str(smoke_mode.size(2, 1)), "--workers", "1",
+            "--no-progress", *TINY,
             "--out", str(out)]
 
 
