@@ -20,8 +20,10 @@ generating one 128², 24-frame scene takes about 31 s on the shared 2-core machi
 from __future__ import annotations
 
 import argparse
+import atexit
 import os
 import pathlib
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -36,8 +38,14 @@ OPTIONS = smoke_mode.size(["resolution=128", "samples=4", "denoise=false"],
 
 
 def cache_dir() -> pathlib.Path:
+    """Where the scenes are generated: kept in the asset cache for full runs; a fresh temporary
+    folder in a smoke run (scenes cached by an older recipe would be refused: other options)."""
+    if smoke_mode.SMOKE:
+        folder = tempfile.mkdtemp(prefix="bench_datasets_scenes_")
+        atexit.register(shutil.rmtree, folder, ignore_errors=True)
+        return pathlib.Path(folder) / "movi_a_smoke"
     base = os.environ.get("KUBRIC_CACHE_DIR") or pathlib.Path.home() / ".cache" / "kubric"
-    return pathlib.Path(base) / "bench_datasets" / smoke_mode.size("movi_a_128", "movi_a_smoke")
+    return pathlib.Path(base) / "bench_datasets" / "movi_a_128"
 
 
 def ensure_scenes(count: int) -> pathlib.Path:

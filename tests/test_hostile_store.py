@@ -177,7 +177,7 @@ def test_a_stalled_store_ends_in_one_line_within_its_deadline(store):
         endpoint = f"http://127.0.0.1:{server.getsockname()[1]}"
         start = time.monotonic()
         proc = kubric("pack", store["scenes"], "--out", "s3://stalled/ds", *PACK, timeout=120,
-                      env={"FSSPEC_S3_ENDPOINT_URL": endpoint, "KUBRIC_STORE_TIMEOUT": "2"})
+                      env={"FSSPEC_S3_ENDPOINT_URL": endpoint, "KUBRIC_STORE_TIMEOUT": "1"})
         took = time.monotonic() - start
     finally:
         server.close()
@@ -186,7 +186,7 @@ def test_a_stalled_store_ends_in_one_line_within_its_deadline(store):
     lines = proc.stderr.strip().splitlines()
     assert proc.returncode in (1, 2) and len(lines) == 1, proc.stderr[-3000:]
     assert "'s3://stalled/ds'" in lines[0] and "no answer within the deadline" in lines[0]
-    assert took < 60, took  # one operation's deadline (10 × 2 s), not minutes
+    assert took < 60, took  # one operation's deadline (10 × 1 s), not minutes
     assert held, "the pack never reached the stalled server"
 
 
