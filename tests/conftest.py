@@ -82,10 +82,18 @@ def _shares_module_state(item) -> bool:
     return module is not None and any(hasattr(v, "cache_info") for v in vars(module).values())
 
 
-@pytest.hookimpl(tryfirst=True)  # before pytest-xdist turns xdist_group marks into node ids
+@pytest.hookimpl(tryfirst=True)  # before pytest-xdist reads the xdist_group marks
 def pytest_collection_modifyitems(config, items):
-    if config.getoption("dist", "no") != "loadgroup":
+    # a worker has dist "no" and loadgroup True (pytest-xdist's setup_config); a serial run neither
+    if not getattr(config.option, "loadgroup", False):
         return
     for item in items:
         if item.get_closest_marker("xdist_group") is None and _shares_module_state(item):
             item.add_marker(pytest.mark.xdist_group(item.nodeid.split("::", 1)[0]))
+        groups = sorted({str(m.args[0] if m.args else m.kwargs.get("name", "default"))
+                         for m in item.iter_markers("xdist_group")})
+        if groups and hasattr(item, "_id"):
+            # the "@group" suffix the scheduler groups by: pytest-xdist 3.8 writes it to
+            # item._nodeid, which pytest ≥ 9.2 no longer reads (the node id lives in item._id)
+            from _pytest.nodeid import coerce_node_id
+            item._id = coerce_node_id(f"{item.nodeid}@{'_'.join(groups)}")
