@@ -93,8 +93,11 @@ def toys(tmp_path_factory):
 @pytest.mark.blender
 @pytest.mark.slow
 @pytest.mark.parametrize("name", sorted(TINY))
-def test_recipe_scene_is_declared_checked_and_packs(name, tmp_path, toys):
-    options = TINY[name] + ([f"objects={toys}"] if name == "toybox" else [])
+def test_recipe_scene_is_declared_checked_and_packs(name, tmp_path, request):
+    # only toybox asks for the module's toys: the other recipes' scenes share nothing, so two
+    # test workers may take them apart (a module fixture groups its users on one worker)
+    options = TINY[name] + ([f"objects={request.getfixturevalue('toys')}"]
+                            if name == "toybox" else [])
     sets = [a for o in options for a in ("--set", o)]
     _kubric("worker", name, "--seed", 3, "--out", tmp_path / "scenes", *sets)
     scene = tmp_path / "scenes" / scene_dir.scene_name(3)
