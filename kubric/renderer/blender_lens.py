@@ -59,6 +59,20 @@ float kb_ratio(float r2) {
     return (1.0 + r2 * (%(k1)r + r2 * (%(k2)r + r2 * %(k3)r)))
          / (1.0 + r2 * (%(k4)r + r2 * (%(k5)r + r2 * %(k6)r)));
 }
+// the distortion at (a, b): radial ratio q, its denominator den and the (symmetric) Jacobian
+void kb_jacobian(float a, float b, output float q, output float den, output float j00,
+                 output float j01, output float j11) {
+    float r2 = a * a + b * b;
+    float num = 1.0 + r2 * (%(k1)r + r2 * (%(k2)r + r2 * %(k3)r));
+    den = 1.0 + r2 * (%(k4)r + r2 * (%(k5)r + r2 * %(k6)r));
+    float dnum = %(k1)r + r2 * (2.0 * %(k2)r + 3.0 * r2 * %(k3)r);
+    float dden = %(k4)r + r2 * (2.0 * %(k5)r + 3.0 * r2 * %(k6)r);
+    q = num / den;
+    float dq = (dnum * den - num * dden) / (den * den);
+    j00 = q + 2.0 * a * a * dq + 2.0 * %(p1)r * b + 6.0 * %(p2)r * a;
+    j01 = 2.0 * a * b * dq + 2.0 * %(p1)r * a + 2.0 * %(p2)r * b;
+    j11 = q + 2.0 * b * b * dq + 6.0 * %(p1)r * b + 2.0 * %(p2)r * a;
+}
 // n Newton steps on the full model from (a, b); res: the residual before the last step
 void kb_newton(float xd, float yd, int n, output float a, output float b, output float res,
                output float ok) {
@@ -66,17 +80,10 @@ void kb_newton(float xd, float yd, int n, output float a, output float b, output
     ok = 0.0;
     for (int i = 0; i < n; i++) {
         float r2 = a * a + b * b;
-        float num = 1.0 + r2 * (%(k1)r + r2 * (%(k2)r + r2 * %(k3)r));
-        float den = 1.0 + r2 * (%(k4)r + r2 * (%(k5)r + r2 * %(k6)r));
-        float dnum = %(k1)r + r2 * (2.0 * %(k2)r + 3.0 * r2 * %(k3)r);
-        float dden = %(k4)r + r2 * (2.0 * %(k5)r + 3.0 * r2 * %(k6)r);
-        float q = num / den;
-        float dq = (dnum * den - num * dden) / (den * den);
+        float q, den, j00, j01, j11;
+        kb_jacobian(a, b, q, den, j00, j01, j11);
         float ex = a * q + 2.0 * %(p1)r * a * b + %(p2)r * (r2 + 2.0 * a * a) - xd;
         float ey = b * q + %(p1)r * (r2 + 2.0 * b * b) + 2.0 * %(p2)r * a * b - yd;
-        float j00 = q + 2.0 * a * a * dq + 2.0 * %(p1)r * b + 6.0 * %(p2)r * a;
-        float j01 = 2.0 * a * b * dq + 2.0 * %(p1)r * a + 2.0 * %(p2)r * b;
-        float j11 = q + 2.0 * b * b * dq + 6.0 * %(p1)r * b + 2.0 * %(p2)r * a;
         float det = j00 * j11 - j01 * j01;
         res = max(fabs(ex), fabs(ey));
         ok = (det > 0.0 && den > 0.0) ? 1.0 : 0.0;
@@ -112,16 +119,8 @@ void kb_newton(float xd, float yd, int n, output float a, output float b, output
 #: Newton iterations itself (its automatic derivatives cost ~15 % of a 256² frame): d(a, b) /
 #: d(xd, yd) is the inverse Jacobian of the distortion at the solution
 _BROWN_DERIVATIVES = """    {
-        float r2 = a * a + b * b;
-        float num = 1.0 + r2 * (%(k1)r + r2 * (%(k2)r + r2 * %(k3)r));
-        float den = 1.0 + r2 * (%(k4)r + r2 * (%(k5)r + r2 * %(k6)r));
-        float dnum = %(k1)r + r2 * (2.0 * %(k2)r + 3.0 * r2 * %(k3)r);
-        float dden = %(k4)r + r2 * (2.0 * %(k5)r + 3.0 * r2 * %(k6)r);
-        float q = num / den;
-        float dq = (dnum * den - num * dden) / (den * den);
-        float j00 = q + 2.0 * a * a * dq + 2.0 * %(p1)r * b + 6.0 * %(p2)r * a;
-        float j01 = 2.0 * a * b * dq + 2.0 * %(p1)r * a + 2.0 * %(p2)r * b;
-        float j11 = q + 2.0 * b * b * dq + 6.0 * %(p1)r * b + 2.0 * %(p2)r * a;
+        float q, den, j00, j01, j11;
+        kb_jacobian(a, b, q, den, j00, j01, j11);
         float det = j00 * j11 - j01 * j01;
         if (det == 0.0) det = 1.0;
         float sx = %(step_x)r / %(fx)r, sy = %(step_y)r / %(fy)r;
