@@ -192,10 +192,10 @@ def write_doc(text: str, doc: pathlib.Path, markers=(BEGIN, END)) -> None:
     doc.write_text(f"{head}{begin}\n{text}\n{end}{rest.split(end, 1)[1]}")
 
 
-def write_tables(data: dict, doc: pathlib.Path, markers=(BEGIN, END)) -> int:
-    """Print the summary and write it with every recipe's table into ``doc`` between
-    ``markers``."""
-    lines = summary(data)
+def write_tables(data: dict, doc: pathlib.Path, markers=(BEGIN, END), summarize=None) -> int:
+    """Print the summary (``summarize(data)``, default :func:`summary`) and write it with every
+    recipe's table into ``doc`` between ``markers``."""
+    lines = (summarize or summary)(data)
     print("\n".join(lines))
     for name, rows in recipe_rows(data).items():
         lines += recipe_table(name, rows, [s for s in data["scenes"] if s["recipe"] == name])
@@ -204,12 +204,17 @@ def write_tables(data: dict, doc: pathlib.Path, markers=(BEGIN, END)) -> int:
     return 0
 
 
-def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+def add_scene_arguments(parser: argparse.ArgumentParser) -> None:
+    """--recipes (MOVi-A and MOVi-C), --seeds (1–3), --reference-samples (1024); smoke sizes."""
     parser.add_argument("--recipes", nargs="*", default=smoke_mode.size(["movi_a", "movi_c"],
                                                                          ["movi_a"]))
     parser.add_argument("--seeds", nargs="*", type=int, default=smoke_mode.size([1, 2, 3], [1]))
     parser.add_argument("--reference-samples", type=int, default=smoke_mode.size(1024, 4))
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    add_scene_arguments(parser)
     parser.add_argument("--group", choices=tuple(GROUPS), default="levers",
                         help="levers: every lever alone and the first combinations (default); "
                         "combined: the levers that cost little or no error, combined")

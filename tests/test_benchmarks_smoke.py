@@ -64,6 +64,10 @@ ROWS = {
                       r"true\}"],
     "bench_stereo": [r"^  mono +[\d.]+ CPU-s/scene", r"^  stereo +[\d.]+ CPU-s/scene \([\d.]+× mono"],
     "bench_simulator": [r"^ +2 +240 +[\d.]+ +[\d.]+ +[\d.]+ +[\d.]+ +\d+ +\d+$"],
+    "bench_temporal_accumulation": [
+        r"^\| 1 spp, 2 frames along the flow, changes > 3 levels rejected \| [\d.]+ \| [\d.]+",
+        r"^\| movi_a \| 1 spp \+ OIDN \(denoised outside Cycles\) \| [\d.]+% / \d+% / ",
+        r"^tables → .+render-cost\.md"],
     "bench_tracks": [r"^16 tracks +: +[\d.]+ CPU-s", r"^ratio tracks / render"],
     "bench_viewer": [r"^scene list  HTTP cold", r"^pixel probe \(cold frames\) median"],
 }
@@ -76,7 +80,7 @@ BLENDER = {"bench_assets", "bench_characters", "bench_cloth_engines", "bench_dat
            "bench_quality_calibration", "bench_quality_levers", "bench_raycast", "bench_render",
            "bench_render_levers",
            "bench_scaling", "bench_scene_cost", "bench_shadows", "bench_signals", "bench_stereo",
-           "bench_tracks", "bench_viewer"}
+           "bench_temporal_accumulation", "bench_tracks", "bench_viewer"}
 
 
 def docs_state() -> dict[str, str]:
