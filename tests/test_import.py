@@ -16,3 +16,13 @@ def test_lazy_names_resolve():
     import kubric as kb
     assert callable(kb.move_until_no_overlap)
     assert "renderer" in dir(kb)
+
+
+def test_built_in_recipes_load_no_mesh_library():
+    """Every `kubric worker` imports the built-in recipes (to find its recipe by name): trimesh
+    and scipy (~0.5 s) come with the layers that cast rays, not with the registry."""
+    code = ("import kubric.recipes, sys; "
+            "print(sorted({'bpy', 'pybullet', 'trimesh', 'scipy'} & {m.split('.')[0] "
+            "for m in sys.modules}))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]"

@@ -36,7 +36,6 @@ from kubric.annotations.materials_parts import (
 from kubric.annotations.scene_flow import CAMERA_LAYERS, WORLD_LAYERS, scene_flow
 from kubric.io.bitmask import pack_masks
 from kubric.io.schema import Feature, Schema
-from kubric.renderer.scene_model_layers import amodal_masks, skinned_anchor
 
 EXTRA_LAYERS = ("amodal", "scene_flow", "scene_flow_camera", "occlusion_boundaries",
                 "material_ids", "part_ids")
@@ -130,7 +129,10 @@ def schema_with(schema: Schema, names) -> Schema:
 def add_before_relabel(scene, layers: dict, names) -> None:
     """The layers that need the renderer's own labels (scene flow, boundaries, material and part
     ids; the tables go to ``scene.metadata``)."""
+    # Embree's casters (trimesh, scipy: ~1 s to import) only when a layer needs them, not with
+    # the recipes nor in a scene without such layers
     if "scene_flow" in names or "scene_flow_camera" in names:
+        from kubric.renderer.scene_model_layers import skinned_anchor
         flows = scene_flow(scene, layers["depth"], layers["segmentation"],
                            camera_frame="scene_flow_camera" in names, anchor=skinned_anchor)
         for key in (WORLD_LAYERS if "scene_flow" in names else ()) + \
@@ -143,6 +145,7 @@ def add_before_relabel(scene, layers: dict, names) -> None:
             scene.metadata[key] = table
             layers[name] = id_layer(layers["segmentation"], scene.assets, ids)
             if name == "part_ids":  # a character's body parts, by the face each ray hits
+                from kubric.renderer.scene_model_layers import skinned_anchor
                 character_part_ids(scene, layers["depth"], layers["segmentation"],
                                    layers[name], ids, anchor=skinned_anchor)
     if "occlusion_boundaries" in names:
@@ -153,6 +156,7 @@ def add_before_relabel(scene, layers: dict, names) -> None:
 def add_after_relabel(scene, layers: dict, names, instances) -> None:
     """The amodal layer and annotations (instance k = bit k, the relabelled order)."""
     if "amodal" in names:
+        from kubric.renderer.scene_model_layers import amodal_masks
         masks = amodal_masks(scene, instances)
         annotate_amodal(masks, layers["segmentation"], instances)
         layers["amodal_segmentation"] = pack_masks(masks)
