@@ -21,11 +21,13 @@ Also printed per recipe: where a single low-sample frame's error is (its share o
 error on object, edge and other pixels against 64 spp's), and an error bound for spending the
 samples where the objects are: the 64-spp image pasted over the object and edge pixels (dilated
 by 0 / 8 px) of the low-sample frame — the best any object-aware sampling could do with the
-low-sample count elsewhere (no cost: it is not a render).
+low-sample count elsewhere (no cost: it is not a render) — and that lever rendered: 64 spp in
+the bounding box of each connected part of the 8-px region (Cycles' render border, one render per
+box) pasted into the low-sample frame, its cost the low-sample frame's plus the boxes'.
 
 Output: rows in ``docs/data/render-temporal.json``, tables in ``docs/render-cost.md`` between its
 temporal markers. Run: ``.venv/bin/python benchmarks/bench_temporal_accumulation.py [--recipes
-movi_a movi_c] [--seeds 1 2 3]`` (about 10 min wall on the shared 2-core machine).
+movi_a movi_c] [--seeds 1 2 3]`` (about 12 min wall on the shared 2-core machine).
 """
 
 from __future__ import annotations
@@ -166,6 +168,30 @@ def accumulate(images: dict, corr: dict, frames: list[int], k: int, denoised: di
     return [(t / count[..., None]).astype(np.float32) for t in sums] + [count]
 
 
+def region_render(r, frame: int, region: np.ndarray, base8: np.ndarray):
+    """``base8`` with ``region``'s pixels replaced by 64 spp (Cycles' OIDN) rendered in the
+    bounding box of each connected part of ``region`` (Cycles' render border, one render per box)
+    → (8-bit image, CPU-s of the box renders, fraction of the frame in boxes)."""
+    from scipy import ndimage
+    s = r.bpy_scene
+    h, w = region.shape
+    out, cpu, area = base8.copy(), 0.0, 0
+    labels, _ = ndimage.label(region)
+    try:
+        for rows, cols in ndimage.find_objects(labels):
+            s.render.use_border, s.render.use_crop_to_border = True, False
+            s.render.border_min_x, s.render.border_max_x = cols.start / w, cols.stop / w
+            s.render.border_min_y, s.render.border_max_y = 1 - rows.stop / h, 1 - rows.start / h
+            images, cost = render_linear(r, [frame], ANCHOR, False, False)
+            cpu += cost[frame]
+            area += (rows.stop - rows.start) * (cols.stop - cols.start)
+            inside = region[rows, cols]
+            out[rows, cols][inside] = srgb8(images[frame]["Combined"])[rows, cols][inside]
+    finally:
+        s.render.use_border = False
+    return out, cpu, area / (h * w)
+
+
 def measure(r, reference_samples: int, spps, ks, thresholds) -> dict:
     """One scene: see the module doc."""
     from scipy import ndimage
@@ -253,6 +279,10 @@ def measure(r, reference_samples: int, spps, ks, thresholds) -> dict:
             composite = np.where(region[..., None], images8[ANCHOR.label], images8[single])
             bounds[f"{single}, 64 spp over objects and edges + {grow} px"] = {
                 "pixels": float(region.mean()), **errors(composite, ref, masks)}
+        # the same, rendered: 64 spp in each box of that region (Cycles' render border)
+        image8, cpu, area = region_render(r, m, region, images8[single])
+        record(f"{spp} spp + 64 spp in the boxes of objects and edges + 8 px", image8,
+               rows[single]["cpu"] + cpu, frames=1.0, box_pixels=area)
     return {"frame": m, "frames": frames, "resolution": [w, h],
             "reference_cpu": float(ref_cpu[m]),
             "fractions": {c: float(mask.mean()) for c, mask in masks.items()},
@@ -304,6 +334,14 @@ def summary(data: dict) -> list[str]:
             cells += [f"{cost:.2f}", f"{ratio:.2f}" + (" ✓" if ratio <= RULE_FACTOR else ""),
                       f"{frames:.2f}"]
         lines.append(f"| {label} | {' | '.join(cells)} | {'**yes**' if pays else 'no'} |")
+    boxes = {(name, label): np.mean([s["settings"][label]["box_pixels"] for s in data["scenes"]
+                                     if s["recipe"] == name])
+             for name in names for label in rows_of[name]
+             if "box_pixels" in data["scenes"][0]["settings"].get(label, {})}
+    if boxes:
+        lines += ["", "Frame area in the render-border boxes: " + "; ".join(
+            f"{name}, {label.split(' +')[0]}: {v:.0%}" for (name, label), v in boxes.items())
+            + "."]
     lines += ["", "Where a single low-sample frame's error is (pooled over seeds; *share* of its "
               "squared error; MSE against 64 spp's on the same pixels), and the object-aware "
               "bound (64 spp pasted over the object and edge pixels; error ratios to 64 spp):", "",
