@@ -29,7 +29,10 @@ motion blur (``coverage_samples``); the ground truth is :mod:`kubric.annotations
   with its occlusions (``event_interpolation=flow``,
   :mod:`kubric.annotations.flow_interpolation`: the renderer's own shading, no extra render),
   or the rendered frames alone (``event_subframes=0``: log intensity linear between frame
-  times); recorded in ``metadata.event_camera``.
+  times); recorded in ``metadata.event_camera``. With a camera rig (``cameras=stereo|ring|
+  random``) every camera is an event camera: each further camera's stream from its own frames in
+  ``events_NAME.h5`` (e.g. ``events_right.h5``) with thresholds of its own, listed in
+  ``metadata.event_camera.cameras``.
 """
 
 from __future__ import annotations
@@ -66,7 +69,8 @@ class ExposureOptions:
     rolling_shutter = Option(0.0, "rolling-shutter readout time from the image's top edge to "
                              "its bottom edge (frames; 0 = global shutter; not with motion "
                              "blur or dof)", low=0.0, high=10.0)
-    events = Option(False, "write events.h5: an event-camera stream (DSEC layout)")
+    events = Option(False, "write events.h5: an event-camera stream (DSEC layout; with a camera "
+                    "rig also events_NAME.h5 per further camera)")
     event_subframes = Option(8, "event intensity samples per frame: 0 = the rendered frames, "
                              "log intensity linear between them; K = K sub-frames (see "
                              "event_interpolation); 8 is the cheapest within the stated error "
@@ -148,8 +152,14 @@ class ExposureOptions:
         from kubric.renderer.raycast_subframes import shutter_segmentation
         return shutter_segmentation(scene, scene.frames, shutter, self.coverage_samples)
 
-    def event_files(self, scene, layers: dict, seed: int) -> dict:
-        """With ``events``: {events.h5: bytes}; the sensor in ``scene.metadata["event_camera"]``."""
+    def event_files(self, scene, layers: dict, seed: int, camera: tuple | None = None) -> dict:
+        """With ``events``: {events.h5: bytes}; the sensor in ``scene.metadata["event_camera"]``.
+
+        ``camera``: (name, index ≥ 1) of a rig's further camera whose ``layers`` these are
+        (``scene.camera`` is that camera): its stream goes to ``events_NAME.h5``, its thresholds
+        are drawn from an rng of its own (``RandomState([seed, tag, index])``: the reference
+        camera's stay those of the mono scene), and its file and event count are recorded in
+        ``scene.metadata["event_camera"]["cameras"][NAME]``."""
         if not self.events:
             return {}
         from kubric.annotations import event_camera as ev
@@ -172,17 +182,22 @@ class ExposureOptions:
             log_i = ev.srgb_to_log_intensity(np.clip(layers["rgba"][..., :3], 0, 255),
                                              model.eps)
         h, w = log_i.shape[1:3]
-        rng = np.random.RandomState([int(seed), EVENTS_RNG_TAG])
+        rng = np.random.RandomState([int(seed), EVENTS_RNG_TAG, *([camera[1]] if camera else [])])
         thresholds = model.thresholds(h, w, rng)
         times_us = ev.frame_times_us(times, scene.frame_start, scene.frame_rate)
         events = ev.simulate(log_i, times_us, thresholds, model)
         events = ev.add_noise(events, h, w, times_us[0], times_us[-1], model, rng)
-        sensor = {**dataclasses.asdict(model), "file": EVENTS_H5_FILE,
+        name = events_file(camera[0]) if camera else EVENTS_H5_FILE
+        sensor = {**dataclasses.asdict(model), "file": name,
                   "source": EVENT_SOURCES[self.event_interpolation].format(k=k)
                   if k else "rendered frames", "num_events": len(events["t"])}
-        scene.metadata["event_camera"] = sensor
+        if camera:
+            record = scene.metadata.setdefault("event_camera", {}).setdefault("cameras", {})
+            record[camera[0]] = {"file": name, "num_events": sensor["num_events"]}
+        else:
+            scene.metadata["event_camera"] = {**scene.metadata.get("event_camera", {}), **sensor}
         attrs = {k: v for k, v in sensor.items() if k != "num_events"}
-        return {EVENTS_H5_FILE: encode_events(events, thresholds, attrs)}
+        return {name: encode_events(events, thresholds, attrs)}
 
     @staticmethod
     def coverage_files(scene, labels, instances, shutter: float) -> dict:
@@ -193,6 +208,11 @@ class ExposureOptions:
         relabelled = adjust_segmentation_idxs(labels.reshape(t * k, h, w), scene.assets,
                                               instances).reshape(t, k, h, w)
         return {COVERAGE_FILE: coverage_archive(relabelled, shutter)}
+
+
+def events_file(camera: str) -> str:
+    """The event stream of rig camera ``camera`` (``events.h5``'s layout)."""
+    return f"events_{camera}.h5"
 
 
 #: metadata.event_camera.source per event_interpolation (k: samples per frame)

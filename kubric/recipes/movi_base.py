@@ -46,6 +46,7 @@ from kubric.recipes.common import (
     source_location,
 )
 from kubric.recipes.exposure_options import ExposureOptions
+from kubric.recipes.exposure_schema import EVENT_FEATURES
 from kubric.recipes.lens_options import LensOptions
 from kubric.recipes.movi_schema import TRACK_FEATURES
 from kubric.recipes.render_quality import RenderQuality
@@ -254,6 +255,7 @@ class MoviBase(ExposureOptions, RenderQuality, Recipe, LensOptions, RigOptions):
             self.add_exposure_layers(scene, layers, blur)  # dof, coverage_samples
             self._subframes = (self.subframe_labels(scene, blur), blur)
             files.update(self.event_files(scene, layers, seed))  # events=True
+            files.update(self.view_event_files(scene, self._views, seed))  # … on every camera
             if self.save_state:
                 files[BLEND_FILE] = renderer.save_state(state / BLEND_FILE)
             render_settings = self.render_metadata(renderer)
@@ -299,7 +301,8 @@ class MoviBase(ExposureOptions, RenderQuality, Recipe, LensOptions, RigOptions):
         self.rig_metadata(scene, metadata)
         schema = extra.schema_with(self.schema, self.extra_layers)
         if views:
-            schema = rig_schema(schema, self._rig, TRACK_FEATURES if with_tracks else (),
+            schema = rig_schema(schema, self._rig, (*(TRACK_FEATURES if with_tracks else ()),
+                                                    *(EVENT_FEATURES if self.events else ())),
                                 list(next(iter(views.values()))))
         write_scene(schema, out_dir, layers, metadata, events, files=files)
         return visible

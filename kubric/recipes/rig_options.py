@@ -37,11 +37,13 @@ from kubric.annotations.rig_views import check_rectified, disparity, view_instan
 from kubric.annotations.segmentation import instance_labels, pixel_counts
 from kubric.annotations.track_files import tracks_archive
 from kubric.core import rig as rigs
+from kubric.io.event_h5 import EVENTS_H5_FILE
 from kubric.io.layers import LayerFormat
 from kubric.io.scene_dir import TRACKS_FILE
 from kubric.io.schema import Feature, Schema
 from kubric.pipeline import Option, OptionError
 from kubric.recipes import extra_layers as extra
+from kubric.recipes.exposure_options import events_file
 
 RIGS = ("mono", "stereo", "ring", "random")
 #: cameras=random: the rig's own rng is ``RandomState([seed, RIG_STREAM])``
@@ -99,6 +101,8 @@ def view_feature(f: Feature, camera: str) -> Feature | None:
         source = f"instance:cameras.{camera}.{arg}"
     elif kind == "npz" and arg.startswith(TRACKS_FILE + ":"):
         source = f"npz:{tracks_file(camera)}:{arg.split(':', 1)[1]}"
+    elif kind == "npz" and arg.startswith(EVENTS_H5_FILE + ":"):
+        source = f"npz:{events_file(camera)}:{arg.split(':', 1)[1]}"
     else:
         return None
     name = (f"instances/cameras/{camera}/{f.name[len('instances/'):]}"
@@ -170,7 +174,7 @@ class RigOptions:
             return
         clash = next(((k, v) for k, v in (
             ("dof", self.dof), ("rolling_shutter", self.rolling_shutter),
-            ("coverage_samples", self.coverage_samples), ("events", self.events),
+            ("coverage_samples", self.coverage_samples),
             ("lens", self.lens if self.cameras == "stereo" and self.lens != "none" else None),
         ) if v), None)
         if clash:
@@ -207,6 +211,14 @@ class RigOptions:
             views[name] = renderer.render()
         scene.camera = rig.reference
         return views
+
+    def view_event_files(self, scene, views, seed: int) -> dict:
+        """With ``events``: {events_NAME.h5: bytes} of every further camera (its own frames and
+        sub-frames; :meth:`~kubric.recipes.exposure_options.ExposureOptions.event_files`)."""
+        files = {}
+        for index, (name, _, view) in enumerate(self._each_view(scene, views), start=1):
+            files.update(self.event_files(scene, view, seed, camera=(name, index)))
+        return files
 
     def rig_order(self, scene, views):
         """annotate_instances' ``order`` (None for mono): visible pixels over every camera."""
