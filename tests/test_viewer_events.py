@@ -42,6 +42,50 @@ def scene(tmp_path_factory):
     return directory.parent, events
 
 
+def _random_events(seed: int, n: int) -> dict:
+    rng = np.random.default_rng(seed)
+    t = np.sort(np.round(rng.uniform(0, (T - 1) * 1e6 / RATE, n)))
+    return {"x": rng.integers(0, W, n).astype(np.uint16), "y": rng.integers(0, H, n)
+            .astype(np.uint16), "t": t, "p": rng.integers(0, 2, n).astype(np.uint8)}
+
+
+def _expected(events: dict, i: int) -> np.ndarray:
+    """Frame i's picture from the test's own count of ON / OFF events per pixel in its
+    interval (t_{i-1}, t_i] (frame 0: t ≤ 0)."""
+    lo, hi = (i - 1) * 1e6 / RATE, i * 1e6 / RATE
+    inside = (events["t"] > lo) & (events["t"] <= hi) if i else events["t"] <= 0
+    on = np.zeros((H, W), int)
+    off = np.zeros((H, W), int)
+    for x, y, p in zip(events["x"][inside], events["y"][inside], events["p"][inside],
+                       strict=True):
+        (on if p else off)[y, x] += 1
+    expected = np.zeros((H, W, 3), np.uint8)
+    expected[(on + off > 0) & (on == off)] = BALANCED
+    expected[on > off] = ON
+    expected[off > on] = OFF
+    return expected
+
+
+def test_a_rig_camera_s_event_frames_come_from_its_own_stream(tmp_path):
+    """A stereo scene's events_right.h5 is the layer right_events (the rig view's right tile
+    shows it when events is selected), drawn from that file, not from events.h5."""
+    directory = tmp_path / "scene_00000004"
+    synthetic_scene(directory)
+    left, right = _random_events(1, 300), _random_events(2, 300)
+    (directory / "events.h5").write_bytes(encode_events(left, np.full((2, H, W), 0.2)))
+    (directory / "events_right.h5").write_bytes(encode_events(right, np.full((2, H, W), 0.2)))
+    with serving(tmp_path) as (address, _):
+        _, meta = get_json(address, "/api/scene/scene_00000004")
+        assert meta["summary"]["layers"][-2:] == ["events", "right_events"]
+        assert meta["layers"]["right_events"]["kind"] == "events"
+        for i in range(T):
+            got = _png(address, f"/api/frame/scene_00000004/right_events/{i}.png")
+            np.testing.assert_array_equal(got, _expected(right, i), err_msg=f"frame {i}")
+            assert i == 0 or (_expected(right, i) != _expected(left, i)).any()
+        status, body = get_json(address, "/api/frame/scene_00000004/left_events/1.png")
+        assert status == 404 and "camera 'left'" in body["error"]
+
+
 def _png(address, target):
     status, ctype, body = request(address, target)
     assert status == 200 and ctype == "image/png", body[:300]
@@ -56,18 +100,7 @@ def test_event_frames_accumulate_each_frame_interval(scene):
         assert meta["layers"]["events"]["kind"] == "events"
         for i in range(T):
             picture = _png(address, f"/api/frame/scene_00000003/events/{i}.png")
-            lo, hi = (i - 1) * 1e6 / RATE, i * 1e6 / RATE
-            inside = (events["t"] > lo) & (events["t"] <= hi) if i else events["t"] <= 0
-            on = np.zeros((H, W), int)
-            off = np.zeros((H, W), int)
-            for x, y, p in zip(events["x"][inside], events["y"][inside], events["p"][inside],
-                               strict=True):
-                (on if p else off)[y, x] += 1
-            expected = np.zeros((H, W, 3), np.uint8)
-            expected[(on + off > 0) & (on == off)] = BALANCED
-            expected[on > off] = ON
-            expected[off > on] = OFF
-            np.testing.assert_array_equal(picture, expected, err_msg=f"frame {i}")
+            np.testing.assert_array_equal(picture, _expected(events, i), err_msg=f"frame {i}")
         # the boundary events: t_1 - 1 µs (ON) in frame 1, t_1 + 1 µs (OFF) in frame 2
         assert tuple(_png(address, "/api/frame/scene_00000003/events/1.png")[H - 1, 0]) in (
             ON, BALANCED)

@@ -59,6 +59,12 @@ def encode_events(events: dict, thresholds, attrs: dict | None = None) -> bytes:
     return buffer.getvalue()
 
 
+def events_file(camera: str) -> str:
+    """The event stream of a camera rig's further camera ``camera``: ``events_NAME.h5``, in
+    ``events.h5``'s layout (the reference camera's is ``events.h5``)."""
+    return f"events_{camera}.h5"
+
+
 def read_events(path) -> dict[str, np.ndarray]:
     """An ``events.h5`` (a path or a scene directory) → {"x", "y", "t" (int64 µs, t_offset
     added), "p", "ms_to_idx", "contrast_thresholds", "attrs"}."""

@@ -163,7 +163,7 @@ class ExposureOptions:
         if not self.events:
             return {}
         from kubric.annotations import event_camera as ev
-        from kubric.io.event_h5 import EVENTS_H5_FILE, encode_events
+        from kubric.io.event_h5 import EVENTS_H5_FILE, encode_events, events_file
         model = ev.SensorModel(self.event_threshold, self.event_threshold,
                                self.event_threshold_spread,
                                refractory_us=self.event_refractory_us,
@@ -208,11 +208,6 @@ class ExposureOptions:
         relabelled = adjust_segmentation_idxs(labels.reshape(t * k, h, w), scene.assets,
                                               instances).reshape(t, k, h, w)
         return {COVERAGE_FILE: coverage_archive(relabelled, shutter)}
-
-
-def events_file(camera: str) -> str:
-    """The event stream of rig camera ``camera`` (``events.h5``'s layout)."""
-    return f"events_{camera}.h5"
 
 
 #: metadata.event_camera.source per event_interpolation (k: samples per frame)

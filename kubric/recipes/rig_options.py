@@ -37,13 +37,12 @@ from kubric.annotations.rig_views import check_rectified, disparity, view_instan
 from kubric.annotations.segmentation import instance_labels, pixel_counts
 from kubric.annotations.track_files import tracks_archive
 from kubric.core import rig as rigs
-from kubric.io.event_h5 import EVENTS_H5_FILE
+from kubric.io.event_h5 import EVENTS_H5_FILE, events_file
 from kubric.io.layers import LayerFormat
 from kubric.io.scene_dir import TRACKS_FILE
 from kubric.io.schema import Feature, Schema
 from kubric.pipeline import Option, OptionError
 from kubric.recipes import extra_layers as extra
-from kubric.recipes.exposure_options import events_file
 
 RIGS = ("mono", "stereo", "ring", "random")
 #: cameras=random: the rig's own rng is ``RandomState([seed, RIG_STREAM])``

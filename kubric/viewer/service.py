@@ -23,6 +23,16 @@ MAX_TRACKS = 64
 DERIVED_PICTURES = ("outline", "fill", "events")
 
 
+def event_camera(layer: str):
+    """Whose events a layer name draws: None for ``events`` (the reference camera's events.h5),
+    NAME for ``NAME_events`` (a rig camera's events_NAME.h5), False for any other layer."""
+    if layer == "events":
+        return None
+    if layer.endswith("_events") and len(layer) > len("_events"):
+        return layer[:-len("_events")]
+    return False
+
+
 class LRUCache:
     """A thread-safe mapping capped by the total ``nbytes`` of its values (least recent out)."""
 
@@ -121,9 +131,10 @@ class ViewerService:
         except SceneError as err:
             command = f"# {err}"
         layers = self.source.vocabulary(name)
-        if "events" in summary["layers"]:
-            layers["events"] = {"label": "events (ON red, OFF blue)", "kind": "events",
-                                "adjustable_range": False}
+        for layer in summary["layers"]:  # events.h5, and a rig's events_NAME.h5
+            if event_camera(layer) is not False:
+                layers[layer] = {"label": f"{layer} (ON red, OFF blue)", "kind": "events",
+                                 "adjustable_range": False}
         for layer in summary["layers"]:  # the range a depth-like layer is first drawn over
             if layers[layer]["adjustable_range"]:
                 try:
@@ -151,10 +162,11 @@ class ViewerService:
         return self.cache.get_or_make(("frame", name, layer, index),
                                       lambda: self.source.frame(name, layer, index))
 
-    def event_frame(self, name: str, index: int) -> np.ndarray:
+    def event_frame(self, name: str, index: int, camera: str | None = None) -> np.ndarray:
         """(H, W, 3) uint8 accumulated events of frame ``index``: those with
         t_{index−1} < t ≤ t_index (t_i = i / frame_rate s, the file frames' times; frame 0: t ≤ 0),
-        drawn by :func:`kubric.annotations.pictures.event_picture`."""
+        drawn by :func:`kubric.annotations.pictures.event_picture`; of rig camera ``camera``'s
+        stream when given."""
         meta = self.source.metadata(name)
         info = meta.get("metadata", {})
         count, rate = self.summary(name)["num_frames"] or 1, info.get("frame_rate")
@@ -163,7 +175,8 @@ class ViewerService:
         if not isinstance(rate, int | float) or isinstance(rate, bool) or rate <= 0:
             raise SceneError(f"{name}/metadata.json: frame_rate {rate!r} is not a positive "
                              "number: the event frames cannot be timed")
-        stream = self.cache.get_or_make(("events", name), lambda: self._event_array(name))
+        stream = self.cache.get_or_make(("events", name, camera),
+                                        lambda: self._event_array(name, camera))
         x, y, t, p = stream
         w, h = info.get("resolution") or meta["camera"]["resolution"]
         t0, t1 = (index - 1) * 1e6 / rate, index * 1e6 / rate
@@ -171,11 +184,13 @@ class ViewerService:
         hi = int(np.searchsorted(t, t1, side="right"))
         return render.event_picture(x[lo:hi], y[lo:hi], p[lo:hi], h, w)
 
-    def _event_array(self, name: str) -> np.ndarray:
-        """(4, N) int64 rows x, y, t (µs), p of the scene's event stream; KeyError when none."""
-        events = self.source.event_stream(name)
+    def _event_array(self, name: str, camera: str | None = None) -> np.ndarray:
+        """(4, N) int64 rows x, y, t (µs), p of the scene's event stream (rig camera
+        ``camera``'s when given); KeyError when none."""
+        events = self.source.event_stream(name, camera)
         if events is None:
-            raise KeyError(f"{name} has no event stream (events.h5: --set events=true)")
+            what = f"camera {camera!r}" if camera else "events.h5: --set events=true"
+            raise KeyError(f"{name} has no event stream ({what})")
         return np.stack([np.asarray(events[k], np.int64) for k in ("x", "y", "t", "p")]) \
             .reshape(4, -1)
 
@@ -188,8 +203,8 @@ class ViewerService:
                 labels = self.frame(name, "segmentation", index)
                 return render.to_png(render.outline(labels) if layer == "outline"
                                      else render.fill(labels))
-            if layer == "events":
-                return render.to_png(self.event_frame(name, index))
+            if event_camera(layer) is not False:
+                return render.to_png(self.event_frame(name, index, event_camera(layer)))
             fmt = self.source.formats(name).get(layer)
             return render.to_png(render.picture(layer, self.frame(name, layer, index), lo, hi,
                                                 fmt.kind if fmt is not None else None))

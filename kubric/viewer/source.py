@@ -22,7 +22,7 @@ import numpy as np
 from kubric.annotations.track_files import read_tracks
 from kubric.errors import InputError, KubricError
 from kubric.extras import EXTRA_OF, message
-from kubric.io.event_h5 import EVENTS_H5_FILE, read_events
+from kubric.io.event_h5 import EVENTS_H5_FILE, events_file, read_events
 from kubric.io.json_io import read_json
 from kubric.io.layers import LAYER_LABELS, LAYERS, LayerFormat, frame_filename, read_frame
 from kubric.io.scene_dir import EVENTS_FILE, METADATA_FILE, SCHEMA_FILE, SUCCESS_FILE, TRACKS_FILE
@@ -70,9 +70,10 @@ class SceneSource(abc.ABC):
     def tracks(self, name: str) -> dict | None:
         """The scene's point tracks (``tracks.npz`` fields) or None when it has none."""
 
-    def event_stream(self, name: str) -> dict | None:
-        """The scene's event stream ({"x", "y", "t" µs, "p"}, t sorted) or None when it has
-        none (default: no source holds events)."""
+    def event_stream(self, name: str, camera: str | None = None) -> dict | None:
+        """The scene's event stream ({"x", "y", "t" µs, "p"}, t sorted) — of rig camera
+        ``camera`` when given (``events_NAME.h5``) — or None when it has none (default: no
+        source holds events)."""
         return None
 
     def output_root(self, name: str) -> str:
@@ -96,6 +97,12 @@ class SceneSource(abc.ABC):
         if not isinstance(name, str) or not NAME_PATTERN.match(name) or name not in self.names():
             raise KeyError(f"no scene named {name!r}")
         return name
+
+
+def event_layer(camera: str) -> str:
+    """The viewer's layer name of rig camera ``camera``'s accumulated events (``NAME_events``,
+    as its other layers are ``NAME_<layer>``)."""
+    return f"{camera}_events"
 
 
 #: the most frames (views) a scene may claim in the viewer
@@ -183,6 +190,8 @@ class DirectorySource(SceneSource):
                    has_tracks=(directory / TRACKS_FILE).is_file())
         if (directory / EVENTS_H5_FILE).is_file():  # drawn as accumulated event frames
             row["layers"].append("events")
+        for path in sorted(directory.glob("events_*.h5")):  # a rig's further cameras' streams
+            row["layers"].append(event_layer(path.stem[len("events_"):]))
         frames = frame_count_error(name, row["num_frames"], directory, self.formats(name),
                                    row["layers"])
         if frames is not None:  # a count the files do not back: never sent to the page
@@ -234,8 +243,8 @@ class DirectorySource(SceneSource):
         except (ValueError, OSError, RuntimeError) as err:  # truncated / corrupt files
             raise SceneError(f"{name}: cannot decode frame {index} of {layer}: {err}") from None
 
-    def event_stream(self, name: str) -> dict | None:
-        path = self.directory(name) / EVENTS_H5_FILE
+    def event_stream(self, name: str, camera: str | None = None) -> dict | None:
+        path = self.directory(name) / (events_file(camera) if camera else EVENTS_H5_FILE)
         if not path.is_file():
             return None
         try:
@@ -244,7 +253,7 @@ class DirectorySource(SceneSource):
             raise SceneError(message(err.name if err.name in EXTRA_OF else "h5py",
                                        f"showing {name}'s events")) from None
         except InputError as err:
-            raise SceneError(f"{name}/{EVENTS_H5_FILE} is unreadable: {err}") from None
+            raise SceneError(f"{name}/{path.name} is unreadable: {err}") from None
 
     def tracks(self, name: str) -> dict | None:
         directory = self.directory(name)
