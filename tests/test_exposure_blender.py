@@ -22,17 +22,28 @@ def _disk_cdf(u):
     return 0.5 + (u * np.sqrt(1.0 - u * u) + np.arcsin(u)) / np.pi
 
 
-def test_cycles_thin_lens_blurs_an_edge_by_the_defocus_diameter():
-    from kubric.annotations.exposure import defocus
-    from kubric.renderer.blender import Blender
-    w, h, f_mm, sw, fstop, focus = 96, 64, 50.0, 36.0, 0.26, 10.0
+#: the plate scene's camera: focal length (mm), sensor width (mm), f-number, focus distance (m)
+PLATE_LENS = (50.0, 36.0, 0.26, 10.0)
+
+
+def plate_scene(w: int = 96, h: int = 64) -> kb.Scene:
+    """A white plate 0.5 m wide facing a thin-lens camera (:data:`PLATE_LENS`) 1.75 m away,
+    black world."""
+    f_mm, sw, fstop, focus = PLATE_LENS
     scene = kb.Scene(resolution=(w, h), frame_start=0, frame_end=0)
     scene.camera = kb.PerspectiveCamera(position=(0, 0, 2), focal_length=f_mm, sensor_width=sw,
                                         use_dof=True, aperture_fstop=fstop,
                                         focus_distance=focus)
-    # a white plate 0.5 m wide facing the camera 1.75 m away (black world)
     scene += kb.Cube(scale=(0.25, 0.25, 0.001), position=(0, 0, 0.25),
                      material=kb.FlatMaterial(color=kb.Color(1, 1, 1)))
+    return scene
+
+
+def test_cycles_thin_lens_blurs_an_edge_by_the_defocus_diameter():
+    from kubric.annotations.exposure import defocus
+    from kubric.renderer.blender import Blender
+    scene = plate_scene()
+    w, h, f_mm, sw, fstop, focus = (*scene.resolution, *PLATE_LENS)
     out = Blender(scene, samples_per_pixel=256, use_denoising=False).render(
         return_layers=("rgba", "z"))
     row = _linear(out["rgba"][0, h // 2, :, 0])

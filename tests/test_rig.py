@@ -181,12 +181,19 @@ def test_moving_rig_keeps_its_mount():
 @pytest.mark.parametrize("options, text", [
     ({"cameras": "stereo", "lens": "opencv"}, "lens=opencv"),
     ({"cameras": "stereo", "rolling_shutter": 0.5, "renderer": "raycast"}, "rolling_shutter"),
-    ({"cameras": "ring", "dof": True}, "dof=True"),
+    ({"cameras": "ring", "rolling_shutter": 0.5, "renderer": "raycast"},
+     "cameras=ring does not combine with rolling_shutter=0.5"),
     ({"cameras": "trio"}, "trio"),
 ])
 def test_refusals(options, text):
     with pytest.raises(OptionError, match=text):
         get_recipe("movi_a")(**options).check()
+
+
+def test_coverage_samples_are_refused_with_a_rig():
+    with pytest.raises(OptionError, match="cameras=stereo does not combine with "
+                                          "coverage_samples=4"):
+        get_recipe("movi_f")(cameras="stereo", coverage_samples=4).check()
 
 
 def test_bad_rigs():

@@ -14,7 +14,9 @@ y up, looking down −z; ``docs/conventions.md``), metres. In OpenCV's camera ax
 looking down +z) a mount is ``CAMERA_TO_OPENCV @ mount @ CAMERA_TO_OPENCV``; the per-frame
 world → OpenCV-camera extrinsics of every camera are in its metadata
 (:func:`kubric.annotations.metadata.get_camera_info`). The cameras share the reference's
-intrinsics and lens (focal length, sensor width, shift, lens model), so they differ only by pose;
+intrinsics and lens (focal length, sensor width, shift, lens model, and the thin lens of depth
+of field: ``use_dof``, f-number, focus distance along each camera's own axis), so they differ
+only by pose;
 one simulation serves all of them (the cameras are background assets, never simulated).
 
 Presets:
@@ -55,7 +57,8 @@ RANDOM_DISTANCE = (0.8, 1.2)
 #: random_rig: a camera's elevation above the pivot's horizontal plane, degrees
 RANDOM_ELEVATION = (10.0, 70.0)
 #: the intrinsics every camera of a rig copies from the reference camera
-SHARED_INTRINSICS = ("focal_length", "sensor_width", "shift_x", "shift_y", "lens")
+SHARED_INTRINSICS = ("focal_length", "sensor_width", "shift_x", "shift_y", "lens",
+                     "use_dof", "aperture_fstop", "focus_distance")
 _NAME = re.compile(r"[a-z][a-z0-9]*\Z")
 
 

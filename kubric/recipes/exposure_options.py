@@ -6,7 +6,8 @@ motion blur (``coverage_samples``); the ground truth is :mod:`kubric.annotations
   distance U(min_focus_distance, max_focus_distance) metres along the view axis, drawn from an
   rng derived from the seed (so the rest of the scene is the seed's without DoF); the renderer
   must render depth of field (Blender: Cycles' thin lens); the scene gets the ``defocus`` layer
-  and ``metadata.depth_of_field`` {use_dof, aperture_fstop, focus_distance}.
+  and ``metadata.depth_of_field`` {use_dof, aperture_fstop, focus_distance}; with a camera rig
+  every camera has that lens and its own ``NAME_defocus`` layer.
 * ``coverage_samples=K`` (> 0): ``coverage.npz``, the fraction of the exposure (the shutter of
   ``metadata.motion_blur`` frames, centred on the frame) at which each pixel shows each instance,
   from K raycast sub-frame renders per frame (with any backend: the raycast backend supplies the

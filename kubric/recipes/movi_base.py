@@ -46,7 +46,7 @@ from kubric.recipes.common import (
     source_location,
 )
 from kubric.recipes.exposure_options import ExposureOptions
-from kubric.recipes.exposure_schema import EVENT_FEATURES
+from kubric.recipes.exposure_schema import DOF_FEATURES, EVENT_FEATURES
 from kubric.recipes.lens_options import LensOptions
 from kubric.recipes.movi_schema import TRACK_FEATURES
 from kubric.recipes.render_quality import RenderQuality
@@ -253,6 +253,7 @@ class MoviBase(ExposureOptions, RenderQuality, Recipe, LensOptions, RigOptions):
             layers = renderer.render()
             self._views = self.render_views(scene, renderer)  # the rig's other cameras
             self.add_exposure_layers(scene, layers, blur)  # dof, coverage_samples
+            self.view_exposure_layers(scene, self._views)  # dof on every camera of a rig
             self._subframes = (self.subframe_labels(scene, blur), blur)
             files.update(self.event_files(scene, layers, seed))  # events=True
             files.update(self.view_event_files(scene, self._views, seed))  # … on every camera
@@ -302,7 +303,8 @@ class MoviBase(ExposureOptions, RenderQuality, Recipe, LensOptions, RigOptions):
         schema = extra.schema_with(self.schema, self.extra_layers)
         if views:
             schema = rig_schema(schema, self._rig, (*(TRACK_FEATURES if with_tracks else ()),
-                                                    *(EVENT_FEATURES if self.events else ())),
+                                                    *(EVENT_FEATURES if self.events else ()),
+                                                    *(DOF_FEATURES if self.dof else ())),
                                 list(next(iter(views.values()))))
         write_scene(schema, out_dir, layers, metadata, events, files=files)
         return visible

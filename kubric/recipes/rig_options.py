@@ -172,7 +172,7 @@ class RigOptions:
         if self.cameras == "mono":
             return
         clash = next(((k, v) for k, v in (
-            ("dof", self.dof), ("rolling_shutter", self.rolling_shutter),
+            ("rolling_shutter", self.rolling_shutter),
             ("coverage_samples", self.coverage_samples),
             ("lens", self.lens if self.cameras == "stereo" and self.lens != "none" else None),
         ) if v), None)
@@ -210,6 +210,15 @@ class RigOptions:
             views[name] = renderer.render()
         scene.camera = rig.reference
         return views
+
+    def view_exposure_layers(self, scene, views) -> None:
+        """With ``dof``: each further camera's ``defocus`` layer from its own ``z`` (every camera
+        has the reference's thin lens, :data:`kubric.core.rig.SHARED_INTRINSICS`)."""
+        if not self.dof:
+            return
+        from kubric.annotations.exposure import defocus
+        for _, camera, view in self._each_view(scene, views):
+            view["defocus"] = defocus(camera, view["z"])
 
     def view_event_files(self, scene, views, seed: int) -> dict:
         """With ``events``: {events_NAME.h5: bytes} of every further camera (its own frames and
