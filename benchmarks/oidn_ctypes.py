@@ -5,9 +5,9 @@ denoise buffers Cycles did not (``bench_temporal_accumulation.py``).
 :func:`denoise` does what Cycles' OIDN denoiser does with ``denoising_input_passes =
 RGB_ALBEDO_NORMAL`` and the ACCURATE prefilter: the albedo and normal guides are each denoised
 first (an ``RT`` filter with only that guide), then the colour with both guides and ``cleanAux``.
-Checked against Cycles once (2026-11-27, MOVi-A seed 1, 128², the same 64-spp noisy render and
-guide passes): 8-bit RMSE to the 1024-spp reference 0.784 denoised here, 0.778 by Cycles; without
-the guides' prefiltering 0.824.
+Checked against Cycles by ``bench_temporal_accumulation.py``'s row "64 spp + OIDN (denoised
+outside Cycles)": 64 spp's noisy frame and guides denoised here give Cycles' own result within
+the noise (worst error ratio 0.99 / 1.04 on MOVi-A / MOVi-C, docs/render-cost.md).
 
 Images are (H, W, 3+) float arrays, linear; only the first three channels are read.
 """

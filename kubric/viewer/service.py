@@ -13,7 +13,7 @@ import numpy as np
 from kubric.annotations import pictures as render
 from kubric.core.camera_geometry import BACKGROUND_DEPTH, pinhole_rays
 from kubric.core.lenses import from_camera_record
-from kubric.viewer.source import SceneError, SceneSource
+from kubric.viewer.source import SceneError, SceneSource, event_layer_camera, is_event_layer
 
 #: default cache size in bytes (decoded frames + PNG bytes)
 CACHE_BYTES = 512 * 2**20
@@ -21,16 +21,6 @@ CACHE_BYTES = 512 * 2**20
 MAX_TRACKS = 64
 #: pictures the server derives from a scene's files beyond its layers
 DERIVED_PICTURES = ("outline", "fill", "events")
-
-
-def event_camera(layer: str):
-    """Whose events a layer name draws: None for ``events`` (the reference camera's events.h5),
-    NAME for ``NAME_events`` (a rig camera's events_NAME.h5), False for any other layer."""
-    if layer == "events":
-        return None
-    if layer.endswith("_events") and len(layer) > len("_events"):
-        return layer[:-len("_events")]
-    return False
 
 
 class LRUCache:
@@ -132,7 +122,7 @@ class ViewerService:
             command = f"# {err}"
         layers = self.source.vocabulary(name)
         for layer in summary["layers"]:  # events.h5, and a rig's events_NAME.h5
-            if event_camera(layer) is not False:
+            if is_event_layer(layer):
                 layers[layer] = {"label": f"{layer} (ON red, OFF blue)", "kind": "events",
                                  "adjustable_range": False}
         for layer in summary["layers"]:  # the range a depth-like layer is first drawn over
@@ -197,14 +187,15 @@ class ViewerService:
     def picture_png(self, name: str, layer: str, index: int, lo: float | None = None,
                     hi: float | None = None) -> bytes:
         """PNG bytes of a layer frame; ``layer`` may also be one of :data:`DERIVED_PICTURES`
-        (segmentation ``outline`` / ``fill`` overlays, accumulated ``events``)."""
+        (segmentation ``outline`` / ``fill`` overlays, accumulated ``events``; a rig camera's
+        ``NAME_events``)."""
         def make():
             if layer in ("outline", "fill"):
                 labels = self.frame(name, "segmentation", index)
                 return render.to_png(render.outline(labels) if layer == "outline"
                                      else render.fill(labels))
-            if event_camera(layer) is not False:
-                return render.to_png(self.event_frame(name, index, event_camera(layer)))
+            if is_event_layer(layer):  # events.h5, or a rig camera's events_NAME.h5
+                return render.to_png(self.event_frame(name, index, event_layer_camera(layer)))
             fmt = self.source.formats(name).get(layer)
             return render.to_png(render.picture(layer, self.frame(name, layer, index), lo, hi,
                                                 fmt.kind if fmt is not None else None))

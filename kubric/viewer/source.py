@@ -99,10 +99,25 @@ class SceneSource(abc.ABC):
         return name
 
 
-def event_layer(camera: str) -> str:
-    """The viewer's layer name of rig camera ``camera``'s accumulated events (``NAME_events``,
-    as its other layers are ``NAME_<layer>``)."""
-    return f"{camera}_events"
+#: the viewer's layer of the reference camera's accumulated events (events.h5); a rig camera
+#: NAME's is ``NAME_events`` (events_NAME.h5), as its other layers are ``NAME_<layer>``
+EVENTS_LAYER = "events"
+
+
+def event_layer(camera: str | None = None) -> str:
+    """The viewer's layer of ``camera``'s accumulated events (None: the reference camera)."""
+    return f"{camera}_{EVENTS_LAYER}" if camera else EVENTS_LAYER
+
+
+def is_event_layer(layer: str) -> bool:
+    """Whether ``layer`` is drawn from an event stream (:func:`event_layer`)."""
+    return layer == EVENTS_LAYER or (layer.endswith("_" + EVENTS_LAYER)
+                                     and len(layer) > len(EVENTS_LAYER) + 1)
+
+
+def event_layer_camera(layer: str) -> str | None:
+    """The rig camera whose stream an event layer draws; None for the reference camera's."""
+    return None if layer == EVENTS_LAYER else layer[:-len("_" + EVENTS_LAYER)]
 
 
 #: the most frames (views) a scene may claim in the viewer
@@ -189,7 +204,7 @@ class DirectorySource(SceneSource):
                            if (directory / frame_filename(fmt.template, 0)).is_file()],
                    has_tracks=(directory / TRACKS_FILE).is_file())
         if (directory / EVENTS_H5_FILE).is_file():  # drawn as accumulated event frames
-            row["layers"].append("events")
+            row["layers"].append(event_layer())
         for path in sorted(directory.glob("events_*.h5")):  # a rig's further cameras' streams
             row["layers"].append(event_layer(path.stem[len("events_"):]))
         frames = frame_count_error(name, row["num_frames"], directory, self.formats(name),
